@@ -1,0 +1,67 @@
+"""genbacklash_core: general backlash models, simulation and identification (numpy + scipy only).
+
+This package never imports ROS, bag or DDS libraries; a controls engineer can import it into
+their own loop. See ``genbacklash_ros`` for IO, the node and the command line.
+"""
+
+from __future__ import annotations
+
+from .backlash import GeneralBacklash
+from .cascade import Cascade
+from .data import check_excitation, count_reversals, prepare_series
+from .errors import GenBacklashError, NonFiniteInputError, NotEnoughExcitationError
+from .examples import ExampleData, PaperExample, paper_example
+from .identify import (
+    Fit,
+    IdentificationResult,
+    IterationHistory,
+    identify_backlash,
+    identify_cascade,
+    nrmse,
+)
+from .linear import LinearBlock, simulate_linear
+from .play import play_operator, play_operator_loop
+from .refine import RefinementResult, refine_output_error
+from .simulate import (
+    CascadeOutput,
+    simulate_backlash,
+    simulate_backlash_loop,
+    simulate_cascade,
+    simulate_cascade_loop,
+)
+from .structure import Structure
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "Cascade",
+    "CascadeOutput",
+    "ExampleData",
+    "Fit",
+    "GenBacklashError",
+    "GeneralBacklash",
+    "IdentificationResult",
+    "IterationHistory",
+    "LinearBlock",
+    "NonFiniteInputError",
+    "NotEnoughExcitationError",
+    "PaperExample",
+    "RefinementResult",
+    "Structure",
+    "__version__",
+    "check_excitation",
+    "count_reversals",
+    "identify_backlash",
+    "identify_cascade",
+    "nrmse",
+    "paper_example",
+    "play_operator",
+    "play_operator_loop",
+    "prepare_series",
+    "refine_output_error",
+    "simulate_backlash",
+    "simulate_backlash_loop",
+    "simulate_cascade",
+    "simulate_cascade_loop",
+    "simulate_linear",
+]

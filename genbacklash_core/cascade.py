@@ -1,0 +1,65 @@
+"""A general backlash followed by linear dynamics (paper §4, Fig. 7)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ._typing import ArrayLike, FloatArray
+from .backlash import GeneralBacklash
+from .errors import GenBacklashError
+from .linear import LinearBlock
+
+__all__ = ["Cascade"]
+
+
+@dataclass(frozen=True)
+class Cascade:
+    """General input backlash followed by the linear block of eq. (30).
+
+    Examples
+    --------
+    >>> bl = GeneralBacklash((0.5, -0.3, 0.3), 0.45, (0.6, 0.4, 0.2), 0.55)
+    >>> model = Cascade(bl, LinearBlock(a=(1.0, 0.15), b=(-0.2, 0.35)))
+    >>> model.parameter_names[-4:]
+    ('c_right', 'a_2', 'b_1', 'b_2')
+    """
+
+    backlash: GeneralBacklash
+    linear: LinearBlock
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.backlash, GeneralBacklash):
+            raise GenBacklashError(f"backlash must be a GeneralBacklash, got {self.backlash!r}")
+        if not isinstance(self.linear, LinearBlock):
+            raise GenBacklashError(f"linear must be a LinearBlock, got {self.linear!r}")
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        """Backlash names followed by ``a_2..a_r, b_1..b_p``."""
+        return (*self.backlash.parameter_names, *self.linear.parameter_names)
+
+    def parameters(self) -> FloatArray:
+        """Natural parameters: the backlash's, then ``a_2..a_r, b_1..b_p``."""
+        return np.concatenate([self.backlash.parameters(), self.linear.parameters()])
+
+    @classmethod
+    def from_parameters(cls, values: ArrayLike, degree: int, na: int, nb: int) -> Cascade:
+        """Inverse of :meth:`parameters`."""
+        p = np.asarray(values, dtype=float)
+        nbl = 2 * degree + 2
+        if p.shape != (nbl + na - 1 + nb,):
+            raise GenBacklashError(
+                f"expected {nbl + na - 1 + nb} parameters for degree={degree}, na={na}, "
+                f"nb={nb}, got shape {p.shape}"
+            )
+        backlash = GeneralBacklash.from_parameters(p[:nbl], degree)
+        linear = LinearBlock(a=(1.0, *p[nbl : nbl + na - 1]), b=tuple(p[nbl + na - 1 :]))
+        return cls(backlash, linear)
+
+    def simulate(self, u: ArrayLike, x0: float = 0.0) -> FloatArray:
+        """Output ``y`` of the cascade; see :func:`simulate_cascade`."""
+        from .simulate import simulate_cascade
+
+        return simulate_cascade(self, u, x0).y

@@ -1,0 +1,463 @@
+"""Batch identification of a general backlash (eqs. 22-29) and of the cascade (eqs. 31-37).
+
+Both run the paper's iteration with internal-variable estimation: from the current parameter
+estimate, compute the switching functions ``f1, f2`` and the internal variables ``xi1, xi2``
+(and for the cascade the internal output ``x`` of eq. 36), solve one linear least-squares
+problem for the separated parameter vector (eqs. 23/33), and repeat. By default the result is
+then refined by output-error minimisation (:mod:`genbacklash_core.refine`), which removes the
+iteration's noise bias.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ._typing import ArrayLike, FloatArray
+from .backlash import GeneralBacklash
+from .cascade import Cascade
+from .data import NonFinitePolicy, check_excitation, prepare_series
+from .errors import GenBacklashError
+from .play import play_operator
+from .refine import RefinementResult, refine_parameters, simulate_parameters
+from .simulate import play_bounds
+from .structure import Structure
+
+__all__ = [
+    "IdentificationResult",
+    "IterationHistory",
+    "identify_backlash",
+    "identify_cascade",
+    "nrmse",
+]
+
+IterationCallback = Callable[[int, FloatArray], None]
+
+_CYCLE_LOOKBACK = 4  # how many earlier iterates a limit cycle may span
+
+
+@dataclass(frozen=True, eq=False)
+class IterationHistory:
+    """Parameter estimates per iteration (row 0 is the start), for the paper's Figs. 4-12."""
+
+    names: tuple[str, ...]
+    values: FloatArray
+
+    def __post_init__(self) -> None:
+        if self.values.ndim != 2 or self.values.shape[1] != len(self.names):
+            raise GenBacklashError(
+                f"history values must be (iterations+1, {len(self.names)}), got {self.values.shape}"
+            )
+
+    def series(self, name: str) -> FloatArray:
+        """Estimates of one parameter over the iterations."""
+        return self.values[:, self.names.index(name)]
+
+
+@dataclass(frozen=True)
+class Fit:
+    """Quality of fit: free-run simulation NRMSE, ``||y - y_sim|| / ||y - mean(y)||``."""
+
+    nrmse: float
+
+
+@dataclass(frozen=True, eq=False)
+class IdentificationResult:
+    """Outcome of :func:`identify_backlash` or :func:`identify_cascade`.
+
+    Attributes
+    ----------
+    model : GeneralBacklash or Cascade
+        The estimate (after refinement when it ran). When ``converged`` is False this is the
+        last valid estimate, or the start model when there was none.
+    iterations : int
+        Iterations of the paper's method that were run.
+    converged : bool
+        True when the iteration met its criterion (and the refinement, when run, too).
+    reason : str
+        A sentence saying why it stopped.
+    fit : Fit
+        Free-run NRMSE of ``model`` on the data.
+    history : IterationHistory
+        The iteration's parameter estimates, start included.
+    equation_error_model : GeneralBacklash or Cascade
+        The iteration's estimate before refinement.
+    refinement : RefinementResult or None
+        The output-error refinement, when it ran.
+    """
+
+    model: GeneralBacklash | Cascade
+    iterations: int
+    converged: bool
+    reason: str
+    fit: Fit
+    history: IterationHistory
+    equation_error_model: GeneralBacklash | Cascade
+    refinement: RefinementResult | None
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON object of the CLI contract (GUIDE §4)."""
+        model = self.model
+        backlash = model.backlash if isinstance(model, Cascade) else model
+        out: dict[str, Any] = {
+            "model": "cascade" if isinstance(model, Cascade) else "backlash",
+            "backlash": {
+                "m_left": list(backlash.m_left),
+                "c_left": backlash.c_left,
+                "m_right": list(backlash.m_right),
+                "c_right": backlash.c_right,
+            },
+        }
+        if isinstance(model, Cascade):
+            out["linear"] = {"a": list(model.linear.a), "b": list(model.linear.b)}
+        out["iterations"] = self.iterations
+        out["converged"] = self.converged
+        out["reason"] = self.reason
+        out["fit"] = {"nrmse": self.fit.nrmse}
+        return out
+
+
+def nrmse(y: FloatArray, y_sim: FloatArray) -> float:
+    """Normalised root-mean-square error ``||y - y_sim|| / ||y - mean(y)||``.
+
+    >>> nrmse(np.array([0.0, 1.0, 2.0]), np.array([0.0, 1.0, 2.0]))
+    0.0
+    """
+    spread = float(np.sum((y - np.mean(y)) ** 2))
+    if spread == 0.0:
+        return 0.0 if np.array_equal(y, y_sim) else float("inf")
+    return float(np.sqrt(np.sum((y - y_sim) ** 2) / spread))
+
+
+def _detect_sign(u: FloatArray, y: FloatArray, max_lag: int) -> float:
+    """Sense of the branches from the data: the sign of the lagged input-output covariance."""
+    uc = u - u.mean()
+    yc = y - y.mean()
+    total = sum(float(uc[: uc.size - k] @ yc[k:]) for k in range(max_lag + 1))
+    if total == 0.0:
+        raise GenBacklashError(
+            "cannot tell whether the branches increase or decrease (zero input-output "
+            "covariance); pass sign=+1 or sign=-1"
+        )
+    return 1.0 if total > 0 else -1.0
+
+
+def _solve_least_squares(phi: FloatArray, target: FloatArray) -> FloatArray | None:
+    """Least-squares solution of ``phi @ theta = target``, or None when it is singular.
+
+    The column-scaled normal equations are formed once (cheap for the few columns here even
+    at N = 1e6) and solved by ``numpy.linalg.lstsq``, whose rank decides singularity.
+    """
+    gram = phi.T @ phi
+    scale = np.sqrt(np.diag(gram))
+    if np.any(scale == 0.0):
+        return None  # a regressor is identically zero, e.g. a branch never engaged
+    scaled = gram / np.outer(scale, scale)
+    theta_scaled, _, rank, _ = np.linalg.lstsq(scaled, (phi.T @ target) / scale, rcond=1e-10)
+    if rank < phi.shape[1] or not np.all(np.isfinite(theta_scaled)):
+        return None
+    return np.asarray(theta_scaled / scale, dtype=np.float64)
+
+
+def _backlash_columns(
+    structure: Structure, p: FloatArray, u: FloatArray, f1: FloatArray, f2: FloatArray
+) -> FloatArray:
+    """Data vector of eq. (22): ``[u f1, f1, xi1^2 f1 .. xi1^n f1, u f2, -f2, xi2^2 f2 ..]``."""
+    n = structure.degree
+    _, c_left, _, c_right = structure.split(p)
+    xi1 = u + c_left  # eq. (25)
+    xi2 = u - c_right  # eq. (26)
+    cols = np.empty((u.size, 2 * n + 2))
+    cols[:, 0] = u * f1
+    cols[:, 1] = f1
+    cols[:, n + 1] = u * f2
+    cols[:, n + 2] = -f2
+    power1, power2 = xi1.copy(), xi2.copy()
+    for i in range(2, n + 1):
+        power1 *= xi1
+        power2 *= xi2
+        cols[:, i] = power1 * f1
+        cols[:, n + 1 + i] = power2 * f2
+    return cols
+
+
+def _switching(
+    structure: Structure, p: FloatArray, u: FloatArray, x_prev: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Estimated switching functions (eqs. 27-28), sign-corrected for decreasing branches."""
+    left, right = structure.branches(p, u)
+    f1 = ((left - x_prev) * structure.sign <= 0.0).astype(np.float64)  # eq. (27)
+    f2 = ((x_prev - right) * structure.sign <= 0.0).astype(np.float64)  # eq. (28)
+    return f1, f2
+
+
+def _backlash_regression(
+    structure: Structure, p: FloatArray, u: FloatArray, x: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Regressors and target of eqs. (24)/(29) for a measured backlash output ``x``."""
+    u_t, x_prev, x_t = u[1:], x[:-1], x[1:]
+    f1, f2 = _switching(structure, p, u_t, x_prev)
+    engaged = (f1 + f2) > 0.0  # rows with neither branch engaged carry no information
+    phi = _backlash_columns(structure, p, u_t[engaged], f1[engaged], f2[engaged])
+    target = x_t[engaged] - x_prev[engaged] * (1.0 - f1[engaged]) * (1.0 - f2[engaged])  # eq. (29)
+    return phi, target
+
+
+def _cascade_regression(
+    structure: Structure, p: FloatArray, u: FloatArray, y: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Regressors (eq. 32) and target (eq. 37) with the internal ``x`` estimated by eq. (36)."""
+    left, right = structure.branches(p, u)
+    x = play_operator(*play_bounds(left, right), 0.0)  # eq. (36), from rest
+    x_prev = np.concatenate([[0.0], x[:-1]])
+    f1, f2 = _switching(structure, p, u, x_prev)
+    na, nb = structure.na, structure.nb
+    t0 = max(1, na, nb)
+    rows = np.arange(t0, u.size)
+    n_bl = structure.n_backlash
+    phi = np.empty((rows.size, structure.n_parameters))
+    phi[:, :n_bl] = _backlash_columns(structure, p, u[rows - 1], f1[rows - 1], f2[rows - 1])
+    x_lagged = np.concatenate([[0.0, 0.0], x])  # x_lagged[t + 2 - i] = x(t - i), rest before 0
+    col = n_bl
+    for i in range(2, na + 1):
+        phi[:, col] = x_lagged[rows + 2 - i]  # x(t-i), eq. (32)
+        col += 1
+    for j in range(1, nb + 1):
+        phi[:, col] = -y[rows - j]  # -y(t-j), eq. (32)
+        col += 1
+    hold = x_lagged[rows] * (1.0 - f1[rows - 1]) * (1.0 - f2[rows - 1])  # x(t-2)[1-f1][1-f2]
+    return phi, y[rows] - hold  # eq. (37)
+
+
+def _run(
+    structure: Structure,
+    u: FloatArray,
+    y: FloatArray,
+    *,
+    start: FloatArray | None,
+    max_iterations: int,
+    tol: float,
+    refine: bool,
+    callback: IterationCallback | None,
+) -> IdentificationResult:
+    regression = _cascade_regression if structure.cascade else _backlash_regression
+    p = structure.start() if start is None else np.asarray(start, dtype=np.float64).copy()
+    if p.shape != (structure.n_parameters,):
+        raise GenBacklashError(f"start must have {structure.n_parameters} parameters, got {p.shape}")
+    if (problem := structure.problem(p)) is not None:
+        raise GenBacklashError(f"invalid start: {problem}")
+    if max_iterations < 1:
+        raise GenBacklashError(f"max_iterations must be >= 1, got {max_iterations}")
+    history = [p.copy()]
+    last_valid = p.copy()
+    converged = False
+    reason = ""
+    iterations = 0
+    for iterations in range(1, max_iterations + 1):
+        phi, target = regression(structure, p, u, y)
+        theta = _solve_least_squares(phi, target) if target.size >= phi.shape[1] else None
+        if theta is None:
+            reason = (
+                f"iteration {iterations}: the regression became singular (a branch is never "
+                "engaged or regressors are collinear): the model structure may not fit the data, "
+                "e.g. a delay or order the model lacks, or the data do not excite both branches"
+            )
+            break
+        try:
+            p_new = structure.from_theta(theta)
+        except GenBacklashError as err:
+            reason = f"iteration {iterations}: {err}"
+            break
+        change = float(np.max(np.abs(p_new - p)))
+        # The switching patterns can flip back and forth between iterations: a limit cycle.
+        # Revisiting one of the last few iterates within tol is as settled as it gets.
+        recent = np.array(history[-_CYCLE_LOOKBACK:])
+        distances = np.max(np.abs(recent - p_new), axis=1)[::-1]  # [1 back, 2 back, ...]
+        period = int(np.argmin(distances)) + 1
+        settled = float(distances[period - 1])
+        p = p_new
+        history.append(p.copy())
+        if callback is not None:
+            callback(iterations, p.copy())
+        problem = structure.problem(p)
+        if problem is None:
+            last_valid = p.copy()
+        if settled <= tol * max(1.0, float(np.max(np.abs(p)))):
+            if problem is None:
+                converged = True
+                reason = f"converged: parameter change {change:.2g} after {iterations} iterations"
+                if period > 1:
+                    reason += f" (a period-{period} cycle of switching patterns)"
+            else:
+                reason = f"the iteration settled on an invalid model: {problem}"
+            break
+    else:
+        reason = f"no convergence in {max_iterations} iterations (last parameter change {change:.2g})"
+        if (problem := structure.problem(p)) is not None:
+            reason += f"; {problem}"
+
+    x0 = 0.0 if structure.cascade else float(y[0])
+    equation_error_p = last_valid
+    refinement: RefinementResult | None = None
+    final_p = equation_error_p
+    if refine and converged:
+        q, steps, ok, cost0, cost1, why = refine_parameters(structure, equation_error_p, u, y, x0)
+        final_p = q
+        refinement = RefinementResult(structure.model(q), steps, ok, cost0, cost1, why)
+        drop = 100.0 * (1.0 - cost1 / cost0) if cost0 > 0 else 0.0
+        reason += f"; output-error refinement: {steps} steps, simulation error -{drop:.1f}% ({why})"
+        converged = ok
+    _, y_sim = simulate_parameters(structure, final_p, u, x0)
+    return IdentificationResult(
+        model=structure.model(final_p),
+        iterations=iterations,
+        converged=converged,
+        reason=reason,
+        fit=Fit(nrmse(y, y_sim)),
+        history=IterationHistory(structure.names(), np.array(history)),
+        equation_error_model=structure.model(equation_error_p),
+        refinement=refinement,
+    )
+
+
+def _sign_option(sign: float | None, u: FloatArray, y: FloatArray, max_lag: int) -> float:
+    if sign is None:
+        return _detect_sign(u, y, max_lag)
+    if sign not in (1, -1):
+        raise GenBacklashError(f"sign must be +1, -1 or None (detect), got {sign!r}")
+    return float(sign)
+
+
+def identify_backlash(
+    u: ArrayLike,
+    x: ArrayLike,
+    degree: int = 3,
+    *,
+    sign: float | None = None,
+    start: GeneralBacklash | None = None,
+    refine: bool = True,
+    max_iterations: int = 30,
+    tol: float = 1e-4,
+    nonfinite: NonFinitePolicy = "raise",
+    callback: IterationCallback | None = None,
+) -> IdentificationResult:
+    """Identify a general backlash from input ``u`` and measured output ``x`` (eqs. 22-29).
+
+    Parameters
+    ----------
+    u, x : array_like, shape (N,)
+        Actuator command and measured (load-side) position.
+    degree : int
+        Polynomial degree ``n >= 1`` of each branch; 1 is the ideal backlash.
+    sign : {+1, -1, None}
+        Whether the branches increase or decrease; None detects it from the data.
+    start : GeneralBacklash, optional
+        Initial estimate; default the paper's ``m_1 = sign``, ``c = 0.001``.
+    refine : bool
+        Run the output-error refinement after the iteration (default True).
+    max_iterations, tol : int, float
+        The iteration stops when no parameter moves more than ``tol * max(1, max|p|)``.
+    nonfinite : {"raise", "drop"}
+        Policy for NaN/inf samples.
+    callback : callable, optional
+        Called as ``callback(iteration, parameters)`` after each iteration.
+
+    Returns
+    -------
+    IdentificationResult
+
+    Raises
+    ------
+    NonFiniteInputError, NotEnoughExcitationError, GenBacklashError
+
+    Examples
+    --------
+    >>> from genbacklash_core import paper_example
+    >>> ex = paper_example(1)
+    >>> data = ex.generate(seed=0)
+    >>> result = identify_backlash(data.u, data.y, degree=3)
+    >>> result.converged
+    True
+    >>> bool(np.max(np.abs(result.model.parameters() - ex.model.parameters())) < 0.03)
+    True
+    """
+    if degree < 1:
+        raise GenBacklashError(f"degree must be >= 1, got {degree}")
+    uu, xx = prepare_series(u, x, nonfinite)
+    structure = Structure(degree, 0, 0, 1.0)
+    check_excitation(uu, xx, structure.n_parameters)
+    s = start.sign if start is not None else _sign_option(sign, uu, xx, 0)
+    structure = Structure(degree, 0, 0, s)
+    p0 = None
+    if start is not None:
+        if start.degree != degree:
+            raise GenBacklashError(f"start has degree {start.degree}, expected {degree}")
+        p0 = start.parameters()
+    return _run(
+        structure, uu, xx, start=p0, max_iterations=max_iterations, tol=tol, refine=refine,
+        callback=callback,
+    )
+
+
+def identify_cascade(
+    u: ArrayLike,
+    y: ArrayLike,
+    degree: int = 3,
+    na: int = 2,
+    nb: int = 2,
+    *,
+    sign: float | None = None,
+    start: Cascade | None = None,
+    refine: bool = True,
+    max_iterations: int = 30,
+    tol: float = 1e-4,
+    nonfinite: NonFinitePolicy = "raise",
+    callback: IterationCallback | None = None,
+) -> IdentificationResult:
+    """Identify a general backlash followed by linear dynamics (eqs. 31-37).
+
+    Parameters
+    ----------
+    u, y : array_like, shape (N,)
+        Input of the backlash and output of the linear block.
+    degree : int
+        Polynomial degree of each branch.
+    na, nb : int
+        ``r >= 1`` input terms (``a_1 = 1`` included) and ``p >= 0`` output terms of eq. (30).
+    sign, start, refine, max_iterations, tol, nonfinite, callback
+        As in :func:`identify_backlash`; the linear block starts at zero.
+
+    Examples
+    --------
+    >>> from genbacklash_core import paper_example
+    >>> ex = paper_example(3)
+    >>> data = ex.generate(seed=0)
+    >>> result = identify_cascade(data.u, data.y, degree=3, na=2, nb=2)
+    >>> result.converged, result.model.linear.na
+    (True, 2)
+    >>> bool(np.max(np.abs(result.model.parameters() - ex.model.parameters())) < 0.03)
+    True
+    """
+    if degree < 1:
+        raise GenBacklashError(f"degree must be >= 1, got {degree}")
+    if na < 1 or nb < 0:
+        raise GenBacklashError(f"need na >= 1 and nb >= 0, got na={na}, nb={nb}")
+    uu, yy = prepare_series(u, y, nonfinite)
+    structure = Structure(degree, na, nb, 1.0)
+    check_excitation(uu, yy, structure.n_parameters)
+    s = start.backlash.sign if start is not None else _sign_option(sign, uu, yy, na + 3)
+    structure = Structure(degree, na, nb, s)
+    p0 = None
+    if start is not None:
+        if Structure.of(start) != structure:
+            raise GenBacklashError(
+                f"start has structure {Structure.of(start)}, expected {structure}"
+            )
+        p0 = start.parameters()
+    return _run(
+        structure, uu, yy, start=p0, max_iterations=max_iterations, tol=tol, refine=refine,
+        callback=callback,
+    )

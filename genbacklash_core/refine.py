@@ -1,0 +1,242 @@
+"""Output-error refinement: minimise the free-run simulation error (maximum likelihood).
+
+The paper's equation-error iteration (eqs. 29, 37) puts the noisy output into its regressors
+and so is biased by output noise. Minimising the simulation error instead is the maximum
+likelihood estimate under white output noise. This module does that by Levenberg-Marquardt
+with an analytic Jacobian:
+
+* backlash: while a branch is engaged the output is the branch value, so its sensitivity is the
+  branch's derivative; while the backlash holds, the sensitivity is the one at the last
+  engagement. A running maximum over engagement indices gives that in one vectorised pass.
+* linear block: ``y = (A(q)/B(q)) x``, so ``dy/d(backlash) = (A/B) dx``,
+  ``dy/da_i = (1/B) x(t-i)`` and ``dy/db_j = -(1/B) y(t-j)`` (filters, no loops).
+
+The normal equations are formed once per step (N x P times P x N is cheap for P ~ 10 even at
+N = 1e6), column-scaled, damped and solved with ``numpy.linalg.lstsq``; damping retries cost a
+simulation each but no new Jacobian. Steps that leave the valid set (c <= 0, flipped slope,
+unstable linear block) are rejected like steps that raise the cost.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import signal
+
+from ._typing import FloatArray
+from .backlash import GeneralBacklash
+from .cascade import Cascade
+from .errors import GenBacklashError
+from .play import play_operator
+from .simulate import play_bounds
+from .structure import Structure
+
+__all__ = ["RefinementResult", "refine_output_error", "simulate_parameters"]
+
+
+@dataclass(frozen=True)
+class RefinementResult:
+    """Outcome of :func:`refine_output_error`.
+
+    Attributes
+    ----------
+    model : GeneralBacklash or Cascade
+        The refined model (the start model when no step lowered the cost).
+    iterations : int
+        Accepted Levenberg-Marquardt steps.
+    converged : bool
+        True when the relative cost decrease fell below the tolerance.
+    cost_start, cost_end : float
+        Sum of squared free-run simulation errors before and after.
+    reason : str
+        Why it stopped.
+    """
+
+    model: GeneralBacklash | Cascade
+    iterations: int
+    converged: bool
+    cost_start: float
+    cost_end: float
+    reason: str
+
+
+def _shift(v: FloatArray, k: int) -> FloatArray:
+    """``v(t - k)`` with zeros before the start (rest)."""
+    out = np.zeros_like(v)
+    if k < v.shape[0]:
+        out[k:] = v[: v.shape[0] - k]
+    return out
+
+
+def simulate_parameters(
+    structure: Structure, p: FloatArray, u: FloatArray, x0: float
+) -> tuple[FloatArray, FloatArray]:
+    """Free-run simulation ``(x, y)`` of the model with parameter vector ``p``.
+
+    For a backlash alone ``y`` is ``x``; a linear block starts from rest.
+    """
+    left, right = structure.branches(p, u)
+    x = play_operator(*play_bounds(left, right), x0)  # eqs. (20), (36)
+    if not structure.cascade:
+        return x, x
+    a, b = structure.linear_part(p)
+    y = signal.lfilter(np.concatenate([[0.0], a]), np.concatenate([[1.0], b]), x)  # eq. (30)
+    return x, np.asarray(y, dtype=np.float64)
+
+
+def _backlash_sensitivity(
+    structure: Structure, p: FloatArray, u: FloatArray, x: FloatArray, x0: float
+) -> FloatArray:
+    """``dx/dp`` for the backlash parameters, shape (N, 2n+2)."""
+    n = structure.degree
+    m_left, c_left, m_right, c_right = structure.split(p)
+    left, right = structure.branches(p, u)
+    x_prev = np.concatenate([[x0], x[:-1]])
+    f1 = (left - x_prev) * structure.sign <= 0.0  # eq. (18): left branch engaged
+    f2 = ((x_prev - right) * structure.sign <= 0.0) & ~f1  # eq. (19)
+    engaged = f1 | f2
+    last = np.where(engaged, np.arange(u.size), -1)
+    np.maximum.accumulate(last, out=last)  # index of the last engagement at or before t
+    held = last >= 0
+    src = last[held]
+
+    xi1 = u[src] + c_left  # eq. (16)
+    xi2 = u[src] - c_right  # eq. (17)
+    on_left = f1[src]
+    on_right = f2[src]
+    jac = np.zeros((u.size, structure.n_backlash))
+    rows = np.flatnonzero(held)
+    powers1 = np.ones_like(xi1)
+    powers2 = np.ones_like(xi2)
+    dleft_dc = np.zeros_like(xi1)
+    dright_dc = np.zeros_like(xi2)
+    for i in range(1, n + 1):
+        dleft_dc += i * m_left[i - 1] * powers1  # d/dc_L sum m_Li xi1^i
+        dright_dc -= i * m_right[i - 1] * powers2  # d/dc_R sum m_Ri (u - c_R)^i
+        powers1 = powers1 * xi1
+        powers2 = powers2 * xi2
+        jac[rows, i - 1] = np.where(on_left, powers1, 0.0)  # dL/dm_Li = xi1^i
+        jac[rows, n + i] = np.where(on_right, powers2, 0.0)  # dR/dm_Ri = xi2^i
+    jac[rows, n] = np.where(on_left, dleft_dc, 0.0)
+    jac[rows, 2 * n + 1] = np.where(on_right, dright_dc, 0.0)
+    return jac
+
+
+def _jacobian(
+    structure: Structure, p: FloatArray, u: FloatArray, x: FloatArray, y: FloatArray, x0: float
+) -> FloatArray:
+    """``dy/dp`` of the free-run simulation, shape (N, P)."""
+    jx = _backlash_sensitivity(structure, p, u, x, x0)
+    if not structure.cascade:
+        return jx
+    a, b = structure.linear_part(p)
+    num = np.concatenate([[0.0], a])
+    den = np.concatenate([[1.0], b])
+    jac = np.empty((u.size, structure.n_parameters))
+    jac[:, : structure.n_backlash] = signal.lfilter(num, den, jx, axis=0)
+    col = structure.n_backlash
+    for i in range(2, structure.na + 1):
+        jac[:, col] = signal.lfilter([1.0], den, _shift(x, i))  # dy/da_i
+        col += 1
+    for j in range(1, structure.nb + 1):
+        jac[:, col] = -signal.lfilter([1.0], den, _shift(y, j))  # dy/db_j
+        col += 1
+    return jac
+
+
+def refine_parameters(
+    structure: Structure,
+    p_start: FloatArray,
+    u: FloatArray,
+    y: FloatArray,
+    x0: float,
+    *,
+    max_iterations: int = 50,
+    tol: float = 1e-10,
+) -> tuple[FloatArray, int, bool, float, float, str]:
+    """Levenberg-Marquardt on the simulation error from ``p_start`` (flat-vector form).
+
+    Returns ``(p, accepted_steps, converged, cost_start, cost_end, reason)``.
+    """
+    p = np.array(p_start, dtype=np.float64)
+    if structure.problem(p) is not None:
+        raise GenBacklashError(f"cannot refine from an invalid model: {structure.problem(p)}")
+    x, yhat = simulate_parameters(structure, p, u, x0)
+    residual = y - yhat
+    cost = float(residual @ residual)
+    cost_start = cost
+    damping = 1e-3
+    accepted = 0
+    for _ in range(max_iterations):
+        jac = _jacobian(structure, p, u, x, yhat, x0)
+        gram = jac.T @ jac
+        grad = jac.T @ residual
+        scale = np.sqrt(np.diag(gram))
+        scale[scale == 0.0] = 1.0
+        scaled = gram / np.outer(scale, scale)
+        rhs = grad / scale
+        improved = False
+        while damping <= 1e10:
+            system = scaled + damping * np.eye(scaled.shape[0])
+            step = np.linalg.lstsq(system, rhs, rcond=None)[0] / scale
+            candidate = p + step
+            if structure.problem(candidate) is None:
+                x_new, y_new = simulate_parameters(structure, candidate, u, x0)
+                res_new = y - y_new
+                cost_new = float(res_new @ res_new)
+                if cost_new < cost:
+                    improved = True
+                    break
+            damping *= 4.0
+        if not improved:
+            return p, accepted, True, cost_start, cost, "no step lowers the simulation error"
+        decrease = (cost - cost_new) / max(cost, 1e-300)
+        p, x, yhat, residual, cost = candidate, x_new, y_new, res_new, cost_new
+        accepted += 1
+        damping = max(damping / 5.0, 1e-12)
+        if decrease < tol:
+            return p, accepted, True, cost_start, cost, "relative cost decrease below tolerance"
+    return p, accepted, False, cost_start, cost, f"stopped after {max_iterations} steps"
+
+
+def refine_output_error(
+    model: GeneralBacklash | Cascade,
+    u: FloatArray,
+    y: FloatArray,
+    *,
+    x0: float | None = None,
+    max_iterations: int = 50,
+    tol: float = 1e-10,
+) -> RefinementResult:
+    """Refine ``model`` by minimising the free-run simulation error on ``(u, y)``.
+
+    Parameters
+    ----------
+    model : GeneralBacklash or Cascade
+        Start, usually the result of the equation-error iteration.
+    u, y : ndarray
+        Input and measured output.
+    x0 : float, optional
+        Backlash state before the first sample; default ``y[0]`` for a backlash alone and 0
+        for a cascade (which starts from rest).
+    max_iterations, tol : int, float
+        Step limit and relative cost-decrease tolerance.
+
+    Examples
+    --------
+    >>> from genbacklash_core import paper_example
+    >>> ex = paper_example(1); data = ex.generate(seed=1)
+    >>> rough = GeneralBacklash((0.45, -0.25, 0.3), 0.6, (0.55, 0.4, 0.2), 0.7)
+    >>> out = refine_output_error(rough, data.u, data.y)
+    >>> bool(np.max(np.abs(out.model.parameters() - ex.model.parameters())) < 0.05)
+    True
+    """
+    structure = Structure.of(model)
+    uu = np.asarray(u, dtype=np.float64)
+    yy = np.asarray(y, dtype=np.float64)
+    start_state = (float(yy[0]) if not structure.cascade else 0.0) if x0 is None else float(x0)
+    p, steps, converged, cost0, cost1, reason = refine_parameters(
+        structure, model.parameters(), uu, yy, start_state, max_iterations=max_iterations, tol=tol
+    )
+    return RefinementResult(structure.model(p), steps, converged, cost0, cost1, reason)
