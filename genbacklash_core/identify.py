@@ -37,6 +37,7 @@ __all__ = [
 IterationCallback = Callable[[int, FloatArray], None]
 
 _CYCLE_LOOKBACK = 4  # how many earlier iterates a limit cycle may span
+_WARM_START_SAMPLES = 20_000  # prefix length for the warm start on long records
 
 
 @dataclass(frozen=True, eq=False)
@@ -170,7 +171,7 @@ def _backlash_columns(
     _, c_left, _, c_right = structure.split(p)
     xi1 = u + c_left  # eq. (25)
     xi2 = u - c_right  # eq. (26)
-    cols = np.empty((u.size, 2 * n + 2))
+    cols = np.empty((u.size, 2 * n + 2), order="F")  # column-major: contiguous column writes
     cols[:, 0] = u * f1
     cols[:, 1] = f1
     cols[:, n + 1] = u * f2
@@ -216,20 +217,92 @@ def _cascade_regression(
     f1, f2 = _switching(structure, p, u, x_prev)
     na, nb = structure.na, structure.nb
     t0 = max(1, na, nb)
-    rows = np.arange(t0, u.size)
+    m = u.size - t0  # rows t = t0 .. N-1
     n_bl = structure.n_backlash
-    phi = np.empty((rows.size, structure.n_parameters))
-    phi[:, :n_bl] = _backlash_columns(structure, p, u[rows - 1], f1[rows - 1], f2[rows - 1])
+    phi = np.empty((m, structure.n_parameters), order="F")
+    prev = slice(t0 - 1, u.size - 1)  # index t-1 for every row
+    phi[:, :n_bl] = _backlash_columns(structure, p, u[prev], f1[prev], f2[prev])
     x_lagged = np.concatenate([[0.0, 0.0], x])  # x_lagged[t + 2 - i] = x(t - i), rest before 0
     col = n_bl
     for i in range(2, na + 1):
-        phi[:, col] = x_lagged[rows + 2 - i]  # x(t-i), eq. (32)
+        phi[:, col] = x_lagged[t0 + 2 - i : u.size + 2 - i]  # x(t-i), eq. (32)
         col += 1
     for j in range(1, nb + 1):
-        phi[:, col] = -y[rows - j]  # -y(t-j), eq. (32)
+        phi[:, col] = -y[t0 - j : u.size - j]  # -y(t-j), eq. (32)
         col += 1
-    hold = x_lagged[rows] * (1.0 - f1[rows - 1]) * (1.0 - f2[rows - 1])  # x(t-2)[1-f1][1-f2]
-    return phi, y[rows] - hold  # eq. (37)
+    hold = x_lagged[t0 : u.size] * (1.0 - f1[prev]) * (1.0 - f2[prev])  # x(t-2)[1-f1][1-f2]
+    return phi, y[t0:] - hold  # eq. (37)
+
+
+@dataclass
+class _IterationOutcome:
+    """Working state of :func:`_iterate` (internal, mutable)."""
+
+    p: FloatArray
+    last_valid: FloatArray
+    history: list[FloatArray]
+    iterations: int
+    converged: bool
+    reason: str
+
+
+def _iterate(
+    structure: Structure,
+    u: FloatArray,
+    y: FloatArray,
+    p_start: FloatArray,
+    max_iterations: int,
+    tol: float,
+    callback: IterationCallback | None,
+) -> _IterationOutcome:
+    """The paper's iteration, steps (a)-(c) of §3b / §4b, from ``p_start``."""
+    regression = _cascade_regression if structure.cascade else _backlash_regression
+    p = p_start.copy()
+    out = _IterationOutcome(p, p.copy(), [p.copy()], 0, False, "")
+    change = float("nan")
+    for iteration in range(1, max_iterations + 1):
+        out.iterations = iteration
+        phi, target = regression(structure, p, u, y)  # step (b): internal variables
+        theta = _solve_least_squares(phi, target) if target.size >= phi.shape[1] else None
+        if theta is None:  # step (a) impossible
+            out.reason = (
+                f"iteration {iteration}: the regression became singular (a branch is never "
+                "engaged or regressors are collinear): the model structure may not fit the data, "
+                "e.g. a delay or order the model lacks, or the data do not excite both branches"
+            )
+            return out
+        try:
+            p_new = structure.from_theta(theta)
+        except GenBacklashError as err:
+            out.reason = f"iteration {iteration}: {err}"
+            return out
+        change = float(np.max(np.abs(p_new - p)))
+        # The switching patterns can flip back and forth between iterations: a limit cycle.
+        # Revisiting one of the last few iterates within tol is as settled as it gets.
+        recent = np.array(out.history[-_CYCLE_LOOKBACK:])
+        distances = np.max(np.abs(recent - p_new), axis=1)[::-1]  # [1 back, 2 back, ...]
+        period = int(np.argmin(distances)) + 1
+        settled = float(distances[period - 1])
+        p = out.p = p_new
+        out.history.append(p.copy())
+        if callback is not None:
+            callback(iteration, p.copy())
+        problem = structure.problem(p)
+        if problem is None:
+            out.last_valid = p.copy()
+        if settled <= tol * max(1.0, float(np.max(np.abs(p)))):  # step (c)
+            if problem is None:
+                out.converged = True
+                out.reason = f"converged: parameter change {change:.2g} after {iteration} iterations"
+                if period > 1:
+                    out.reason += f" (a period-{period} cycle of switching patterns)"
+            else:
+                out.reason = f"the iteration settled on an invalid model: {problem}"
+            return out
+    out.reason = f"no convergence in {max_iterations} iterations (last parameter change {change:.2g})"
+    if (problem := structure.problem(p)) is not None:
+        out.reason += f"; {problem}"
+    return out
 
 
 def _run(
@@ -243,7 +316,6 @@ def _run(
     refine: bool,
     callback: IterationCallback | None,
 ) -> IdentificationResult:
-    regression = _cascade_regression if structure.cascade else _backlash_regression
     p = structure.start() if start is None else np.asarray(start, dtype=np.float64).copy()
     if p.shape != (structure.n_parameters,):
         raise GenBacklashError(f"start must have {structure.n_parameters} parameters, got {p.shape}")
@@ -251,56 +323,25 @@ def _run(
         raise GenBacklashError(f"invalid start: {problem}")
     if max_iterations < 1:
         raise GenBacklashError(f"max_iterations must be >= 1, got {max_iterations}")
-    history = [p.copy()]
-    last_valid = p.copy()
-    converged = False
-    reason = ""
-    iterations = 0
-    for iterations in range(1, max_iterations + 1):
-        phi, target = regression(structure, p, u, y)
-        theta = _solve_least_squares(phi, target) if target.size >= phi.shape[1] else None
-        if theta is None:
-            reason = (
-                f"iteration {iterations}: the regression became singular (a branch is never "
-                "engaged or regressors are collinear): the model structure may not fit the data, "
-                "e.g. a delay or order the model lacks, or the data do not excite both branches"
-            )
-            break
-        try:
-            p_new = structure.from_theta(theta)
-        except GenBacklashError as err:
-            reason = f"iteration {iterations}: {err}"
-            break
-        change = float(np.max(np.abs(p_new - p)))
-        # The switching patterns can flip back and forth between iterations: a limit cycle.
-        # Revisiting one of the last few iterates within tol is as settled as it gets.
-        recent = np.array(history[-_CYCLE_LOOKBACK:])
-        distances = np.max(np.abs(recent - p_new), axis=1)[::-1]  # [1 back, 2 back, ...]
-        period = int(np.argmin(distances)) + 1
-        settled = float(distances[period - 1])
-        p = p_new
-        history.append(p.copy())
-        if callback is not None:
-            callback(iterations, p.copy())
-        problem = structure.problem(p)
-        if problem is None:
-            last_valid = p.copy()
-        if settled <= tol * max(1.0, float(np.max(np.abs(p)))):
-            if problem is None:
-                converged = True
-                reason = f"converged: parameter change {change:.2g} after {iterations} iterations"
-                if period > 1:
-                    reason += f" (a period-{period} cycle of switching patterns)"
-            else:
-                reason = f"the iteration settled on an invalid model: {problem}"
-            break
-    else:
-        reason = f"no convergence in {max_iterations} iterations (last parameter change {change:.2g})"
-        if (problem := structure.problem(p)) is not None:
-            reason += f"; {problem}"
+    history: list[FloatArray] = []
+    if u.size > 4 * _WARM_START_SAMPLES:
+        # Long records: the early iterations only find the switching regime, which a prefix
+        # shows as well; iterate there first and finish on all the data.
+        head = _iterate(
+            structure, u[:_WARM_START_SAMPLES], y[:_WARM_START_SAMPLES], p, max_iterations, tol,
+            callback,
+        )
+        if head.converged:
+            p = head.p
+            history = head.history[:-1]
+    outcome = _iterate(structure, u, y, p, max_iterations, tol, callback)
+    history += outcome.history
+    converged, reason = outcome.converged, outcome.reason
+    if history is not outcome.history and len(history) > len(outcome.history):
+        reason += f" on all data, after {len(history) - len(outcome.history)} on a prefix"
 
     x0 = 0.0 if structure.cascade else float(y[0])
-    equation_error_p = last_valid
+    equation_error_p = outcome.last_valid
     refinement: RefinementResult | None = None
     final_p = equation_error_p
     if refine and converged:
@@ -313,7 +354,7 @@ def _run(
     _, y_sim = simulate_parameters(structure, final_p, u, x0)
     return IdentificationResult(
         model=structure.model(final_p),
-        iterations=iterations,
+        iterations=len(history) - 1,
         converged=converged,
         reason=reason,
         fit=Fit(nrmse(y, y_sim)),

@@ -1,0 +1,71 @@
+"""Reading and writing input/output series as CSV with a header (``u,y`` and optional ``t``)."""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+
+from genbacklash_core import GenBacklashError
+
+__all__ = ["Series", "read_series_csv", "write_series_csv"]
+
+FloatArray = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True, eq=False)
+class Series:
+    """An input/output record: command ``u``, measured output ``y``, optional time ``t`` [s]."""
+
+    u: FloatArray
+    y: FloatArray
+    t: FloatArray | None = None
+
+
+def read_series_csv(path: str | Path) -> Series:
+    """Read a CSV whose header names the columns ``u`` and ``y`` (and optionally ``t``).
+
+    Other columns are ignored. Empty or non-numeric cells become NaN, so the identifiers can
+    report where they are (or drop them on request) instead of failing here.
+    """
+    file = Path(path)
+    try:
+        with file.open(newline="") as handle:
+            header = next(csv.reader(handle), None)
+    except OSError as err:
+        raise GenBacklashError(f"cannot read {file}: {err.strerror or err}") from err
+    except UnicodeDecodeError as err:
+        raise GenBacklashError(f"{file} is not a text CSV file: {err}") from err
+    if not header:
+        raise GenBacklashError(f"{file} is empty; expected a header line with columns u,y")
+    names = [name.strip().lower() for name in header]
+    missing = [c for c in ("u", "y") if c not in names]
+    if missing:
+        raise GenBacklashError(
+            f"{file} has columns {header}; the header must name 'u' and 'y' (missing: {missing})"
+        )
+    wanted = [names.index("u"), names.index("y")] + ([names.index("t")] if "t" in names else [])
+    try:
+        table = np.loadtxt(file, delimiter=",", skiprows=1, usecols=wanted, ndmin=2)
+    except ValueError:
+        # Empty or malformed cells: parse tolerantly, marking them NaN for the caller to report.
+        table = np.genfromtxt(
+            file, delimiter=",", skip_header=1, usecols=wanted, dtype=np.float64, ndmin=2,
+            invalid_raise=False,
+        )
+    if table.shape[0] == 0:
+        raise GenBacklashError(f"{file} has a header but no data rows")
+    t = table[:, 2].copy() if table.shape[1] == 3 else None
+    return Series(u=table[:, 0].copy(), y=table[:, 1].copy(), t=t)
+
+
+def write_series_csv(path: str | Path, series: Series) -> None:
+    """Write ``t,u,y`` (or ``u,y``) with full float precision."""
+    columns = [series.u, series.y] if series.t is None else [series.t, series.u, series.y]
+    header = "u,y" if series.t is None else "t,u,y"
+    file = Path(path)
+    file.parent.mkdir(parents=True, exist_ok=True)
+    np.savetxt(file, np.column_stack(columns), delimiter=",", header=header, comments="", fmt="%.17g")
