@@ -70,8 +70,8 @@ class GeneralBacklash:
     >>> bl = GeneralBacklash((0.5, -0.3, 0.3), 0.7, (0.6, 0.4, 0.2), 0.8)
     >>> bl.degree, bl.increasing
     (3, True)
-    >>> float(bl.left(np.array([0.0]))[0])  # L(0) = 0.5*0.7 - 0.3*0.7**2 + 0.3*0.7**3
-    0.2059
+    >>> round(float(bl.left(np.array([0.0]))[0]), 6)  # L(0) = 0.5*0.7 - 0.3*0.7**2 + 0.3*0.7**3
+    0.3059
     >>> bl.branches_separated(-2.0, 2.0)
     True
     """
@@ -206,8 +206,9 @@ class GeneralBacklash:
         if np.allclose(coef, 0.0):
             return (float(u_min),)
         for root in difference.roots():
-            if abs(root.imag) <= 1e-9 * max(1.0, abs(root.real)) and u_min <= root.real <= u_max:
-                found.append(float(root.real))
+            real, imag = float(np.real(root)), float(np.imag(root))
+            if abs(imag) <= 1e-9 * max(1.0, abs(real)) and u_min <= real <= u_max:
+                found.append(real)
         for end in (u_min, u_max):
             if difference(end) * self.sign <= 0.0 and end not in found:
                 found.append(float(end))

@@ -37,12 +37,14 @@ def prepare_series(
     >>> prepare_series([0.0, float("nan")], [1.0, 2.0])
     Traceback (most recent call last):
     ...
-    genbacklash_core.errors.NonFiniteInputError: 1 of 2 samples are NaN or infinite (u: 1, y: 0), at index 1; ...
+    genbacklash_core.errors.NonFiniteInputError: 1 of 2 samples are NaN or infinite ...
     """
     uu = np.asarray(u, dtype=np.float64)
     yy = np.asarray(y, dtype=np.float64)
     if uu.ndim != 1 or yy.ndim != 1:
-        raise GenBacklashError(f"u and y must be one-dimensional, got shapes {uu.shape}, {yy.shape}")
+        raise GenBacklashError(
+            f"u and y must be one-dimensional, got shapes {uu.shape}, {yy.shape}"
+        )
     if uu.size != yy.size:
         raise GenBacklashError(f"u and y must have the same length, got {uu.size} and {yy.size}")
     bad_u = ~np.isfinite(uu)

@@ -15,7 +15,9 @@ from .simulate import simulate_backlash, simulate_cascade
 
 __all__ = ["ExampleData", "PaperExample", "paper_example"]
 
-_LINEAR = LinearBlock(a=(1.0, 0.15), b=(-0.2, 0.35))  # y = x(t-1) + 0.15x(t-2) + 0.2y(t-1) - 0.35y(t-2)
+_LINEAR = LinearBlock(
+    a=(1.0, 0.15), b=(-0.2, 0.35)
+)  # y = x(t-1) + 0.15x(t-2) + 0.2y(t-1) - 0.35y(t-2)
 
 
 @dataclass(frozen=True, eq=False)
@@ -79,7 +81,9 @@ class PaperExample:
 def paper_example(number: int) -> PaperExample:
     """The paper's Example ``number`` (1-4) with its N, input range and SNR."""
     if number == 1:
-        model: GeneralBacklash | Cascade = GeneralBacklash((0.5, -0.3, 0.3), 0.7, (0.6, 0.4, 0.2), 0.8)
+        model: GeneralBacklash | Cascade = GeneralBacklash(
+            (0.5, -0.3, 0.3), 0.7, (0.6, 0.4, 0.2), 0.8
+        )
         return PaperExample(1, model, 800, 2.0, 25.0)
     if number == 2:
         model = GeneralBacklash((-0.5, 0.3, -0.3), 0.7, (-0.6, -0.4, -0.2), 0.8)

@@ -293,13 +293,17 @@ def _iterate(
         if settled <= tol * max(1.0, float(np.max(np.abs(p)))):  # step (c)
             if problem is None:
                 out.converged = True
-                out.reason = f"converged: parameter change {change:.2g} after {iteration} iterations"
+                out.reason = (
+                    f"converged: parameter change {change:.2g} after {iteration} iterations"
+                )
                 if period > 1:
                     out.reason += f" (a period-{period} cycle of switching patterns)"
             else:
                 out.reason = f"the iteration settled on an invalid model: {problem}"
             return out
-    out.reason = f"no convergence in {max_iterations} iterations (last parameter change {change:.2g})"
+    out.reason = (
+        f"no convergence in {max_iterations} iterations (last parameter change {change:.2g})"
+    )
     if (problem := structure.problem(p)) is not None:
         out.reason += f"; {problem}"
     return out
@@ -318,7 +322,9 @@ def _run(
 ) -> IdentificationResult:
     p = structure.start() if start is None else np.asarray(start, dtype=np.float64).copy()
     if p.shape != (structure.n_parameters,):
-        raise GenBacklashError(f"start must have {structure.n_parameters} parameters, got {p.shape}")
+        raise GenBacklashError(
+            f"start must have {structure.n_parameters} parameters, got {p.shape}"
+        )
     if (problem := structure.problem(p)) is not None:
         raise GenBacklashError(f"invalid start: {problem}")
     if max_iterations < 1:
@@ -328,7 +334,12 @@ def _run(
         # Long records: the early iterations only find the switching regime, which a prefix
         # shows as well; iterate there first and finish on all the data.
         head = _iterate(
-            structure, u[:_WARM_START_SAMPLES], y[:_WARM_START_SAMPLES], p, max_iterations, tol,
+            structure,
+            u[:_WARM_START_SAMPLES],
+            y[:_WARM_START_SAMPLES],
+            p,
+            max_iterations,
+            tol,
             callback,
         )
         if head.converged:
@@ -438,7 +449,13 @@ def identify_backlash(
             raise GenBacklashError(f"start has degree {start.degree}, expected {degree}")
         p0 = start.parameters()
     return _run(
-        structure, uu, xx, start=p0, max_iterations=max_iterations, tol=tol, refine=refine,
+        structure,
+        uu,
+        xx,
+        start=p0,
+        max_iterations=max_iterations,
+        tol=tol,
+        refine=refine,
         callback=callback,
     )
 
@@ -499,6 +516,12 @@ def identify_cascade(
             )
         p0 = start.parameters()
     return _run(
-        structure, uu, yy, start=p0, max_iterations=max_iterations, tol=tol, refine=refine,
+        structure,
+        uu,
+        yy,
+        start=p0,
+        max_iterations=max_iterations,
+        tol=tol,
+        refine=refine,
         callback=callback,
     )

@@ -31,7 +31,7 @@ class LinearBlock:
     >>> block.na, block.nb, block.stable
     (2, 2, True)
     >>> round(block.dc_gain, 6)
-    0.7
+    1.0
     """
 
     a: tuple[float, ...]

@@ -72,7 +72,9 @@ def play_operator(lo: ArrayLike, hi: ArrayLike, x0: float = 0.0) -> FloatArray:
     low = np.ascontiguousarray(lo, dtype=np.float64)
     high = np.ascontiguousarray(hi, dtype=np.float64)
     if low.ndim != 1 or low.shape != high.shape:
-        raise GenBacklashError(f"lo and hi must be 1-D of one length, got {low.shape}, {high.shape}")
+        raise GenBacklashError(
+            f"lo and hi must be 1-D of one length, got {low.shape}, {high.shape}"
+        )
     n = low.size
     if n < _LOOP_BELOW:
         return play_operator_loop(low, high, x0)

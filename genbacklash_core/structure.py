@@ -135,7 +135,9 @@ class Structure:
                 f"are not {sense} as the start assumed"
             )
         if c_left <= 0 or c_right <= 0:
-            return f"a dead-zone constant is not positive (c_left={c_left:.3g}, c_right={c_right:.3g})"
+            return (
+                f"a dead-zone constant is not positive (c_left={c_left:.3g}, c_right={c_right:.3g})"
+            )
         if self.cascade:
             _, b = self.linear_part(p)
             if not denominator_is_stable(np.concatenate([[1.0], b])):

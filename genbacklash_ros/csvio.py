@@ -53,7 +53,12 @@ def read_series_csv(path: str | Path) -> Series:
     except ValueError:
         # Empty or malformed cells: parse tolerantly, marking them NaN for the caller to report.
         table = np.genfromtxt(
-            file, delimiter=",", skip_header=1, usecols=wanted, dtype=np.float64, ndmin=2,
+            file,
+            delimiter=",",
+            skip_header=1,
+            usecols=wanted,
+            dtype=np.float64,
+            ndmin=2,
             invalid_raise=False,
         )
     if table.shape[0] == 0:
@@ -68,4 +73,6 @@ def write_series_csv(path: str | Path, series: Series) -> None:
     header = "u,y" if series.t is None else "t,u,y"
     file = Path(path)
     file.parent.mkdir(parents=True, exist_ok=True)
-    np.savetxt(file, np.column_stack(columns), delimiter=",", header=header, comments="", fmt="%.17g")
+    np.savetxt(
+        file, np.column_stack(columns), delimiter=",", header=header, comments="", fmt="%.17g"
+    )
