@@ -88,53 +88,56 @@ def simulate_parameters(
 def _backlash_sensitivity(
     structure: Structure, p: FloatArray, u: FloatArray, x: FloatArray, x0: float
 ) -> FloatArray:
-    """``dx/dp`` for the backlash parameters, shape (N, 2n+2)."""
+    """``dx/dp`` for the backlash parameters, shape (N, 2n+2), column-major."""
     n = structure.degree
     m_left, c_left, m_right, c_right = structure.split(p)
     left, right = structure.branches(p, u)
     x_prev = np.concatenate([[x0], x[:-1]])
     f1 = (left - x_prev) * structure.sign <= 0.0  # eq. (18): left branch engaged
     f2 = ((x_prev - right) * structure.sign <= 0.0) & ~f1  # eq. (19)
-    engaged = f1 | f2
-    last = np.where(engaged, np.arange(u.size), -1)
+    last = np.where(f1 | f2, np.arange(u.size), -1)
     np.maximum.accumulate(last, out=last)  # index of the last engagement at or before t
-    held = last >= 0
-    src = last[held]
+    never = last < 0  # before the first engagement the output is x0: no sensitivity
+    source = np.where(never, 0, last)
 
-    xi1 = u[src] + c_left  # eq. (16)
-    xi2 = u[src] - c_right  # eq. (17)
-    on_left = f1[src]
-    on_right = f2[src]
-    jac = np.zeros((u.size, structure.n_backlash))
-    rows = np.flatnonzero(held)
-    powers1 = np.ones_like(xi1)
-    powers2 = np.ones_like(xi2)
+    xi1 = u + c_left  # eq. (16)
+    xi2 = u - c_right  # eq. (17)
+    jac = np.empty((u.size, structure.n_backlash), order="F")
+    power1 = np.ones_like(xi1)
+    power2 = np.ones_like(xi2)
     dleft_dc = np.zeros_like(xi1)
     dright_dc = np.zeros_like(xi2)
+
+    def held(engaged_value: FloatArray, column: int) -> None:
+        # The output holds the value of the last engaged branch: gather its sensitivity.
+        np.take(engaged_value, source, out=jac[:, column])
+        jac[never, column] = 0.0
+
     for i in range(1, n + 1):
-        dleft_dc += i * m_left[i - 1] * powers1  # d/dc_L sum m_Li xi1^i
-        dright_dc -= i * m_right[i - 1] * powers2  # d/dc_R sum m_Ri (u - c_R)^i
-        powers1 = powers1 * xi1
-        powers2 = powers2 * xi2
-        jac[rows, i - 1] = np.where(on_left, powers1, 0.0)  # dL/dm_Li = xi1^i
-        jac[rows, n + i] = np.where(on_right, powers2, 0.0)  # dR/dm_Ri = xi2^i
-    jac[rows, n] = np.where(on_left, dleft_dc, 0.0)
-    jac[rows, 2 * n + 1] = np.where(on_right, dright_dc, 0.0)
+        dleft_dc += i * m_left[i - 1] * power1  # d/dc_L sum m_Li xi1^i
+        dright_dc -= i * m_right[i - 1] * power2  # d/dc_R sum m_Ri (u - c_R)^i
+        power1 = power1 * xi1
+        power2 = power2 * xi2
+        held(np.where(f1, power1, 0.0), i - 1)  # dL/dm_Li = xi1^i
+        held(np.where(f2, power2, 0.0), n + i)  # dR/dm_Ri = xi2^i
+    held(np.where(f1, dleft_dc, 0.0), n)
+    held(np.where(f2, dright_dc, 0.0), 2 * n + 1)
     return jac
 
 
 def _jacobian(
     structure: Structure, p: FloatArray, u: FloatArray, x: FloatArray, y: FloatArray, x0: float
 ) -> FloatArray:
-    """``dy/dp`` of the free-run simulation, shape (N, P)."""
+    """``dy/dp`` of the free-run simulation, shape (N, P), column-major."""
     jx = _backlash_sensitivity(structure, p, u, x, x0)
     if not structure.cascade:
         return jx
     a, b = structure.linear_part(p)
     num = np.concatenate([[0.0], a])
     den = np.concatenate([[1.0], b])
-    jac = np.empty((u.size, structure.n_parameters))
-    jac[:, : structure.n_backlash] = signal.lfilter(num, den, jx, axis=0)
+    jac = np.empty((u.size, structure.n_parameters), order="F")
+    for col in range(structure.n_backlash):
+        jac[:, col] = signal.lfilter(num, den, jx[:, col])  # (A/B) dx/dp
     col = structure.n_backlash
     for i in range(2, structure.na + 1):
         jac[:, col] = signal.lfilter([1.0], den, _shift(x, i))  # dy/da_i
