@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -49,7 +50,9 @@ def read_series_csv(path: str | Path) -> Series:
         )
     wanted = [names.index("u"), names.index("y")] + ([names.index("t")] if "t" in names else [])
     try:
-        table = np.loadtxt(file, delimiter=",", skiprows=1, usecols=wanted, ndmin=2)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # "no data": reported below instead
+            table = np.loadtxt(file, delimiter=",", skiprows=1, usecols=wanted, ndmin=2)
     except ValueError:
         # Empty or malformed cells: parse tolerantly, marking them NaN for the caller to report.
         table = np.genfromtxt(
