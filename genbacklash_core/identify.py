@@ -38,6 +38,7 @@ IterationCallback = Callable[[int, FloatArray], None]
 
 _CYCLE_LOOKBACK = 4  # how many earlier iterates a limit cycle may span
 _WARM_START_SAMPLES = 20_000  # prefix length for the warm start on long records
+_RESTART_DEAD_ZONES = (0.05, 0.2)  # restart dead zones, as fractions of the input span
 
 
 @dataclass(frozen=True, eq=False)
@@ -309,6 +310,78 @@ def _iterate(
     return out
 
 
+@dataclass
+class _Candidate:
+    """One start's outcome, refined when asked (internal)."""
+
+    outcome: _IterationOutcome
+    history: list[FloatArray]
+    p: FloatArray
+    y_sim: FloatArray
+    cost: float
+    refinement: RefinementResult | None
+    converged: bool
+    reason: str
+
+
+def _candidate(
+    structure: Structure,
+    u: FloatArray,
+    y: FloatArray,
+    p_start: FloatArray,
+    *,
+    max_iterations: int,
+    tol: float,
+    refine: bool,
+    callback: IterationCallback | None,
+) -> _Candidate:
+    """Iterate from one start (warm-started on a prefix for long records), then refine."""
+    history: list[FloatArray] = []
+    p = p_start
+    if u.size > 4 * _WARM_START_SAMPLES:
+        # Long records: the early iterations only find the switching regime, which a prefix
+        # shows as well; iterate there first and finish on all the data.
+        head = _iterate(
+            structure,
+            u[:_WARM_START_SAMPLES],
+            y[:_WARM_START_SAMPLES],
+            p,
+            max_iterations,
+            tol,
+            callback,
+        )
+        if head.converged:
+            p = head.p
+            history = head.history[:-1]
+    outcome = _iterate(structure, u, y, p, max_iterations, tol, callback)
+    prefix_iterations = len(history)
+    history += outcome.history
+    reason = outcome.reason
+    if prefix_iterations:
+        reason += f" on all data, after {prefix_iterations} on a prefix"
+    # "wandering": valid to the end but never settled (typical at low SNR, where noise keeps
+    # flipping switching decisions). The refinement decides then. A singular regression or an
+    # invalid model is a failure whatever the refinement would say.
+    wandering = not outcome.converged and outcome.iterations == max_iterations
+    wandering = wandering and structure.problem(outcome.p) is None
+    x0 = 0.0 if structure.cascade else float(y[0])
+    p_final = outcome.last_valid
+    refinement: RefinementResult | None = None
+    converged = outcome.converged
+    if refine and (outcome.converged or wandering):
+        q, steps, ok, cost0, cost1, why = refine_parameters(structure, p_final, u, y, x0)
+        p_final = q
+        refinement = RefinementResult(structure.model(q), steps, ok, cost0, cost1, why)
+        drop = 100.0 * (1.0 - cost1 / cost0) if cost0 > 0 else 0.0
+        reason += f"; output-error refinement: {steps} steps, simulation error -{drop:.1f}% ({why})"
+        converged = ok
+    _, y_sim = simulate_parameters(structure, p_final, u, x0)
+    residual = y - y_sim
+    return _Candidate(
+        outcome, history, p_final, y_sim, float(residual @ residual), refinement, converged, reason
+    )
+
+
 def _run(
     structure: Structure,
     u: FloatArray,
@@ -329,49 +402,34 @@ def _run(
         raise GenBacklashError(f"invalid start: {problem}")
     if max_iterations < 1:
         raise GenBacklashError(f"max_iterations must be >= 1, got {max_iterations}")
-    history: list[FloatArray] = []
-    if u.size > 4 * _WARM_START_SAMPLES:
-        # Long records: the early iterations only find the switching regime, which a prefix
-        # shows as well; iterate there first and finish on all the data.
-        head = _iterate(
-            structure,
-            u[:_WARM_START_SAMPLES],
-            y[:_WARM_START_SAMPLES],
-            p,
-            max_iterations,
-            tol,
-            callback,
-        )
-        if head.converged:
-            p = head.p
-            history = head.history[:-1]
-    outcome = _iterate(structure, u, y, p, max_iterations, tol, callback)
-    history += outcome.history
-    converged, reason = outcome.converged, outcome.reason
-    if history is not outcome.history and len(history) > len(outcome.history):
-        reason += f" on all data, after {len(history) - len(outcome.history)} on a prefix"
-
-    x0 = 0.0 if structure.cascade else float(y[0])
-    equation_error_p = outcome.last_valid
-    refinement: RefinementResult | None = None
-    final_p = equation_error_p
-    if refine and converged:
-        q, steps, ok, cost0, cost1, why = refine_parameters(structure, equation_error_p, u, y, x0)
-        final_p = q
-        refinement = RefinementResult(structure.model(q), steps, ok, cost0, cost1, why)
-        drop = 100.0 * (1.0 - cost1 / cost0) if cost0 > 0 else 0.0
-        reason += f"; output-error refinement: {steps} steps, simulation error -{drop:.1f}% ({why})"
-        converged = ok
-    _, y_sim = simulate_parameters(structure, final_p, u, x0)
+    options = {"max_iterations": max_iterations, "tol": tol, "refine": refine, "callback": callback}
+    best = _candidate(structure, u, y, p, **options)  # type: ignore[arg-type]
+    if not best.outcome.converged and start is None:
+        # The paper's start did not settle: the iteration can stall on a spurious fixed point.
+        # Try wider dead zones and keep the candidate that simulates the data best.
+        span = float(np.ptp(u))
+        for fraction in _RESTART_DEAD_ZONES:
+            alternative = _candidate(
+                structure,
+                u,
+                y,
+                structure.start(c=fraction * span),
+                **options,  # type: ignore[arg-type]
+            )
+            if alternative.cost < best.cost and (alternative.converged or not best.converged):
+                best = alternative
+                best.reason += f" (restarted from dead zones {fraction:g} x the input span)"
+            if best.outcome.converged:
+                break
     return IdentificationResult(
-        model=structure.model(final_p),
-        iterations=len(history) - 1,
-        converged=converged,
-        reason=reason,
-        fit=Fit(nrmse(y, y_sim)),
-        history=IterationHistory(structure.names(), np.array(history)),
-        equation_error_model=structure.model(equation_error_p),
-        refinement=refinement,
+        model=structure.model(best.p),
+        iterations=len(best.history) - 1,
+        converged=best.converged,
+        reason=best.reason,
+        fit=Fit(nrmse(y, best.y_sim)),
+        history=IterationHistory(structure.names(), np.array(best.history)),
+        equation_error_model=structure.model(best.outcome.last_valid),
+        refinement=best.refinement,
     )
 
 
