@@ -9,6 +9,7 @@ Degree 1 is the ideal backlash of eqs. (1)/(7).
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -92,7 +93,8 @@ class GeneralBacklash:
                 f"coefficients, m_right {len(m_right)}"
             )
         for name, value in (("c_left", self.c_left), ("c_right", self.c_right)):
-            if not (isinstance(value, (int, float, np.floating)) and math.isfinite(value)):
+            real = isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+            if not (real and math.isfinite(value)):
                 raise GenBacklashError(f"{name} must be a finite number, got {value!r}")
             if value <= 0:
                 raise GenBacklashError(f"{name} must be > 0 (a dead-zone width), got {value}")

@@ -39,6 +39,8 @@ def prepare_series(
     ...
     genbacklash_core.errors.NonFiniteInputError: 1 of 2 samples are NaN or infinite ...
     """
+    if nonfinite not in ("raise", "drop"):
+        raise GenBacklashError(f"nonfinite must be 'raise' or 'drop', got {nonfinite!r}")
     uu = np.asarray(u, dtype=np.float64)
     yy = np.asarray(y, dtype=np.float64)
     if uu.ndim != 1 or yy.ndim != 1:
@@ -53,8 +55,6 @@ def prepare_series(
     if bad.any():
         if nonfinite == "drop":
             return uu[~bad].copy(), yy[~bad].copy()
-        if nonfinite != "raise":
-            raise GenBacklashError(f"nonfinite must be 'raise' or 'drop', got {nonfinite!r}")
         positions = np.flatnonzero(bad)
         raise NonFiniteInputError(
             f"{positions.size} of {uu.size} samples are NaN or infinite "

@@ -24,7 +24,7 @@ from .errors import GenBacklashError
 from .play import play_operator
 from .refine import RefinementResult, refine_parameters, simulate_parameters
 from .simulate import play_bounds
-from .structure import Structure
+from .structure import Structure, as_order
 
 __all__ = [
     "IdentificationResult",
@@ -38,7 +38,8 @@ IterationCallback = Callable[[int, FloatArray], None]
 
 _CYCLE_LOOKBACK = 4  # how many earlier iterates a limit cycle may span
 _WARM_START_SAMPLES = 20_000  # prefix length for the warm start on long records
-_RESTART_DEAD_ZONES = (0.05, 0.2)  # restart dead zones, as fractions of the input span
+_RESTART_DEAD_ZONES = (0.05, 0.2)
+_USELESS_FIT = 0.95  # free-run NRMSE from which a model explains nothing (SNR 1 gives ~0.71)  # restart dead zones, as fractions of the input span
 
 
 @dataclass(frozen=True, eq=False)
@@ -375,8 +376,27 @@ def _candidate(
         drop = 100.0 * (1.0 - cost1 / cost0) if cost0 > 0 else 0.0
         reason += f"; output-error refinement: {steps} steps, simulation error -{drop:.1f}% ({why})"
         converged = ok
+        if wandering and ok:
+            # A wandering iteration may have met a structure that does not fit (a missing
+            # delay, say). With the right structure the refined estimate sits near a fixed point
+            # of the paper's iteration, so restarted there the iteration settles; otherwise not.
+            check = _iterate(structure, u, y, q, max_iterations, tol, None)
+            converged = check.converged
+            reason += (
+                "; restarted from the refined estimate, the iteration settled"
+                if converged
+                else "; restarted from the refined estimate, the iteration still did not settle "
+                f"({check.reason}): the structure may not fit"
+            )
     _, y_sim = simulate_parameters(structure, p_final, u, x0)
     residual = y - y_sim
+    fit = nrmse(y, y_sim)
+    if converged and not fit < _USELESS_FIT:
+        converged = False
+        reason += (
+            f"; but the model explains almost none of the output (free-run NRMSE {fit:.3f}, "
+            "no better than a constant): the structure does not fit the data (a dead time?)"
+        )
     return _Candidate(
         outcome, history, p_final, y_sim, float(residual @ residual), refinement, converged, reason
     )
@@ -494,6 +514,7 @@ def identify_backlash(
     >>> bool(np.max(np.abs(result.model.parameters() - ex.model.parameters())) < 0.03)
     True
     """
+    degree = as_order("degree", degree)
     if degree < 1:
         raise GenBacklashError(f"degree must be >= 1, got {degree}")
     uu, xx = prepare_series(u, x, nonfinite)
@@ -557,6 +578,7 @@ def identify_cascade(
     >>> bool(np.max(np.abs(result.model.parameters() - ex.model.parameters())) < 0.03)
     True
     """
+    degree, na, nb = as_order("degree", degree), as_order("na", na), as_order("nb", nb)
     if degree < 1:
         raise GenBacklashError(f"degree must be >= 1, got {degree}")
     if na < 1 or nb < 0:

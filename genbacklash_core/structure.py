@@ -7,6 +7,7 @@ and turn it into a validated model object only at the end.
 
 from __future__ import annotations
 
+import operator
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,7 +18,17 @@ from .cascade import Cascade
 from .errors import GenBacklashError
 from .linear import LinearBlock, denominator_is_stable
 
-__all__ = ["Structure"]
+__all__ = ["Structure", "as_order"]
+
+
+def as_order(name: str, value: object) -> int:
+    """``value`` as a Python int (a degree or model order), or a clear error."""
+    if isinstance(value, bool):
+        raise GenBacklashError(f"{name} must be a whole number, got {value!r}")
+    try:
+        return operator.index(value)  # type: ignore[arg-type]
+    except TypeError as err:
+        raise GenBacklashError(f"{name} must be a whole number, got {value!r}") from err
 
 
 @dataclass(frozen=True)
@@ -33,6 +44,8 @@ class Structure:
     sign: float = 1.0
 
     def __post_init__(self) -> None:
+        for name in ("degree", "na", "nb"):
+            object.__setattr__(self, name, as_order(name, getattr(self, name)))
         if self.degree < 1:
             raise GenBacklashError(f"degree must be >= 1, got {self.degree}")
         if self.na < 0 or self.nb < 0:
