@@ -38,8 +38,8 @@ IterationCallback = Callable[[int, FloatArray], None]
 
 _CYCLE_LOOKBACK = 4  # how many earlier iterates a limit cycle may span
 _WARM_START_SAMPLES = 20_000  # prefix length for the warm start on long records
-_RESTART_DEAD_ZONES = (0.05, 0.2)
-_USELESS_FIT = 0.95  # free-run NRMSE from which a model explains nothing (SNR 1 gives ~0.71)  # restart dead zones, as fractions of the input span
+_RESTART_DEAD_ZONES = (0.05, 0.2)  # restart dead zones, as fractions of the input span
+_USELESS_FIT = 0.95  # free-run NRMSE from which a model explains nothing (SNR 1 gives ~0.71)
 
 
 @dataclass(frozen=True, eq=False)

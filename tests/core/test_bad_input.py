@@ -258,6 +258,7 @@ def test_numpy_integer_orders_are_accepted() -> None:
 
 # --------------------------------------------------------------------------- wrong structure
 
+
 def _case(kind: str, delay: int, seed: int) -> object:
     return pytest.param(kind, delay, seed, id=f"{kind}-{delay}-seed{seed}")
 
