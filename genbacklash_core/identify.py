@@ -259,6 +259,7 @@ def _iterate(
 ) -> _IterationOutcome:
     """The paper's iteration, steps (a)-(c) of §3b / §4b, from ``p_start``."""
     regression = _cascade_regression if structure.cascade else _backlash_regression
+    u_range = (float(u.min()), float(u.max()))
     p = p_start.copy()
     out = _IterationOutcome(p, p.copy(), [p.copy()], 0, False, "")
     change = float("nan")
@@ -289,7 +290,7 @@ def _iterate(
         out.history.append(p.copy())
         if callback is not None:
             callback(iteration, p.copy())
-        problem = structure.problem(p)
+        problem = structure.problem(p, u_range)
         if problem is None:
             out.last_valid = p.copy()
         if settled <= tol * max(1.0, float(np.max(np.abs(p)))):  # step (c)
@@ -306,7 +307,7 @@ def _iterate(
     out.reason = (
         f"no convergence in {max_iterations} iterations (last parameter change {change:.2g})"
     )
-    if (problem := structure.problem(p)) is not None:
+    if (problem := structure.problem(p, u_range)) is not None:
         out.reason += f"; {problem}"
     return out
 
@@ -364,7 +365,7 @@ def _candidate(
     # flipping switching decisions). The refinement decides then. A singular regression or an
     # invalid model is a failure whatever the refinement would say.
     wandering = not outcome.converged and outcome.iterations == max_iterations
-    wandering = wandering and structure.problem(outcome.p) is None
+    wandering = wandering and structure.problem(outcome.p, (float(u.min()), float(u.max()))) is None
     x0 = 0.0 if structure.cascade else float(y[0])
     p_final = outcome.last_valid
     refinement: RefinementResult | None = None

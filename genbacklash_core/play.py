@@ -27,7 +27,7 @@ from .errors import GenBacklashError
 
 __all__ = ["play_operator", "play_operator_loop"]
 
-_LOOP_BELOW = 256  # below this many samples the plain loop is faster than the scan
+_LOOP_BELOW = 2048  # below this many samples the plain loop is faster than the scan (bench)
 
 
 def play_operator_loop(lo: ArrayLike, hi: ArrayLike, x0: float = 0.0) -> FloatArray:

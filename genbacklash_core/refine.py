@@ -163,8 +163,9 @@ def refine_parameters(
     Returns ``(p, accepted_steps, converged, cost_start, cost_end, reason)``.
     """
     p = np.array(p_start, dtype=np.float64)
-    if structure.problem(p) is not None:
-        raise GenBacklashError(f"cannot refine from an invalid model: {structure.problem(p)}")
+    u_range = (float(u.min()), float(u.max()))
+    if (problem := structure.problem(p, u_range)) is not None:
+        raise GenBacklashError(f"cannot refine from an invalid model: {problem}")
     x, yhat = simulate_parameters(structure, p, u, x0)
     residual = y - yhat
     cost = float(residual @ residual)
@@ -184,7 +185,7 @@ def refine_parameters(
             system = scaled + damping * np.eye(scaled.shape[0])
             step = np.linalg.lstsq(system, rhs, rcond=None)[0] / scale
             candidate = p + step
-            if structure.problem(candidate) is None:
+            if structure.problem(candidate, u_range) is None:
                 x_new, y_new = simulate_parameters(structure, candidate, u, x0)
                 res_new = y - y_new
                 cost_new = float(res_new @ res_new)
@@ -193,7 +194,9 @@ def refine_parameters(
                     break
             damping *= 4.0
         if not improved:
-            return p, accepted, True, cost_start, cost, "no step lowers the simulation error"
+            # Stuck before any step means a kink of the piecewise-smooth cost, not a minimum.
+            stalled = "no step lowers the simulation error"
+            return p, accepted, accepted > 0, cost_start, cost, stalled
         decrease = (cost - cost_new) / max(cost, 1e-300)
         p, x, yhat, residual, cost = candidate, x_new, y_new, res_new, cost_new
         accepted += 1

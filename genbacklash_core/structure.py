@@ -20,6 +20,8 @@ from .linear import LinearBlock, denominator_is_stable
 
 __all__ = ["Structure", "as_order"]
 
+_CROSSING_GRID = 257  # input points at which branch separation is checked
+
 
 def as_order(name: str, value: object) -> int:
     """``value`` as a Python int (a degree or model order), or a clear error."""
@@ -136,8 +138,12 @@ class Structure:
         p[2 * n + 2 :] = theta[2 * n + 2 :]
         return p
 
-    def problem(self, p: FloatArray) -> str | None:
-        """Why ``p`` is not a valid model, or None when it is."""
+    def problem(self, p: FloatArray, u_range: tuple[float, float] | None = None) -> str | None:
+        """Why ``p`` is not a valid model, or None when it is.
+
+        With ``u_range`` the branches must also stay apart on that input range (the paper's
+        condition below eq. 21): where they cross the model is no backlash.
+        """
         if not np.all(np.isfinite(p)):
             return "a parameter became non-finite"
         m_left, c_left, m_right, c_right = self.split(p)
@@ -151,6 +157,16 @@ class Structure:
             return (
                 f"a dead-zone constant is not positive (c_left={c_left:.3g}, c_right={c_right:.3g})"
             )
+        if u_range is not None:
+            grid = np.linspace(u_range[0], u_range[1], _CROSSING_GRID)
+            left, right = self.branches(p, grid)
+            crossed = (left - right) * self.sign <= 0.0
+            if crossed.any():
+                where = grid[crossed]
+                return (
+                    f"the branches cross on the input range (u in [{where.min():.3g}, "
+                    f"{where.max():.3g}])"
+                )
         if self.cascade:
             _, b = self.linear_part(p)
             if not denominator_is_stable(np.concatenate([[1.0], b])):

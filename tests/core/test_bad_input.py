@@ -333,8 +333,9 @@ def test_refine_cascade_from_rough_start_moves_closer() -> None:
     ex = paper_example(3)
     assert isinstance(ex.model, Cascade)
     data = ex.generate(2)
-    offset = np.array([0.05, -0.05, 0.05, 0.05, -0.05, 0.05, -0.05, 0.05, 0.03, 0.03, 0.03])
+    offset = np.array([0.05, -0.05, -0.05, 0.05, -0.05, 0.05, 0.05, 0.05, 0.03, 0.03, 0.03])
     rough = Cascade.from_parameters(ex.model.parameters() + offset, 3, 2, 2)
+    assert rough.backlash.branches_separated(-1.0, 1.0)  # a valid start on the data range
     out = refine_output_error(rough, data.u, data.y)
     after = np.max(np.abs(out.model.parameters() - ex.model.parameters()))
     assert after < 0.3 * 0.05

@@ -21,13 +21,13 @@ def _bounds(rng: np.random.Generator, n: int, scale: float = 1.0) -> tuple[np.nd
     return lo, lo + width
 
 
-def test_threshold_is_what_the_sizes_below_straddle() -> None:
-    assert _LOOP_BELOW == 256
-
-
 @pytest.mark.parametrize(
     "n",
-    [0, 1, 2, 17, 255, 256, 257, 258, 1023, 1024, 1025, 4099, 10_001, 65_537, 100_000],
+    [
+        *(0, 1, 2, 17, 1023, 1024, 1025, 4099, 10_001, 65_537, 100_000),
+        # straddle the switch from the plain loop to the scan
+        *(_LOOP_BELOW - 1, _LOOP_BELOW, _LOOP_BELOW + 1, _LOOP_BELOW + 2),
+    ],
 )
 @pytest.mark.parametrize("x0", [0.0, -7.5, 1e6])
 def test_scan_equals_loop(n: int, x0: float) -> None:

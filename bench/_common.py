@@ -1,0 +1,182 @@
+"""Helpers shared by the benchmark scripts: timing, machine description, markdown output.
+
+Timing follows :mod:`timeit`: a call that takes less than ``MIN_REPEAT_TIME`` is repeated
+``number`` times per measurement and the mean per call is taken; the reported time is the best
+(minimum) of ``k`` such measurements, which is the least disturbed by other load on the machine.
+When several functions are compared they are measured round-robin, so a burst of load from
+another process hits all of them alike and the ratios stay meaningful.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import os
+import platform
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import scipy
+
+BENCH_DIR = Path(__file__).resolve().parent
+ROOT = BENCH_DIR.parent
+OUTPUT_DIR = BENCH_DIR / "output"
+MIN_REPEAT_TIME = 0.02  # seconds; shorter calls are repeated within one measurement
+
+__all__ = [
+    "BENCH_DIR",
+    "OUTPUT_DIR",
+    "ROOT",
+    "Timing",
+    "command_line",
+    "fmt_bytes",
+    "fmt_ratio",
+    "fmt_time",
+    "machine_description",
+    "md_table",
+    "parse_args",
+    "time_interleaved",
+    "write_section",
+]
+
+
+def parse_args(description: str, argv: Sequence[str] | None = None) -> argparse.Namespace:
+    """The common command line: ``--quick`` for smaller settings."""
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("--quick", action="store_true", help="smaller settings (smoke test)")
+    return parser.parse_args(argv)
+
+
+def cpu_model() -> str:
+    """CPU model name from /proc/cpuinfo (Linux), else ``platform.processor()``."""
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as handle:
+            for line in handle:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown CPU"
+
+
+def load_average() -> str:
+    """1-minute load average, or ``n/a``."""
+    try:
+        return f"{os.getloadavg()[0]:.2f}"
+    except (AttributeError, OSError):
+        return "n/a"
+
+
+def machine_description() -> str:
+    """One sentence naming the machine and the library versions."""
+    return (
+        f"`{platform.platform()}`, {cpu_model()}, {os.cpu_count()} logical cores (shared: "
+        f"another developer's test runs may execute at the same time; 1-min load average "
+        f"{load_average()} when the script started), Python {platform.python_version()}, "
+        f"numpy {np.__version__}, scipy {scipy.__version__}"
+    )
+
+
+def command_line() -> str:
+    """The command that produced the current script's tables, e.g. ``python bench/kernel.py``."""
+    return " ".join(["python", f"bench/{Path(sys.argv[0]).name}", *sys.argv[1:]])
+
+
+@dataclass(frozen=True)
+class Timing:
+    """Best per-call time [s] of ``runs`` measurements of ``number`` calls each."""
+
+    best: float
+    runs: int
+    number: int
+
+    @property
+    def label(self) -> str:
+        """``best of k`` (``x n calls`` when calls were batched)."""
+        calls = f" x {self.number} calls" if self.number > 1 else ""
+        return f"best of {self.runs}{calls}" if self.runs > 1 else f"1 run{calls}"
+
+
+def _measure(fn: Callable[[], object], number: int) -> float:
+    was_enabled = gc.isenabled()
+    gc.disable()
+    try:
+        start = time.perf_counter()
+        for _ in range(number):
+            fn()
+        return (time.perf_counter() - start) / number
+    finally:
+        if was_enabled:
+            gc.enable()
+
+
+def time_interleaved(
+    functions: dict[str, Callable[[], object]], repeats: dict[str, int] | int = 3
+) -> dict[str, Timing]:
+    """Best-of-k per-call times of several functions, measured round-robin.
+
+    The first (calibration) call of a function counts as one run when it takes at least
+    ``MIN_REPEAT_TIME``; faster functions are batched so each measurement lasts about that long.
+    """
+    wanted = {name: repeats if isinstance(repeats, int) else repeats[name] for name in functions}
+    times: dict[str, list[float]] = {name: [] for name in functions}
+    number: dict[str, int] = {}
+    gc.collect()
+    for name, fn in functions.items():
+        first = _measure(fn, 1)
+        if first >= MIN_REPEAT_TIME:
+            number[name] = 1
+            times[name].append(first)
+        else:
+            number[name] = max(1, int(np.ceil(MIN_REPEAT_TIME / max(first, 1e-7))))
+    for _ in range(max(wanted.values())):
+        for name, fn in functions.items():
+            if len(times[name]) < wanted[name]:
+                times[name].append(_measure(fn, number[name]))
+    return {name: Timing(min(values), len(values), number[name]) for name, values in times.items()}
+
+
+def fmt_time(seconds: float) -> str:
+    """A time with a unit that keeps three significant digits."""
+    if seconds < 1e-3:
+        return f"{seconds * 1e6:.3g} µs"
+    if seconds < 1.0:
+        return f"{seconds * 1e3:.3g} ms"
+    return f"{seconds:.3g} s"
+
+
+def fmt_ratio(value: float) -> str:
+    """A ratio such as ``71.9x``."""
+    return f"{value:.3g}x" if value < 100 else f"{value:.0f}x"
+
+
+def fmt_bytes(value: float) -> str:
+    """Bytes with a binary unit."""
+    for unit in ("B", "KiB", "MiB", "GiB"):
+        if abs(value) < 1024 or unit == "GiB":
+            return f"{value:.3g} {unit}" if unit != "B" else f"{value:.0f} B"
+        value /= 1024
+    return f"{value:.3g} GiB"  # pragma: no cover
+
+
+def md_table(headers: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
+    """A GitHub markdown table."""
+    lines = [
+        "| " + " | ".join(headers) + " |",
+        "|" + "|".join("---" for _ in headers) + "|",
+    ]
+    lines += ["| " + " | ".join(str(cell) for cell in row) + " |" for row in rows]
+    return "\n".join(lines)
+
+
+def write_section(name: str, text: str) -> Path:
+    """Write ``bench/output/<name>.md`` and return its path."""
+    OUTPUT_DIR.mkdir(parents=True, exist_ok=True)
+    path = OUTPUT_DIR / f"{name}.md"
+    path.write_text(text.rstrip() + "\n", encoding="utf-8")
+    print(f"wrote {path.relative_to(ROOT)}", file=sys.stderr)
+    return path
