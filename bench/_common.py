@@ -18,6 +18,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import scipy
@@ -180,3 +181,21 @@ def write_section(name: str, text: str) -> Path:
     path.write_text(text.rstrip() + "\n", encoding="utf-8")
     print(f"wrote {path.relative_to(ROOT)}", file=sys.stderr)
     return path
+
+
+INVALID_RESIDUAL = 1e3  # residual value returned at invalid parameter points
+
+
+def simulation_residual(structure: Any, u: Any, y: Any, x0: float) -> Any:
+    """Free-run simulation error with the vectorised simulation; ``INVALID_RESIDUAL`` everywhere
+    at invalid points (what a user would hand to ``scipy.optimize.least_squares``)."""
+    from genbacklash_core.refine import simulate_parameters
+
+    invalid = np.full(y.size, INVALID_RESIDUAL)
+
+    def residual(p: Any) -> Any:
+        if structure.problem(p) is not None:
+            return invalid
+        return simulate_parameters(structure, p, u, x0)[1] - y
+
+    return residual

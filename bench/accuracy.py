@@ -19,11 +19,13 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 from _common import (
+    INVALID_RESIDUAL,
     OUTPUT_DIR,
     command_line,
     machine_description,
     md_table,
     parse_args,
+    simulation_residual,
     write_section,
 )
 from scipy.optimize import least_squares
@@ -36,13 +38,11 @@ from genbacklash_core import (
     identify_cascade,
     paper_example,
 )
-from genbacklash_core.refine import simulate_parameters
 from genbacklash_core.structure import Structure
 
 SNRS = (2.0, 5.0, 25.0)
 SEEDS_FULL = 50
 SEEDS_QUICK = 5
-INVALID_RESIDUAL = 1e3  # residual value returned at invalid parameter points
 TARGET = 1.05  # default identify RMSE / full output-error fit RMSE must not exceed this
 SAME_COST = 1e-6  # relative cost tolerance for "reached the reference optimum"
 
@@ -86,20 +86,6 @@ SETTINGS = (
 )
 
 
-def residual_function(
-    structure: Structure, u: np.ndarray, y: np.ndarray, x0: float
-) -> Callable[[np.ndarray], np.ndarray]:
-    """Free-run simulation error, ``INVALID_RESIDUAL`` everywhere at invalid points."""
-    invalid = np.full(y.size, INVALID_RESIDUAL)
-
-    def residual(p: np.ndarray) -> np.ndarray:
-        if structure.problem(p) is not None:
-            return invalid
-        return simulate_parameters(structure, p, u, x0)[1] - y
-
-    return residual
-
-
 @dataclass
 class Run:
     """One method on one data set: estimate (NaN when it raised), failure flag, cost, time."""
@@ -117,7 +103,7 @@ def run_method(
     """Fit one method; failures are 'not converged' or an exception."""
     structure = setting.structure
     x0 = setting.x0(y)
-    residual = residual_function(structure, u, y, x0)
+    residual = simulation_residual(structure, u, y, x0)
     start = time.perf_counter()
     try:
         if method in ("a", "b"):

@@ -24,6 +24,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from _common import (
     BENCH_DIR,
+    INVALID_RESIDUAL,
     OUTPUT_DIR,
     ROOT,
     command_line,
@@ -33,6 +34,7 @@ from _common import (
     machine_description,
     md_table,
     parse_args,
+    simulation_residual,
     time_interleaved,
     write_section,
 )
@@ -47,11 +49,9 @@ from genbacklash_core import (
     simulate_backlash_loop,
     simulate_cascade_loop,
 )
-from genbacklash_core.refine import simulate_parameters
 from genbacklash_core.structure import Structure
 from genbacklash_ros.csvio import Series, read_series_csv, write_series_csv
 
-INVALID_RESIDUAL = 1e3
 TARGET_GENERIC = 50.0  # identify must be at least 50x faster than the generic loop fit
 TARGET_PASSES = 1.5  # identify_cascade incl. CSV read: < 1.5 per-sample passes at N = 1e6
 TARGET_BYTES = 1024.0  # peak memory per sample of identify_cascade
@@ -70,20 +70,6 @@ def backlash_residual_loop(
             return invalid
         model = GeneralBacklash.from_parameters(p, structure.degree)
         return simulate_backlash_loop(model, u, x0) - y
-
-    return residual
-
-
-def vector_residual(
-    u: np.ndarray, y: np.ndarray, structure: Structure, x0: float
-) -> Callable[[np.ndarray], np.ndarray]:
-    """The same residual with the vectorised simulation."""
-    invalid = np.full(y.size, INVALID_RESIDUAL)
-
-    def residual(p: np.ndarray) -> np.ndarray:
-        if structure.problem(p) is not None:
-            return invalid
-        return simulate_parameters(structure, p, u, x0)[1] - y
 
     return residual
 
@@ -118,7 +104,7 @@ def part_generic(quick: bool) -> tuple[list[list[str]], dict[str, float]]:
         data = example.generate(seed)  # N = 800, SNR 25 (the paper's setting)
         u, y = data.u, data.y
         res_loop = backlash_residual_loop(u, y, structure)
-        res_vec = vector_residual(u, y, structure, float(y[0]))
+        res_vec = simulation_residual(structure, u, y, float(y[0]))
         start = structure.start()
         # One untimed run each for the call counts and the estimates.
         ident = identify_backlash(u, y, 3)
@@ -193,7 +179,7 @@ def part_cascade(quick: bool, workdir: Path) -> tuple[list[dict[str, object]], d
         generic_error = None
         generic_calls = None
         if n <= GENERIC_MAX_N:
-            residual = vector_residual(u, y, structure, 0.0)
+            residual = simulation_residual(structure, u, y, 0.0)
             wrapped, calls = counted(residual)
             fit = least_squares(wrapped, structure.start())
             generic_error = float(np.max(np.abs(fit.x - truth)))

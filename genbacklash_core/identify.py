@@ -423,20 +423,26 @@ def _run(
         raise GenBacklashError(f"invalid start: {problem}")
     if max_iterations < 1:
         raise GenBacklashError(f"max_iterations must be >= 1, got {max_iterations}")
-    options = {"max_iterations": max_iterations, "tol": tol, "refine": refine, "callback": callback}
-    best = _candidate(structure, u, y, p, **options)  # type: ignore[arg-type]
+
+    def attempt(start_p: FloatArray) -> _Candidate:
+        return _candidate(
+            structure,
+            u,
+            y,
+            start_p,
+            max_iterations=max_iterations,
+            tol=tol,
+            refine=refine,
+            callback=callback,
+        )
+
+    best = attempt(p)
     if not best.outcome.converged and start is None:
         # The paper's start did not settle: the iteration can stall on a spurious fixed point.
         # Try wider dead zones and keep the candidate that simulates the data best.
         span = float(np.ptp(u))
         for fraction in _RESTART_DEAD_ZONES:
-            alternative = _candidate(
-                structure,
-                u,
-                y,
-                structure.start(c=fraction * span),
-                **options,  # type: ignore[arg-type]
-            )
+            alternative = attempt(structure.start(c=fraction * span))
             if alternative.cost < best.cost and (alternative.converged or not best.converged):
                 best = alternative
                 best.reason += f" (restarted from dead zones {fraction:g} x the input span)"
