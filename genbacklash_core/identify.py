@@ -242,6 +242,7 @@ class _IterationOutcome:
 
     p: FloatArray
     last_valid: FloatArray
+    valid: bool  # whether p itself is a valid model on the data's input range
     history: list[FloatArray]
     iterations: int
     converged: bool
@@ -261,7 +262,7 @@ def _iterate(
     regression = _cascade_regression if structure.cascade else _backlash_regression
     u_range = (float(u.min()), float(u.max()))
     p = p_start.copy()
-    out = _IterationOutcome(p, p.copy(), [p.copy()], 0, False, "")
+    out = _IterationOutcome(p, p.copy(), True, [p.copy()], 0, False, "")
     change = float("nan")
     for iteration in range(1, max_iterations + 1):
         out.iterations = iteration
@@ -291,7 +292,8 @@ def _iterate(
         if callback is not None:
             callback(iteration, p.copy())
         problem = structure.problem(p, u_range)
-        if problem is None:
+        out.valid = problem is None
+        if out.valid:
             out.last_valid = p.copy()
         if settled <= tol * max(1.0, float(np.max(np.abs(p)))):  # step (c)
             if problem is None:
@@ -308,7 +310,7 @@ def _iterate(
         f"no convergence in {max_iterations} iterations (last parameter change {change:.2g})"
     )
     if (problem := structure.problem(p, u_range)) is not None:
-        out.reason += f"; {problem}"
+        out.reason += f"; {problem}"  # the last iterate's problem, for the reason only
     return out
 
 
@@ -319,8 +321,7 @@ class _Candidate:
     outcome: _IterationOutcome
     history: list[FloatArray]
     p: FloatArray
-    y_sim: FloatArray
-    cost: float
+    fit: float  # free-run NRMSE of p on the data
     refinement: RefinementResult | None
     converged: bool
     reason: str
@@ -364,8 +365,7 @@ def _candidate(
     # "wandering": valid to the end but never settled (typical at low SNR, where noise keeps
     # flipping switching decisions). The refinement decides then. A singular regression or an
     # invalid model is a failure whatever the refinement would say.
-    wandering = not outcome.converged and outcome.iterations == max_iterations
-    wandering = wandering and structure.problem(outcome.p, (float(u.min()), float(u.max()))) is None
+    wandering = not outcome.converged and outcome.iterations == max_iterations and outcome.valid
     x0 = 0.0 if structure.cascade else float(y[0])
     p_final = outcome.last_valid
     refinement: RefinementResult | None = None
@@ -389,18 +389,14 @@ def _candidate(
                 else "; restarted from the refined estimate, the iteration still did not settle "
                 f"({check.reason}): the structure may not fit"
             )
-    _, y_sim = simulate_parameters(structure, p_final, u, x0)
-    residual = y - y_sim
-    fit = nrmse(y, y_sim)
+    fit = nrmse(y, simulate_parameters(structure, p_final, u, x0)[1])
     if converged and not fit < _USELESS_FIT:
         converged = False
         reason += (
             f"; but the model explains almost none of the output (free-run NRMSE {fit:.3f}, "
             "no better than a constant): the structure does not fit the data (a dead time?)"
         )
-    return _Candidate(
-        outcome, history, p_final, y_sim, float(residual @ residual), refinement, converged, reason
-    )
+    return _Candidate(outcome, history, p_final, fit, refinement, converged, reason)
 
 
 def _run(
@@ -443,7 +439,8 @@ def _run(
         span = float(np.ptp(u))
         for fraction in _RESTART_DEAD_ZONES:
             alternative = attempt(structure.start(c=fraction * span))
-            if alternative.cost < best.cost and (alternative.converged or not best.converged):
+            # For the same data NRMSE orders candidates as the simulation error does.
+            if alternative.fit < best.fit and (alternative.converged or not best.converged):
                 best = alternative
                 best.reason += f" (restarted from dead zones {fraction:g} x the input span)"
             if best.outcome.converged:
@@ -453,7 +450,7 @@ def _run(
         iterations=len(best.history) - 1,
         converged=best.converged,
         reason=best.reason,
-        fit=Fit(nrmse(y, best.y_sim)),
+        fit=Fit(best.fit),
         history=IterationHistory(structure.names(), np.array(best.history)),
         equation_error_model=structure.model(best.outcome.last_valid),
         refinement=best.refinement,

@@ -17,6 +17,7 @@ import numpy as np
 from genbacklash_core import (
     Cascade,
     GenBacklashError,
+    GeneralBacklash,
     IdentificationResult,
     __version__,
     identify_backlash,
@@ -56,32 +57,41 @@ class _Progress:
 
 
 def _identify(
-    series: Series, args: argparse.Namespace, show_progress: bool
+    series: Series,
+    *,
+    model: str,
+    degree: int,
+    na: int = 2,
+    nb: int = 2,
+    sign: float | None = None,
+    refine: bool = True,
+    max_iterations: int = 30,
+    nonfinite: NonFinitePolicy = "raise",
+    show_progress: bool = True,
 ) -> IdentificationResult:
-    progress = _Progress(args.max_iterations, show_progress)
-    sign = None if args.sign == "auto" else float(args.sign)
-    nonfinite: NonFinitePolicy = "drop" if args.drop_nonfinite else "raise"
+    """Run the identifier chosen by ``model`` with a progress bar over the iterations."""
+    progress = _Progress(max_iterations, show_progress)
     try:
-        if args.model == "cascade":
+        if model == "cascade":
             return identify_cascade(
                 series.u,
                 series.y,
-                args.degree,
-                args.na,
-                args.nb,
+                degree,
+                na,
+                nb,
                 sign=sign,
-                refine=not args.no_refine,
-                max_iterations=args.max_iterations,
+                refine=refine,
+                max_iterations=max_iterations,
                 nonfinite=nonfinite,
                 callback=progress,
             )
         return identify_backlash(
             series.u,
             series.y,
-            args.degree,
+            degree,
             sign=sign,
-            refine=not args.no_refine,
-            max_iterations=args.max_iterations,
+            refine=refine,
+            max_iterations=max_iterations,
             nonfinite=nonfinite,
             callback=progress,
         )
@@ -101,12 +111,14 @@ def _load(path: str) -> Series:
     return read_series_csv(file)
 
 
-def _parameter_table(result: IdentificationResult, truth: Cascade | object | None = None) -> str:
+def _parameter_table(
+    result: IdentificationResult, truth: GeneralBacklash | Cascade | None = None
+) -> str:
     names = result.model.parameter_names
     estimate = result.model.parameters()
     header = f"{'parameter':<12}{'estimate':>12}"
     true_values = None
-    if truth is not None and hasattr(truth, "parameters"):
+    if truth is not None:
         true_values = truth.parameters()
         header += f"{'truth':>12}{'error':>12}"
     lines = [header, "-" * len(header)]
@@ -128,7 +140,18 @@ def _summary(result: IdentificationResult) -> str:
 
 def _cmd_identify(args: argparse.Namespace) -> int:
     series = _load(args.data)
-    result = _identify(series, args, show_progress=not args.json)
+    result = _identify(
+        series,
+        model=args.model,
+        degree=args.degree,
+        na=args.na,
+        nb=args.nb,
+        sign=None if args.sign == "auto" else float(args.sign),
+        refine=not args.no_refine,
+        max_iterations=args.max_iterations,
+        nonfinite="drop" if args.drop_nonfinite else "raise",
+        show_progress=not args.json,
+    )
     if args.json:
         print(json.dumps(result.to_dict()))
     else:
@@ -162,20 +185,14 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         f"Paper Example {example.number}: {'cascade' if cascade else 'general backlash'}, "
         f"N = {example.n_samples}, |u| < {example.u_max}, SNR {example.snr}, seed {args.seed}\n"
     )
-    progress = _Progress(30, True)
-    try:
-        if cascade:
-            result = identify_cascade(data.u, data.y, 3, 2, 2, callback=progress)
-        else:
-            result = identify_backlash(data.u, data.y, 3, callback=progress)
-    finally:
-        progress.close()
+    series = Series(u=data.u, y=data.y)
+    result = _identify(series, model="cascade" if cascade else "backlash", degree=3)
     print(_parameter_table(result, example.model))
     print(_summary(result))
     from .plots import save_identification_plots
 
     out = Path(args.out)
-    write_series_csv(out / "data.csv", Series(u=data.u, y=data.y))
+    write_series_csv(out / "data.csv", series)
     for path in save_identification_plots(result, out, data.u, data.y, example.model):
         print(f"wrote {path}")
     (out / "result.json").write_text(json.dumps(result.to_dict(), indent=2) + "\n")
