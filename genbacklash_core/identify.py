@@ -362,25 +362,24 @@ def _candidate(
     reason = outcome.reason
     if prefix_iterations:
         reason += f" on all data, after {prefix_iterations} on a prefix"
-    # "wandering": valid to the end but never settled (typical at low SNR, where noise keeps
-    # flipping switching decisions). The refinement decides then. A singular regression or an
-    # invalid model is a failure whatever the refinement would say.
-    wandering = not outcome.converged and outcome.iterations == max_iterations and outcome.valid
+    # When the iteration did not settle - it wandered (typical at low SNR, where noise keeps
+    # flipping switching decisions), stepped into crossing branches, or met a singular
+    # regression - the output-error refinement from its last valid iterate decides.
     x0 = 0.0 if structure.cascade else float(y[0])
     p_final = outcome.last_valid
     refinement: RefinementResult | None = None
     converged = outcome.converged
-    if refine and (outcome.converged or wandering):
+    if refine:
         q, steps, ok, cost0, cost1, why = refine_parameters(structure, p_final, u, y, x0)
         p_final = q
         refinement = RefinementResult(structure.model(q), steps, ok, cost0, cost1, why)
         drop = 100.0 * (1.0 - cost1 / cost0) if cost0 > 0 else 0.0
         reason += f"; output-error refinement: {steps} steps, simulation error -{drop:.1f}% ({why})"
         converged = ok
-        if wandering and ok:
-            # A wandering iteration may have met a structure that does not fit (a missing
-            # delay, say). With the right structure the refined estimate sits near a fixed point
-            # of the paper's iteration, so restarted there the iteration settles; otherwise not.
+        if not outcome.converged and ok:
+            # The failure may come from a structure that does not fit (a missing delay, say).
+            # With the right structure the refined estimate sits near a fixed point of the
+            # paper's iteration, so restarted there the iteration settles; otherwise not.
             check = _iterate(structure, u, y, q, max_iterations, tol, None)
             converged = check.converged
             reason += (
@@ -389,7 +388,11 @@ def _candidate(
                 else "; restarted from the refined estimate, the iteration still did not settle "
                 f"({check.reason}): the structure may not fit"
             )
-    fit = nrmse(y, simulate_parameters(structure, p_final, u, x0)[1])
+    if refinement is not None:  # its final cost is the simulation error of p_final
+        spread = float(np.sum((y - np.mean(y)) ** 2))
+        fit = float(np.sqrt(refinement.cost_end / spread)) if spread > 0 else float("inf")
+    else:
+        fit = nrmse(y, simulate_parameters(structure, p_final, u, x0)[1])
     if converged and not fit < _USELESS_FIT:
         converged = False
         reason += (
