@@ -29,6 +29,7 @@ from tqdm import tqdm
 
 from genbacklash_core import (
     paper_example,
+    play,
     play_operator,
     play_operator_loop,
     simulate_backlash,
@@ -190,7 +191,7 @@ def main() -> None:
         sizes_slower = ", ".join(f"{r['n']:,}" for r in slower)
         small_n = (
             f"At N = {sizes_slower} the scan is slower than the float"
-            " loop; `play_operator` switches to the loop only below 256 samples"
+            f" loop; `play_operator` switches to the loop only below {play._LOOP_BELOW} samples"
             " (`genbacklash_core.play._LOOP_BELOW`).\n\n"
         )
     conservative = ""
@@ -252,11 +253,11 @@ At N = {n_label}, `simulate_backlash` splits into branch evaluation
 ### Why a numpy scan and not a compiled path
 
 The recursion is sequential, but every step is a clamp and a composition of clamps is again a
-clamp, so the series can be cut into about sqrt(N) blocks, each block composed into one clamp
-with vectorised min/max over the blocks, the few block clamps chained in Python, and all blocks
-then run at once from their start states. Every operation is a min or a max that selects one of
-its inputs, so the result is exactly the per-sample loop's (the table shows bit-identical output
-at every N) — no tolerance argument is needed, unlike a float associative scan of a linear
+clamp, so the series can be cut into blocks of about sqrt(N)/4 samples, each block composed into
+one clamp with vectorised min/max over the blocks, the block clamps chained in Python, and all
+blocks then run at once from their start states. Every operation is a min or a max that selects
+one of its inputs, so the result is exactly the per-sample loop's (the table shows bit-identical
+output at every N) — no tolerance argument is needed, unlike a float associative scan of a linear
 recursion. It needs no compiler and no extra dependency: numba or Cython would add a build or
 JIT step and a heavyweight install to a package whose core is numpy + scipy only. Measured here:
 {fmt_time(k_last["scan"])} for {n_label} samples ({k_last["scan"] / n_big * 1e9:.0f} ns per

@@ -43,10 +43,12 @@ def evaluate_branch(m: FloatArray, shifted: FloatArray) -> FloatArray:
     shifted : ndarray
         ``u + c_L`` for the left branch (eq. 16) or ``u - c_R`` for the right (eq. 17).
     """
-    acc = np.full_like(shifted, m[-1])
-    for coefficient in m[-2::-1]:
-        acc = acc * shifted + coefficient
-    return np.asarray(acc * shifted, dtype=np.float64)
+    coefficients = np.asarray(m, dtype=np.float64).tolist()  # Python floats: cheaper scalars
+    acc = shifted * coefficients[-1]
+    for coefficient in coefficients[-2::-1]:
+        acc += coefficient
+        acc *= shifted
+    return np.asarray(acc, dtype=np.float64)
 
 
 @dataclass(frozen=True)

@@ -9,11 +9,12 @@ step is a clamp map and a composition of clamps is again a clamp:
 
     clamp(clamp(x, l1, h1), l2, h2) = clamp(x, clamp(l1, l2, h2), clamp(h1, l2, h2)).
 
-:func:`play_operator` uses that to run a two-level parallel prefix scan in numpy: the series is
-cut into ``B`` blocks of ``S ~ sqrt(N)`` samples; one vectorised sweep over the ``S`` rows composes
-every block into a single clamp, a short scan over the ``B`` block clamps gives each block's
-start state, and a second sweep runs all blocks at once from those states. Every operation
-selects one of its inputs (min/max), so the result equals the per-sample loop bit for bit.
+:func:`play_operator` uses that to run a two-level parallel prefix scan in numpy: the series
+is cut into ``B`` blocks of ``S ~ sqrt(N)/4`` samples; one vectorised sweep over the ``S`` rows
+composes every block into a single clamp, a short scan over the ``B`` block clamps gives each
+block's start state, and a second sweep runs all blocks at once from those states. Every
+operation selects one of its inputs (min/max), so the result equals the per-sample loop bit for
+bit.
 """
 
 from __future__ import annotations
@@ -27,7 +28,8 @@ from .errors import GenBacklashError
 
 __all__ = ["play_operator", "play_operator_loop"]
 
-_LOOP_BELOW = 2048  # below this many samples the plain loop is faster than the scan (bench)
+_LOOP_BELOW = 512  # below this many samples the plain loop is faster than the scan (bench)
+_BLOCK_DIVISOR = 4  # S = sqrt(N) / 4: more, shorter blocks measured ~25% faster than sqrt(N)
 
 
 def play_operator_loop(lo: ArrayLike, hi: ArrayLike, x0: float = 0.0) -> FloatArray:
@@ -78,7 +80,7 @@ def play_operator(lo: ArrayLike, hi: ArrayLike, x0: float = 0.0) -> FloatArray:
     n = low.size
     if n < _LOOP_BELOW:
         return play_operator_loop(low, high, x0)
-    size = math.isqrt(n - 1) + 1  # S: samples per block
+    size = max(8, math.isqrt(n) // _BLOCK_DIVISOR)  # S: samples per block
     blocks = -(-n // size)  # B: number of blocks
     pad = size * blocks - n
     if pad:  # pad with the identity clamp (-inf, inf)
@@ -107,11 +109,12 @@ def play_operator(lo: ArrayLike, hi: ArrayLike, x0: float = 0.0) -> FloatArray:
         if x > bh:
             x = bh
 
-    # Sweep 2: run every block from its start state at once.
-    state = starts
+    # Sweep 2: run every block from its start state at once, row k written in place.
     out_rows = np.empty_like(lo_rows)
+    previous = starts
     for k in range(size):
-        np.maximum(state, lo_rows[k], out=state)
-        np.minimum(state, hi_rows[k], out=state)
-        out_rows[k] = state
+        row = out_rows[k]
+        np.maximum(previous, lo_rows[k], out=row)
+        np.minimum(row, hi_rows[k], out=row)
+        previous = row
     return np.ascontiguousarray(out_rows.T).reshape(-1)[:n]

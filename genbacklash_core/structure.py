@@ -7,6 +7,7 @@ and turn it into a validated model object only at the end.
 
 from __future__ import annotations
 
+import functools
 import operator
 from dataclasses import dataclass
 
@@ -21,6 +22,14 @@ from .linear import LinearBlock, denominator_is_stable
 __all__ = ["Structure", "as_order"]
 
 _CROSSING_GRID = 257  # input points at which branch separation is checked
+
+
+@functools.lru_cache(maxsize=64)
+def _crossing_grid(u_min: float, u_max: float) -> FloatArray:
+    """Read-only input grid for the crossing check (cached: the estimators ask repeatedly)."""
+    grid = np.linspace(u_min, u_max, _CROSSING_GRID)
+    grid.flags.writeable = False
+    return grid
 
 
 def as_order(name: str, value: object) -> int:
@@ -158,7 +167,7 @@ class Structure:
                 f"a dead-zone constant is not positive (c_left={c_left:.3g}, c_right={c_right:.3g})"
             )
         if u_range is not None:
-            grid = np.linspace(u_range[0], u_range[1], _CROSSING_GRID)
+            grid = _crossing_grid(float(u_range[0]), float(u_range[1]))
             left, right = self.branches(p, grid)
             crossed = (left - right) * self.sign <= 0.0
             if crossed.any():
