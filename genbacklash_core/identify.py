@@ -247,6 +247,7 @@ class _IterationOutcome:
     iterations: int
     converged: bool
     reason: str
+    period: int = 1  # length of the limit cycle the iteration settled in (1: a fixed point)
 
 
 def _iterate(
@@ -298,6 +299,7 @@ def _iterate(
         if settled <= tol * max(1.0, float(np.max(np.abs(p)))):  # step (c)
             if problem is None:
                 out.converged = True
+                out.period = period
                 out.reason = (
                     f"converged: parameter change {change:.2g} after {iteration} iterations"
                 )
@@ -370,24 +372,48 @@ def _candidate(
     refinement: RefinementResult | None = None
     converged = outcome.converged
     if refine:
-        q, steps, ok, cost0, cost1, why = refine_parameters(structure, p_final, u, y, x0)
-        p_final = q
-        refinement = RefinementResult(structure.model(q), steps, ok, cost0, cost1, why)
-        drop = 100.0 * (1.0 - cost1 / cost0) if cost0 > 0 else 0.0
-        reason += f"; output-error refinement: {steps} steps, simulation error -{drop:.1f}% ({why})"
-        converged = ok
-        if not outcome.converged and ok:
-            # The failure may come from a structure that does not fit (a missing delay, say).
-            # With the right structure the refined estimate sits near a fixed point of the
-            # paper's iteration, so restarted there the iteration settles; otherwise not.
-            check = _iterate(structure, u, y, q, max_iterations, tol, None)
-            converged = check.converged
+        # The simulation error is piecewise smooth with local minima; refine from every point
+        # the iteration cannot choose between and keep the lowest cost: each member of a limit
+        # cycle, and after a failure also its first valid iterate and its start.
+        starts = [p_final]
+        if outcome.converged and outcome.period > 1:
+            starts += outcome.history[-outcome.period : -1]
+        elif not outcome.converged:
+            starts += outcome.history[1:2] + outcome.history[:1]
+        u_range = (float(u.min()), float(u.max()))
+        best: tuple[FloatArray, int, bool, float, float, str] | None = None
+        for start_p in starts:
+            if structure.problem(start_p, u_range) is not None:
+                continue
+            trial = refine_parameters(structure, start_p, u, y, x0)
+            if best is None or trial[4] < best[4]:
+                best = trial
+        if best is None:
+            converged = False
+            reason += "; no start valid on the input range to refine from (branches cross)"
+        else:
+            q, steps, ok, cost0, cost1, why = best
+            p_final = q
+            refinement = RefinementResult(structure.model(q), steps, ok, cost0, cost1, why)
+            drop = 100.0 * (1.0 - cost1 / cost0) if cost0 > 0 else 0.0
             reason += (
-                "; restarted from the refined estimate, the iteration settled"
-                if converged
-                else "; restarted from the refined estimate, the iteration still did not settle "
-                f"({check.reason}): the structure may not fit"
+                f"; output-error refinement: {steps} steps, simulation error -{drop:.1f}% ({why})"
             )
+            if len(starts) > 1:
+                reason += f", best of {len(starts)} starts"
+            converged = ok
+            if not outcome.converged and ok:
+                # The failure may come from a structure that does not fit (a missing delay,
+                # say). With the right structure the refined estimate sits near a fixed point
+                # of the paper's iteration, so restarted there the iteration settles.
+                check = _iterate(structure, u, y, q, max_iterations, tol, None)
+                converged = check.converged
+                reason += (
+                    "; restarted from the refined estimate, the iteration settled"
+                    if converged
+                    else "; restarted from the refined estimate, the iteration still did not "
+                    f"settle ({check.reason}): the structure may not fit"
+                )
     if refinement is not None:  # its final cost is the simulation error of p_final
         spread = float(np.sum((y - np.mean(y)) ** 2))
         fit = float(np.sqrt(refinement.cost_end / spread)) if spread > 0 else float("inf")
