@@ -19,6 +19,14 @@ from .identify import (
     identify_cascade,
     nrmse,
 )
+from .inverse import (
+    CompensatorOptions,
+    CompensatorState,
+    InverseBacklash,
+    compensate,
+    compensate_step,
+    hold_interval,
+)
 from .linear import LinearBlock, simulate_linear
 from .play import play_operator, play_operator_loop
 from .refine import RefinementResult, refine_output_error
@@ -36,11 +44,14 @@ __version__ = "0.1.0"
 __all__ = [
     "Cascade",
     "CascadeOutput",
+    "CompensatorOptions",
+    "CompensatorState",
     "ExampleData",
     "Fit",
     "GenBacklashError",
     "GeneralBacklash",
     "IdentificationResult",
+    "InverseBacklash",
     "IterationHistory",
     "LinearBlock",
     "NonFiniteInputError",
@@ -50,7 +61,10 @@ __all__ = [
     "Structure",
     "__version__",
     "check_excitation",
+    "compensate",
+    "compensate_step",
     "count_reversals",
+    "hold_interval",
     "identify_backlash",
     "identify_cascade",
     "nrmse",
