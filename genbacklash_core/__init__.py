@@ -10,6 +10,7 @@ from .backlash import GeneralBacklash
 from .cascade import Cascade
 from .data import check_excitation, count_reversals, prepare_series
 from .errors import GenBacklashError, NonFiniteInputError, NotEnoughExcitationError
+from .estimate import Estimate, EstimatorState, OnlineIdentifier, track
 from .examples import ExampleData, PaperExample, paper_example
 from .identify import (
     Fit,
@@ -29,6 +30,7 @@ from .inverse import (
 )
 from .linear import LinearBlock, simulate_linear
 from .play import play_operator, play_operator_loop
+from .recursive import RecursiveIdentifier, RecursiveSettings
 from .refine import RefinementResult, refine_output_error
 from .simulate import (
     CascadeOutput,
@@ -38,6 +40,7 @@ from .simulate import (
     simulate_cascade_loop,
 )
 from .structure import Structure
+from .windowed import WindowedIdentifier, WindowedSettings
 
 __version__ = "0.1.0"
 
@@ -46,6 +49,8 @@ __all__ = [
     "CascadeOutput",
     "CompensatorOptions",
     "CompensatorState",
+    "Estimate",
+    "EstimatorState",
     "ExampleData",
     "Fit",
     "GenBacklashError",
@@ -56,9 +61,14 @@ __all__ = [
     "LinearBlock",
     "NonFiniteInputError",
     "NotEnoughExcitationError",
+    "OnlineIdentifier",
     "PaperExample",
+    "RecursiveIdentifier",
+    "RecursiveSettings",
     "RefinementResult",
     "Structure",
+    "WindowedIdentifier",
+    "WindowedSettings",
     "__version__",
     "check_excitation",
     "compensate",
@@ -78,4 +88,5 @@ __all__ = [
     "simulate_cascade",
     "simulate_cascade_loop",
     "simulate_linear",
+    "track",
 ]

@@ -1,0 +1,345 @@
+"""Windowed online identification: cold-start convergence, drift, freeze, divergence, contract."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from genbacklash_core import (
+    Cascade,
+    EstimatorState,
+    GenBacklashError,
+    GeneralBacklash,
+    LinearBlock,
+    NonFiniteInputError,
+    WindowedIdentifier,
+    WindowedSettings,
+    identify_backlash,
+    paper_example,
+    track,
+)
+from genbacklash_core.backlash import evaluate_branch
+from genbacklash_core.play import play_operator
+from genbacklash_core.simulate import play_bounds
+from genbacklash_core.windowed import SampleRing
+
+EX1 = paper_example(1)
+
+
+def _args(number: int) -> tuple[int, ...]:
+    return (3,) if number <= 2 else (3, 2, 2)
+
+
+def _error(parameters: np.ndarray, truth: np.ndarray) -> float:
+    return float(np.max(np.abs(parameters - truth)))
+
+
+def drifting_gap_data(
+    seed: int,
+    n: int,
+    ramp: tuple[int, int],
+    growth: float = 0.5,
+    snr: float = 25.0,
+    model: GeneralBacklash | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Example 1's backlash whose gaps grow by ``growth`` linearly over ``ramp`` (wear).
+
+    Simulated with per-sample branches through the play operator. Returns ``u, y, c_left,
+    c_right`` (the last two per sample).
+    """
+    bl = EX1.backlash if model is None else model
+    rng = np.random.default_rng(seed)
+    u = rng.uniform(-2.0, 2.0, n)
+    t = np.arange(n)
+    share = np.clip((t - ramp[0]) / (ramp[1] - ramp[0]), 0.0, 1.0)
+    c_left = bl.c_left * (1.0 + growth * share)
+    c_right = bl.c_right * (1.0 + growth * share)
+    left = evaluate_branch(np.asarray(bl.m_left), u + c_left)
+    right = evaluate_branch(np.asarray(bl.m_right), u - c_right)
+    x = play_operator(*play_bounds(left, right), 0.0)
+    y = x + rng.normal(0.0, float(np.std(x)) / snr, n)
+    return u, y, c_left, c_right
+
+
+def tracking_lag(
+    samples: np.ndarray, estimate: np.ndarray, truth: np.ndarray, window: tuple[int, int]
+) -> float:
+    """Mean ``(truth - estimate) / slope`` over ``window``: the lag behind a linear ramp."""
+    a, b = window
+    slope = (truth[b - 1] - truth[a]) / (b - 1 - a)
+    inside = (samples >= a) & (samples <= b)
+    return float(np.mean((truth[samples[inside] - 1] - estimate[inside]) / slope))
+
+
+# --------------------------------------------------------------------------- settings
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"window": 10}, r"window must lie in \[20, inf\]"),
+        ({"window": 100.0}, "window must be a whole number"),
+        ({"refit_every": 0}, r"refit_every must lie in \[1, 2000\]"),
+        ({"refit_every": 3000}, r"refit_every must lie in \[1, 2000\]"),
+        ({"refit_fraction": 1.5}, r"refit_fraction must lie in \[0, 1\]"),
+        ({"iterations": 0}, r"iterations must lie in \[1, 1000\]"),
+        ({"tol": -1e-3}, r"tol must lie in \[0, 1\]"),
+        ({"refine": 1}, "refine must be True or False"),
+        ({"min_samples": 5}, r"min_samples must lie in \[20, 2000\]"),
+        ({"min_excitation": float("nan")}, r"min_excitation must lie in \[0, 1\]"),
+        ({"converged_std": 0.0}, r"converged_std must lie in \[1e-12, inf\]"),
+        ({"max_failures": 0}, r"max_failures must lie in \[1, 1e\+06\]"),
+        ({"nonfinite": "ignore"}, "nonfinite must be 'raise' or 'drop'"),
+        ({"input_deadband": "small"}, "input_deadband must be a number"),
+    ],
+)
+def test_settings_validation(changes: dict[str, object], message: str) -> None:
+    with pytest.raises(GenBacklashError, match=message):
+        WindowedSettings(**changes)  # type: ignore[arg-type]
+
+
+def test_numpy_numbers_are_settings_too() -> None:
+    settings = WindowedSettings(window=np.int64(800), refit_fraction=np.float64(0.2))
+    assert settings.window == 800
+
+
+def test_constructor_validation() -> None:
+    with pytest.raises(GenBacklashError, match=r"sign must be \+1, -1 or None"):
+        WindowedIdentifier(3, sign=0)
+    with pytest.raises(GenBacklashError, match="degree must be >= 1"):
+        WindowedIdentifier(0)
+    with pytest.raises(GenBacklashError, match="a linear block needs na >= 1"):
+        WindowedIdentifier(3, 0, 2)
+    with pytest.raises(GenBacklashError, match="settings must be WindowedSettings"):
+        WindowedIdentifier(3, settings={"window": 100})  # type: ignore[arg-type]
+
+
+# --------------------------------------------------------------------------- ring buffer
+
+
+def test_ring_buffer_holds_the_latest_samples_in_order() -> None:
+    ring = SampleRing(5)
+    assert ring.window()[0].size == 0
+    values = np.arange(13.0)
+    ring.extend(values[:3], -values[:3])
+    np.testing.assert_array_equal(ring.window()[0], [0.0, 1.0, 2.0])
+    for v in values[3:9]:
+        ring.push(float(v), -float(v))
+    np.testing.assert_array_equal(ring.window()[0], values[4:9])
+    np.testing.assert_array_equal(ring.window()[1], -values[4:9])
+    np.testing.assert_array_equal(ring.window(2)[0], values[7:9])
+    ring.extend(values[9:13], -values[9:13])
+    np.testing.assert_array_equal(ring.window()[0], values[8:13])
+    ring.extend(np.arange(100.0, 112.0), np.zeros(12))  # longer than the ring
+    np.testing.assert_array_equal(ring.window()[0], np.arange(107.0, 112.0))
+    assert len(ring) == 5 and ring.count == 25
+
+
+# --------------------------------------------------------------------------- convergence
+
+
+@pytest.mark.parametrize(
+    ("number", "samples", "tolerance"),
+    [(1, 300, 0.05), (2, 300, 0.05), (3, 1000, 0.03), (4, 1000, 0.03)],
+)
+def test_converges_from_a_cold_start(number: int, samples: int, tolerance: float) -> None:
+    ex = paper_example(number)
+    for seed in (0, 1):
+        data = ex.generate(seed, n_samples=samples)
+        ident = WindowedIdentifier(*_args(number))
+        est = ident.update_many(data.u, data.y)
+        assert est.state in (EstimatorState.CONVERGED, EstimatorState.CONVERGING), est.reason
+        assert _error(est.parameters, ex.model.parameters()) < tolerance
+        assert ident.structure.sign == ex.backlash.sign  # detected
+        assert type(est.model) is type(ex.model)
+        assert est.residual < 3.0 * data.noise_std
+
+
+EX3_BACKLASH = GeneralBacklash((0.5, -0.3, 0.3), 0.45, (0.6, 0.4, 0.2), 0.55)
+
+
+@pytest.mark.parametrize(
+    ("model", "orders"),
+    [
+        (GeneralBacklash.ideal(0.8, 0.3, 0.5), (1,)),
+        (GeneralBacklash.ideal(-0.8, 0.3, 0.5), (1,)),
+        (Cascade(EX3_BACKLASH, LinearBlock((1.0,))), (3, 1, 0)),
+        (Cascade(EX3_BACKLASH, LinearBlock((1.0, 0.3, -0.2), (-0.4,))), (3, 3, 1)),
+    ],
+    ids=["ideal", "ideal-decreasing", "na1-nb0", "na3-nb1"],
+)
+def test_other_structures(model: GeneralBacklash | Cascade, orders: tuple[int, ...]) -> None:
+    rng = np.random.default_rng(20)
+    u = rng.uniform(-1.5, 1.5, 1500)
+    clean = model.simulate(u)
+    y = clean + rng.normal(0.0, float(np.std(clean)) / 50.0, u.size)
+    est = WindowedIdentifier(*orders).update_many(u, y)
+    assert est.state is EstimatorState.CONVERGED, est.reason
+    assert _error(est.parameters, model.parameters()) < 0.05
+    assert est.names == model.parameter_names
+
+
+def test_warming_up_until_enough_samples() -> None:
+    data = EX1.generate(0, n_samples=30)
+    ident = WindowedIdentifier(3)
+    est = ident.update_many(data.u, data.y)
+    assert est.state is EstimatorState.WARMING_UP
+    assert est.model is None and est.confidence == 0.0
+    assert ident.min_samples == 48
+
+
+def test_constant_input_from_the_start_stays_warming_up() -> None:
+    ident = WindowedIdentifier(3)
+    est = ident.update_many(np.full(500, 0.3), np.full(500, 0.1))
+    assert est.state is EstimatorState.WARMING_UP
+    assert "input is constant" in est.reason
+
+
+def test_update_and_update_many_agree_exactly() -> None:
+    data = paper_example(3).generate(5, n_samples=900)
+    one = WindowedIdentifier(3, 2, 2, settings=WindowedSettings(window=400))
+    for u, y in zip(data.u.tolist(), data.y.tolist(), strict=True):
+        last = one.update(u, y)
+    many = WindowedIdentifier(3, 2, 2, settings=WindowedSettings(window=400))
+    chunks = np.split(np.arange(900), [7, 250, 251, 600])
+    for idx in chunks:
+        est = many.update_many(data.u[idx], data.y[idx])
+    np.testing.assert_array_equal(last.parameters, est.parameters)
+    np.testing.assert_array_equal(last.covariance, est.covariance)
+    assert (last.state, last.samples, last.residual) == (est.state, est.samples, est.residual)
+
+
+def test_confidence_grows_with_data() -> None:
+    data = EX1.generate(1, n_samples=3000)
+    trace = track(WindowedIdentifier(3), data.u, data.y, every=100)
+    assert trace[0].confidence < trace[-1].confidence
+    assert trace[-1].confidence > 0.8
+    assert np.all(trace[-1].std() < trace[1].std())
+
+
+def test_large_window_with_refinement_matches_the_batch_fit() -> None:
+    data = EX1.generate(3, n_samples=3000)
+    settings = WindowedSettings(window=3000, refine=True, iterations=1)
+    ident = WindowedIdentifier(3, settings=settings)
+    est = ident.update_many(data.u, data.y)
+    batch = identify_backlash(data.u, data.y, 3)
+    truth = EX1.model.parameters()
+    assert _error(est.parameters, truth) < 1.5 * _error(batch.model.parameters(), truth)
+    final = ident.refit()  # on all the data now: the batch fit's maximum-likelihood estimate
+    assert final.samples == 3000
+    np.testing.assert_allclose(final.parameters, batch.model.parameters(), atol=2e-3)
+
+
+def test_refit_before_any_sample() -> None:
+    assert WindowedIdentifier(3).refit().state is EstimatorState.WARMING_UP
+
+
+def test_refinement_of_the_cascade_runs_on_a_mid_stream_window() -> None:
+    ex = paper_example(3)
+    data = ex.generate(2, n_samples=2500)
+    settings = WindowedSettings(window=1200, refine=True, iterations=1)
+    est = WindowedIdentifier(3, 2, 2, settings=settings).update_many(data.u, data.y)
+    assert est.state is EstimatorState.CONVERGED, est.reason
+    assert _error(est.parameters, ex.model.parameters()) < 0.02
+
+
+# --------------------------------------------------------------------------- drift
+
+
+def test_tracks_a_growing_gap() -> None:
+    n, ramp = 14_000, (2_000, 12_000)
+    u, y, c_left, c_right = drifting_gap_data(0, n, ramp)
+    ident = WindowedIdentifier(3, settings=WindowedSettings(window=1000))
+    trace = track(ident, u, y, every=100)
+    samples = np.array([e.samples for e in trace])
+    values = np.array([e.parameters for e in trace])
+    judged = (7_000, 12_000)
+    lag_left = tracking_lag(samples, values[:, 3], c_left, judged)
+    lag_right = tracking_lag(samples, values[:, 7], c_right, judged)
+    assert 0 < lag_left < 1000 and 0 < lag_right < 1000, (lag_left, lag_right)
+    assert trace[-1].state is EstimatorState.CONVERGED
+    assert abs(trace[-1].parameters[3] - c_left[-1]) < 0.03
+    assert abs(trace[-1].parameters[7] - c_right[-1]) < 0.03
+
+
+# --------------------------------------------------------------------------- no excitation
+
+
+def _held_then_moving(seed: int) -> tuple[np.ndarray, np.ndarray, slice]:
+    """1500 random samples, 2000 with the input held, then 1500 random again."""
+    rng = np.random.default_rng(seed)
+    u = np.concatenate([rng.uniform(-2, 2, 1500), np.full(2000, 0.4), rng.uniform(-2, 2, 1500)])
+    x = EX1.model.simulate(u)
+    y = x + rng.normal(0.0, float(np.std(x)) / 25.0, u.size)
+    return u, y, slice(1500, 3500)
+
+
+def test_freezes_without_excitation_and_recovers() -> None:
+    u, y, held = _held_then_moving(3)
+    ident = WindowedIdentifier(3, settings=WindowedSettings(window=1000))
+    before = ident.update_many(u[: held.start], y[: held.start])
+    assert before.state is EstimatorState.CONVERGED
+    during = track(ident, u[held], y[held], every=250)
+    assert during[-1].state is EstimatorState.NO_EXCITATION
+    assert "no information" in during[-1].reason
+    for est in during[1:]:
+        np.testing.assert_array_equal(est.parameters, during[0].parameters)  # frozen
+    assert during[-1].confidence > 0.5  # the frozen estimate is still good
+    after = ident.update_many(u[held.stop :], y[held.stop :])
+    assert after.state is EstimatorState.CONVERGED
+    assert _error(after.parameters, EX1.model.parameters()) < 0.03
+
+
+def test_freezes_when_the_input_sweeps_only_part_of_a_branch() -> None:
+    rng = np.random.default_rng(8)
+    t = np.arange(4000)
+    narrow = 1.2 + 0.3 * np.sin(2 * np.pi * t / 60)  # the upper part of the right branch only
+    u = np.concatenate([rng.uniform(-2, 2, 1500), narrow])
+    x = EX1.model.simulate(u)
+    y = x + rng.normal(0.0, float(np.std(x)) / 25.0, u.size)
+    ident = WindowedIdentifier(3, settings=WindowedSettings(window=1000))
+    trace = track(ident, u, y, every=250)
+    assert trace[-1].state is EstimatorState.NO_EXCITATION
+    assert trace[-1].reason.startswith("estimate frozen")
+    assert max(_error(e.parameters, EX1.model.parameters()) for e in trace[2:]) < 0.04
+
+
+# --------------------------------------------------------------------------- divergence
+
+
+def test_recovers_after_a_sensor_fault() -> None:
+    data = EX1.generate(4, n_samples=6000)
+    rng = np.random.default_rng(9)
+    y = data.y.copy()
+    y[2000:2600] = rng.normal(0.0, 2.0, 600)  # a burst of garbage longer than the window
+    ident = WindowedIdentifier(3, settings=WindowedSettings(window=500))
+    trace = track(ident, data.u, y, every=100)
+    states = [e.state for e in trace]
+    assert EstimatorState.DIVERGED in states
+    diverged = [e for e in trace if e.state is EstimatorState.DIVERGED]
+    assert all(e.confidence == 0.0 and e.model is not None for e in diverged)
+    assert trace[-1].state is EstimatorState.CONVERGED
+    assert _error(trace[-1].parameters, EX1.model.parameters()) < 0.03
+
+
+# --------------------------------------------------------------------------- bad input
+
+
+def test_nonfinite_samples() -> None:
+    ident = WindowedIdentifier(3)
+    with pytest.raises(NonFiniteInputError, match="sample 0 is not finite"):
+        ident.update(float("nan"), 0.0)
+    with pytest.raises(NonFiniteInputError, match="1 of 3 samples are not finite"):
+        ident.update_many([0.0, 1.0, 2.0], [0.0, float("inf"), 1.0])
+    assert ident.estimate.samples == 0  # nothing was taken
+    dropping = WindowedIdentifier(3, settings=WindowedSettings(nonfinite="drop"))
+    assert dropping.update(float("nan"), 1.0).samples == 0
+    assert dropping.update_many([0.0, np.nan, 1.0], [0.0, 1.0, 2.0]).samples == 2
+
+
+def test_bad_series() -> None:
+    ident = WindowedIdentifier(3)
+    with pytest.raises(GenBacklashError, match="one-dimensional of one length"):
+        ident.update_many([0.0, 1.0], [0.0])
+    with pytest.raises(GenBacklashError, match="u and y must be numbers"):
+        ident.update("left", 0.0)  # type: ignore[arg-type]
