@@ -881,8 +881,9 @@ class WindowedIdentifier:
     def _schedule(self) -> None:
         s = self.settings
         k = max(s.refit_every, math.ceil(s.refit_fraction * len(self._ring)))
-        if self._needs_cold and self._cold_failures:  # back off while cold starts fail
-            k = min(s.refit_every * 2 ** min(self._cold_failures, 10), s.window)
+        if self._needs_cold and self._cold_failures:  # back off while cold starts fail,
+            # but retry at least every W/8 samples: slow references excite the system slowly
+            k = min(s.refit_every * 2 ** min(self._cold_failures, 10), max(s.window // 8, 1))
         self._last_fit_at = self._samples
         self._next_fit = self._samples + k
 
