@@ -102,13 +102,16 @@ class CompensatorOptions:
         is ``w = clip((confidence - gate_low) / (gate_high - gate_low), 0, 1)`` (``w = 1`` when
         ``confidence >= gate_high``) and the command ``u = x_d + w (u_inverse - x_d)``: at
         ``w = 0`` the compensator passes ``x_d`` through. A NaN confidence counts as ``0``.
+        The defaults (0.2, 0.5) match :attr:`Estimate.confidence <genbacklash_core.Estimate>`:
+        full correction once an online estimate has converged (confidence >= 0.5), a fade
+        while it converges, pass-through while it warms up or diverged (confidence 0).
     valid_range : (float, float) or None
         Input interval on which the model is trusted and its branches are inverted; ``None``
         uses the output limits. It is intersected with ``[u_min, u_max]``.
 
     Examples
     --------
-    >>> options = CompensatorOptions(u_min=-2.0, u_max=2.0, max_rate=0.1, gate_low=0.5)
+    >>> options = CompensatorOptions(u_min=-2.0, u_max=2.0, gate_low=0.5, gate_high=1.0)
     >>> options.inversion_range
     (-2.0, 2.0)
     >>> options.weight(0.75), options.weight(0.2), options.weight(float("nan"))
@@ -119,8 +122,8 @@ class CompensatorOptions:
     u_max: float = math.inf
     max_rate: float = math.inf
     smoothing: int = 0
-    gate_low: float = 0.0
-    gate_high: float = 1.0
+    gate_low: float = 0.2
+    gate_high: float = 0.5
     valid_range: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:

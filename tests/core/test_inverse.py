@@ -400,7 +400,7 @@ def test_cascade_inverts_only_its_backlash() -> None:
         ({"smoothing": -1}, r"smoothing must be >= 0 samples"),
         ({"smoothing": 1.5}, r"smoothing must be a whole number"),
         ({"gate_low": -0.1}, r"gate_low and gate_high must lie in \[0, 1\]"),
-        ({"gate_high": 1.5}, r"must lie in \[0, 1\], got 0.0 and 1.5"),
+        ({"gate_high": 1.5}, r"must lie in \[0, 1\], got 0.2 and 1.5"),
         ({"gate_low": 0.8, "gate_high": 0.2}, r"need gate_low <= gate_high"),
         ({"valid_range": (1.0, 0.0)}, r"valid_range needs low < high"),
         ({"valid_range": (1.0,)}, r"valid_range must be a pair"),
