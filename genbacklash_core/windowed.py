@@ -682,12 +682,18 @@ def cold_fit(
     """
     sign = structure.sign if sign_known else None
     try:
-        if structure.cascade:
-            result = identify_cascade(
-                u, y, structure.degree, structure.na, structure.nb, sign=sign, refine=False
-            )
-        else:
-            result = identify_backlash(u, y, structure.degree, sign=sign, refine=False)
+        for refine in (False, True):
+            # Without refinement first (cheaper); when the iteration does not settle (it can
+            # creep on for more than its 30 iterations), the default identify decides: its
+            # refined estimate counts only when the iteration restarted there settles.
+            if structure.cascade:
+                result = identify_cascade(
+                    u, y, structure.degree, structure.na, structure.nb, sign=sign, refine=refine
+                )
+            else:
+                result = identify_backlash(u, y, structure.degree, sign=sign, refine=refine)
+            if result.converged:
+                break
     except GenBacklashError as err:
         return str(err)
     if not result.converged:

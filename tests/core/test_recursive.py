@@ -18,7 +18,7 @@ from genbacklash_core import (
     track,
 )
 
-from .test_windowed import drifting_gap_data, tracking_lag
+from ._helpers import drifting_gap_data, tracking_lag
 
 EX1 = paper_example(1)
 EX3_BACKLASH = GeneralBacklash((0.5, -0.3, 0.3), 0.45, (0.6, 0.4, 0.2), 0.55)

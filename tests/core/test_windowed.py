@@ -18,10 +18,9 @@ from genbacklash_core import (
     paper_example,
     track,
 )
-from genbacklash_core.backlash import evaluate_branch
-from genbacklash_core.play import play_operator
-from genbacklash_core.simulate import play_bounds
 from genbacklash_core.windowed import SampleRing
+
+from ._helpers import drifting_gap_data, tracking_lag
 
 EX1 = paper_example(1)
 
@@ -32,43 +31,6 @@ def _args(number: int) -> tuple[int, ...]:
 
 def _error(parameters: np.ndarray, truth: np.ndarray) -> float:
     return float(np.max(np.abs(parameters - truth)))
-
-
-def drifting_gap_data(
-    seed: int,
-    n: int,
-    ramp: tuple[int, int],
-    growth: float = 0.5,
-    snr: float = 25.0,
-    model: GeneralBacklash | None = None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Example 1's backlash whose gaps grow by ``growth`` linearly over ``ramp`` (wear).
-
-    Simulated with per-sample branches through the play operator. Returns ``u, y, c_left,
-    c_right`` (the last two per sample).
-    """
-    bl = EX1.backlash if model is None else model
-    rng = np.random.default_rng(seed)
-    u = rng.uniform(-2.0, 2.0, n)
-    t = np.arange(n)
-    share = np.clip((t - ramp[0]) / (ramp[1] - ramp[0]), 0.0, 1.0)
-    c_left = bl.c_left * (1.0 + growth * share)
-    c_right = bl.c_right * (1.0 + growth * share)
-    left = evaluate_branch(np.asarray(bl.m_left), u + c_left)
-    right = evaluate_branch(np.asarray(bl.m_right), u - c_right)
-    x = play_operator(*play_bounds(left, right), 0.0)
-    y = x + rng.normal(0.0, float(np.std(x)) / snr, n)
-    return u, y, c_left, c_right
-
-
-def tracking_lag(
-    samples: np.ndarray, estimate: np.ndarray, truth: np.ndarray, window: tuple[int, int]
-) -> float:
-    """Mean ``(truth - estimate) / slope`` over ``window``: the lag behind a linear ramp."""
-    a, b = window
-    slope = (truth[b - 1] - truth[a]) / (b - 1 - a)
-    inside = (samples >= a) & (samples <= b)
-    return float(np.mean((truth[samples[inside] - 1] - estimate[inside]) / slope))
 
 
 # --------------------------------------------------------------------------- settings
