@@ -69,7 +69,7 @@ def accuracy(n_seeds: int) -> tuple[str, dict[str, object]]:
     ex = paper_example(1)
     truth = ex.model.parameters()
     configs = {
-        "windowed, W = 2000 (default)": lambda: WindowedIdentifier(3),
+        "windowed, W = 1500 (default)": lambda: WindowedIdentifier(3),
         "windowed, W = 5000": lambda: WindowedIdentifier(3, settings=WindowedSettings(window=5000)),
         "windowed, W = 5000, refine, 1 iteration per fit": lambda: WindowedIdentifier(
             3, settings=WindowedSettings(window=5000, refine=True, iterations=1)
@@ -280,8 +280,8 @@ def drift(n: int) -> tuple[str, dict[str, float], dict[str, tuple[np.ndarray, np
     summary: dict[str, float] = {}
     curves: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     for name, make in {
-        "windowed, W = 2000 (default)": lambda: WindowedIdentifier(3),
-        "windowed, W = 1000": lambda: WindowedIdentifier(3, settings=WindowedSettings(window=1000)),
+        "windowed, W = 1500 (default)": lambda: WindowedIdentifier(3),
+        "windowed, W = 2000": lambda: WindowedIdentifier(3, settings=WindowedSettings(window=2000)),
         "recursive, lambda = 0.998 (default)": lambda: RecursiveIdentifier(3),
         "recursive, lambda = 0.999": lambda: RecursiveIdentifier(
             3, settings=RecursiveSettings(forgetting=0.999)
@@ -355,7 +355,7 @@ def main() -> None:
     def mark(ok: bool) -> str:
         return "met" if ok else "**not met**"
 
-    w300 = acc["windowed, W = 2000 (default)"]
+    w300 = acc["windowed, W = 1500 (default)"]
     w5000 = acc["windowed, W = 5000, refine, 1 iteration per fit"]
     w5000_plain = acc["windowed, W = 5000"]
     rec = soaked["recursive (default)"]
@@ -368,7 +368,7 @@ def main() -> None:
 * after 5000 samples within 1.5x the error of a batch fit on all the data:
   {mark(w5000[2] <= 1.5)} with W = 5000 and refinement ({w5000[2]:.2f}x); without the
   refinement W = 5000 gives {w5000_plain[2]:.2f}x (the equation error's noise bias) and the
-  default W = 2000 {w300[2]:.2f}x (a window forgets on purpose: the trade-off against drift
+  default W = 1500 {w300[2]:.2f}x (a window forgets on purpose: the trade-off against drift
   tracking below)
 * recursive: no divergence over the soak: {mark(rec[0] == 0)} ({rec[0]} chunks diverged; the
   windowed identifier: {win[0]})

@@ -118,9 +118,9 @@ class WindowedSettings:
     The window trades accuracy for tracking. Measured on the paper's Example 1 (random
     input, SNR 25), all from a cold start:
 
-    * default (``W = 2000``): max parameter error ~0.01-0.02 at 300 samples; a gap growing
-      linearly is tracked ~1000 samples behind;
-    * ``window=1500``: tracking lag ~800 samples;
+    * default (``W = 1500``): max parameter error ~0.01-0.02 at 300 samples; a gap growing
+      linearly is tracked ~800 samples behind;
+    * ``window=2000``: tracking lag ~1100 samples;
     * ``window=5000, refine=True, iterations=1``: after 5000 samples as accurate as the
       batch fit (with refinement) on all of them; tracking lag ~2800 samples.
 
@@ -138,7 +138,7 @@ class WindowedSettings:
     genbacklash_core.errors.GenBacklashError: window must lie in [20, inf], got 5
     """
 
-    window: int = 2000
+    window: int = 1500
     refit_every: int = 25
     refit_fraction: float = 0.1
     iterations: int = 3
