@@ -26,6 +26,7 @@ from genbacklash_core import (
 )
 from genbacklash_core.data import NonFinitePolicy
 
+from . import replay_cli
 from .csvio import Series, read_series_csv, write_series_csv
 
 __all__ = ["main"]
@@ -99,13 +100,12 @@ def _identify(
         progress.close()
 
 
-def _load(path: str) -> Series:
+def _load(path: str, args: argparse.Namespace | None = None) -> Series:
     file = Path(path)
     if file.is_dir() or file.suffix.lower() in _BAG_SUFFIXES:
-        raise GenBacklashError(
-            f"{file} looks like a bag; this version reads CSV files with columns u,y "
-            "(bag input comes with the ROS 2 tools); export the two signals to CSV"
-        )
+        if args is None:
+            raise GenBacklashError(f"{file} looks like a bag; give a CSV with columns u,y")
+        return replay_cli.load_bag_series(args)
     if not file.exists():
         raise GenBacklashError(f"{file} does not exist")
     return read_series_csv(file)
@@ -139,7 +139,7 @@ def _summary(result: IdentificationResult) -> str:
 
 
 def _cmd_identify(args: argparse.Namespace) -> int:
-    series = _load(args.data)
+    series = _load(args.data, args)
     result = _identify(
         series,
         model=args.model,
@@ -166,6 +166,10 @@ def _cmd_identify(args: argparse.Namespace) -> int:
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
+    if args.bag or args.scenario:
+        return replay_cli.simulate_bag(args)
+    if args.example is None or not args.output:
+        raise GenBacklashError("give --example N and -o FILE.csv (or --bag DIR for a bag)")
     example = paper_example(args.example)
     data = example.generate(args.seed, n_samples=args.samples, snr=args.snr)
     write_series_csv(args.output, Series(u=data.u, y=data.y))
@@ -244,7 +248,13 @@ def build_parser() -> argparse.ArgumentParser:
             "likelihood accuracy. Exit status 3 when it did not converge."
         ),
     )
-    ident.add_argument("data", metavar="DATA", help="CSV file with columns u,y[,t]")
+    ident.add_argument(
+        "data",
+        metavar="DATA",
+        help="CSV file with columns u,y[,t], or a rosbag2 directory / .mcap file (then give "
+        "--command and --encoder: one sample per encoder message, the command held)",
+    )
+    replay_cli.add_bag_input_options(ident, required=False)
     ident.add_argument(
         "--model",
         choices=("backlash", "cascade"),
@@ -304,14 +314,15 @@ def build_parser() -> argparse.ArgumentParser:
         help="write synthetic data of the paper's examples",
         description=(
             "Simulate one of the paper's four examples (uniform random input, white output "
-            "noise at the paper's SNR = std(output)/std(noise)) and write a CSV with columns u,y."
+            "noise at the paper's SNR = std(output)/std(noise)) and write a CSV with columns u,y "
+            "(-o), or a rosbag2 MCAP bag (--bag) of it or of the --scenario drivetrain."
         ),
     )
     sim.add_argument(
         "--example",
         type=int,
         choices=(1, 2, 3, 4),
-        required=True,
+        default=None,
         help="1, 2: general backlash (increasing, decreasing); 3, 4: cascade",
     )
     sim.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
@@ -327,7 +338,8 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="signal-to-noise ratio (default: the paper's)",
     )
-    sim.add_argument("-o", "--output", required=True, metavar="FILE.csv", help="output CSV")
+    sim.add_argument("-o", "--output", metavar="FILE.csv", help="output CSV")
+    replay_cli.add_simulate_bag_options(sim)
     sim.set_defaults(func=_cmd_simulate)
 
     demo = sub.add_parser(
@@ -351,6 +363,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--out", default="demo_output", metavar="DIR", help="output directory (default demo_output)"
     )
     demo.set_defaults(func=_cmd_demo)
+    replay_cli.add_parser(sub)
     return parser
 
 

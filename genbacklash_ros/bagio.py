@@ -1,0 +1,644 @@
+"""Reading and writing rosbag2 MCAP bags with rosbags (Jazzy typestore).
+
+:class:`BagReader` opens a rosbag2 directory (``metadata.yaml`` + ``.mcap``) or a bare
+``.mcap`` file with :class:`rosbags.highlevel.AnyReader` and yields :class:`BagMessage` s
+(topic, log time in integer nanoseconds, our message of :mod:`genbacklash_ros.messages`,
+the raw CDR bytes) for chosen topics in log-time order. Every problem -- a missing path, a
+file that is not a bag, a corrupt or truncated file, an unknown topic, a message type we do
+not read -- is a :class:`BagError` with a one-line reason.
+
+A truncated MCAP file (a recording cut short: no summary, no footer) cannot be opened by
+rosbags. The reader then *salvages* it: it scans the records from the start and yields the
+messages of every complete chunk, then raises :class:`BagError` saying where the file ends,
+so that a replay can keep (and properly close) what it wrote so far.
+
+:class:`BagWriter` writes a rosbag2 directory with one MCAP file
+(``rosbags.rosbag2.Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)``) from our
+messages (:func:`~genbacklash_ros.rosbags_types.to_rosbags` + ``serialize_cdr``) or from raw
+CDR bytes. :func:`align` is the batch form of the pipeline's alignment (one sample per
+encoder message, the command held), used by ``genbacklash identify`` on bags.
+
+Examples
+--------
+>>> import tempfile, pathlib
+>>> from genbacklash_ros.messages import Float64
+>>> out = pathlib.Path(tempfile.mkdtemp()) / "bag"
+>>> with BagWriter(out) as writer:
+...     writer.write("/x", 1_000, Float64(0.5))
+>>> with BagReader(out) as reader:
+...     [(m.topic, m.log_time_ns, m.message) for m in reader.messages(["/x"])]
+[('/x', 1000, Float64(data=0.5))]
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+from typing import Any, BinaryIO, Literal
+
+import numpy as np
+
+from genbacklash_core import GenBacklashError
+
+from .messages import (
+    CommandType,
+    DiagnosticArray,
+    EncoderType,
+    Float64,
+    Float64MultiArray,
+    JointState,
+    Message,
+    MessageError,
+    read_command,
+    read_encoder,
+)
+from .rosbags_types import from_rosbags, jazzy_typestore, to_rosbags
+
+__all__ = [
+    "COMMAND_MSGTYPES",
+    "ENCODER_MSGTYPES",
+    "SUPPORTED_MSGTYPES",
+    "AlignedSeries",
+    "BagError",
+    "BagMessage",
+    "BagReader",
+    "BagWriter",
+    "TopicInfo",
+    "align",
+    "read_aligned",
+]
+
+COMMAND_MSGTYPES: dict[str, CommandType] = {
+    Float64.ros_type: "float64",
+    Float64MultiArray.ros_type: "float64_multi_array",
+    JointState.ros_type: "joint_state",
+}
+"""Command topic types and the pipeline's ``command_type`` for each."""
+
+ENCODER_MSGTYPES: dict[str, EncoderType] = {
+    JointState.ros_type: "joint_state",
+    Float64.ros_type: "float64",
+}
+"""Encoder topic types and the pipeline's ``encoder_type`` for each."""
+
+SUPPORTED_MSGTYPES = frozenset(
+    {Float64.ros_type, Float64MultiArray.ros_type, JointState.ros_type, DiagnosticArray.ros_type}
+)
+"""Message types :class:`BagReader` converts into our messages."""
+
+_MCAP_MAGIC = b"\x89MCAP0\r\n"
+_OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK, _OP_FOOTER = 0x03, 0x04, 0x05, 0x06, 0x02
+
+
+class BagError(GenBacklashError):
+    """A bag cannot be read or written (the message says why, in one line)."""
+
+
+@dataclass(frozen=True, slots=True)
+class TopicInfo:
+    """One topic of a bag: its name, ROS message type and message count."""
+
+    name: str
+    msgtype: str
+    count: int
+
+
+@dataclass(frozen=True, slots=True)
+class BagMessage:
+    """One message of a bag.
+
+    Attributes
+    ----------
+    topic : str
+    log_time_ns : int
+        When the recorder received it (integer nanoseconds since the epoch).
+    message : Message
+        The message as our dataclass (:mod:`genbacklash_ros.messages`).
+    msgtype : str
+        Its ROS type, e.g. ``sensor_msgs/msg/JointState``.
+    raw : bytes
+        The CDR bytes as stored (to copy the message to another bag unchanged).
+    """
+
+    topic: str
+    log_time_ns: int
+    message: Message
+    msgtype: str
+    raw: bytes
+
+
+def _one_line(err: BaseException) -> str:
+    text = " ".join(str(a) for a in err.args) if err.args else type(err).__name__
+    return " ".join(text.split()) or type(err).__name__
+
+
+# --------------------------------------------------------------------------- salvage
+
+
+class _Truncated(Exception):
+    """The MCAP records end before the file does (internal)."""
+
+
+def _read(stream: BinaryIO, size: int) -> bytes:
+    data = stream.read(size)
+    if len(data) != size:
+        raise _Truncated
+    return data
+
+
+def _string(buf: bytes, pos: int) -> tuple[str, int]:
+    (size,) = struct.unpack_from("<I", buf, pos)
+    end = pos + 4 + size
+    if end > len(buf):
+        raise _Truncated
+    return buf[pos + 4 : end].decode("utf-8"), end
+
+
+class _Salvage:
+    """Sequential scan of an MCAP file that has no valid footer (a cut-off recording).
+
+    Yields ``(topic, msgtype, log_time_ns, raw)`` for the messages outside chunks and in
+    every complete chunk, in file order (sorted by log time within a chunk), and records
+    where and why the scan stopped in :attr:`problem`.
+    """
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.problem = ""
+        self.schemas: dict[int, str] = {}
+        self.channels: dict[int, tuple[str, str]] = {}
+
+    def _records(self, buf: bytes) -> Iterator[tuple[int, bytes]]:
+        pos = 0
+        while pos < len(buf):
+            if pos + 9 > len(buf):
+                raise _Truncated
+            op = buf[pos]
+            (size,) = struct.unpack_from("<Q", buf, pos + 1)
+            end = pos + 9 + size
+            if end > len(buf):
+                raise _Truncated
+            yield op, buf[pos + 9 : end]
+            pos = end
+
+    def _record(self, op: int, body: bytes) -> Iterator[tuple[str, str, int, bytes]]:
+        if op == _OP_SCHEMA:
+            (sid,) = struct.unpack_from("<H", body, 0)
+            name, _ = _string(body, 2)
+            self.schemas[sid] = name
+        elif op == _OP_CHANNEL:
+            cid, sid = struct.unpack_from("<HH", body, 0)
+            topic, _ = _string(body, 4)
+            self.channels[cid] = (topic, self.schemas.get(sid, ""))
+        elif op == _OP_MESSAGE:
+            cid, _seq, log_time, _pub = struct.unpack_from("<HIQQ", body, 0)
+            if cid in self.channels:
+                topic, msgtype = self.channels[cid]
+                yield topic, msgtype, int(log_time), bytes(body[22:])
+        elif op == _OP_CHUNK:
+            from rosbags.rosbag2.storage_mcap import decompress
+
+            _start, _end, size, crc = struct.unpack_from("<QQQI", body, 0)
+            compression, pos = _string(body, 28)
+            (length,) = struct.unpack_from("<Q", body, pos)
+            data = body[pos + 8 : pos + 8 + length]
+            inner = decompress(data, compression, size, crc)
+            found: list[tuple[str, str, int, bytes]] = []
+            for sub_op, sub_body in self._records(inner):
+                found.extend(self._record(sub_op, sub_body))
+            found.sort(key=lambda item: item[2])
+            yield from found
+
+    def messages(self) -> Iterator[tuple[str, str, int, bytes]]:
+        count = 0
+        offset = len(_MCAP_MAGIC)
+        try:
+            with self.path.open("rb") as stream:
+                if stream.read(len(_MCAP_MAGIC)) != _MCAP_MAGIC:
+                    self.problem = f"{self.path} is not an MCAP file (bad magic)"
+                    return
+                while True:
+                    head = stream.read(9)
+                    if not head:
+                        raise _Truncated
+                    if len(head) < 9:
+                        raise _Truncated
+                    op = head[0]
+                    (size,) = struct.unpack_from("<Q", head, 1)
+                    body = _read(stream, size)
+                    if op == _OP_FOOTER:
+                        return
+                    for item in self._record(op, body):
+                        count += 1
+                        yield item
+                    offset += 9 + size
+        except _Truncated:
+            self.problem = (
+                f"{self.path} is truncated (records end at byte {offset}); "
+                f"read {count} messages before the cut"
+            )
+        except (struct.error, UnicodeDecodeError, ValueError, OSError) as err:
+            self.problem = (
+                f"{self.path} is corrupt at byte {offset} ({_one_line(err)}); "
+                f"read {count} messages before it"
+            )
+        except Exception as err:  # rosbags' ReaderError for a bad chunk, and the like
+            self.problem = (
+                f"{self.path} is corrupt at byte {offset} ({_one_line(err)}); "
+                f"read {count} messages before it"
+            )
+
+
+def _mcap_files(path: Path) -> list[Path]:
+    if path.is_dir():
+        return sorted(path.glob("*.mcap"))
+    return [path]
+
+
+# --------------------------------------------------------------------------- reading
+
+
+class BagReader:
+    """Read the messages of a rosbag2 directory or a bare ``.mcap`` file.
+
+    Parameters
+    ----------
+    path : str or Path
+        A rosbag2 directory (with ``metadata.yaml``) or an ``.mcap`` file.
+
+    Notes
+    -----
+    Use as a context manager. :attr:`salvaged` is True when the file could not be opened
+    normally and is scanned record by record (a truncated recording): :meth:`messages` then
+    yields what it can and raises :class:`BagError` at the damage.
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        if not self.path.exists():
+            raise BagError(f"no bag at {self.path}: the path does not exist")
+        self._reader: Any = None
+        self._salvage: list[Path] = []
+        self._salvage_reason = ""
+        self._topics: dict[str, TopicInfo] = {}
+
+    # context management
+
+    def __enter__(self) -> BagReader:
+        self.open()
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> Literal[False]:
+        self.close()
+        return False
+
+    def open(self) -> None:
+        """Open the bag (or prepare its salvage); raises :class:`BagError`."""
+        from rosbags.highlevel import AnyReader
+
+        try:
+            reader = AnyReader([self.path], default_typestore=jazzy_typestore())
+            reader.open()
+        except Exception as err:  # AnyReaderError, FileNotFoundError, yaml and type errors
+            reason = _one_line(err)
+            files = [f for f in _mcap_files(self.path) if f.is_file()]
+            with_magic = [f for f in files if _starts_with_magic(f)]
+            if not with_magic:
+                kind = "directory" if self.path.is_dir() else "file"
+                raise BagError(
+                    f"{self.path} is not a readable rosbag2 MCAP bag ({kind}): {reason}"
+                ) from err
+            self._salvage = with_magic
+            self._salvage_reason = reason
+            self._topics = self._scan_topics()
+            if not any(t.count for t in self._topics.values()):
+                raise BagError(
+                    f"{self.path} cannot be opened ({reason}) and holds no complete message"
+                ) from err
+            return
+        self._reader = reader
+        topics: dict[str, TopicInfo] = {}
+        for conn in reader.connections:
+            old = topics.get(conn.topic)
+            count = conn.msgcount + (old.count if old else 0)
+            topics[conn.topic] = TopicInfo(conn.topic, conn.msgtype, count)
+        self._topics = topics
+
+    def _scan_topics(self) -> dict[str, TopicInfo]:
+        counts: dict[tuple[str, str], int] = {}
+        for file in self._salvage:
+            scan = _Salvage(file)
+            for topic, msgtype, _t, _raw in scan.messages():
+                counts[topic, msgtype] = counts.get((topic, msgtype), 0) + 1
+            for topic, msgtype in scan.channels.values():
+                counts.setdefault((topic, msgtype), 0)
+        return {t: TopicInfo(t, m, n) for (t, m), n in sorted(counts.items())}
+
+    def close(self) -> None:
+        """Close the bag (idempotent)."""
+        reader, self._reader = self._reader, None
+        if reader is not None:
+            try:
+                reader.close()
+            except Exception:  # closing a reader that failed mid-way: nothing to keep
+                pass
+
+    # topics
+
+    @property
+    def salvaged(self) -> bool:
+        """True when the bag is read record by record because it could not be opened."""
+        return bool(self._salvage)
+
+    @property
+    def topics(self) -> dict[str, TopicInfo]:
+        """Topic name -> :class:`TopicInfo` (for a salvaged bag: what the scan found)."""
+        return dict(self._topics)
+
+    def topic_list(self) -> str:
+        """The topics as ``name (type, count)``, one comma-separated line."""
+        if not self._topics:
+            return "none"
+        return ", ".join(f"{t.name} ({t.msgtype}, {t.count})" for t in self._topics.values())
+
+    def topic(self, name: str, allowed: Iterable[str] | None = None) -> TopicInfo:
+        """The topic ``name``, checked to exist (and to have one of the ``allowed`` types).
+
+        Raises :class:`BagError` listing the topics that exist, or the supported types.
+        """
+        info = self._topics.get(name)
+        if info is None:
+            raise BagError(
+                f"topic {name!r} is not in {self.path}; the bag has: {self.topic_list()}"
+            )
+        kinds = SUPPORTED_MSGTYPES if allowed is None else frozenset(allowed)
+        if info.msgtype not in kinds:
+            raise BagError(
+                f"topic {name!r} has type {info.msgtype}, which is not supported here; "
+                f"use one of: {', '.join(sorted(kinds))}"
+            )
+        return info
+
+    def count(self, topics: Iterable[str]) -> int:
+        """Number of messages on ``topics`` (for progress bars)."""
+        return sum(self._topics[t].count for t in topics if t in self._topics)
+
+    # messages
+
+    def messages(self, topics: Sequence[str]) -> Iterator[BagMessage]:
+        """The messages of ``topics`` in log-time order.
+
+        Raises :class:`BagError` for an unknown topic or unsupported type (before yielding
+        anything), and for a corrupt message or a truncated file (after yielding the
+        messages before the damage).
+        """
+        for name in topics:
+            self.topic(name)
+        wanted = set(topics)
+        if self._salvage:
+            yield from self._salvaged_messages(wanted)
+            return
+        reader = self._reader
+        if reader is None:
+            raise BagError(f"{self.path} is not open")
+        connections = [c for c in reader.connections if c.topic in wanted]
+        count = 0
+        try:
+            for conn, log_time, raw in reader.messages(connections=connections):
+                message = from_rosbags(reader.deserialize(raw, conn.msgtype))
+                count += 1
+                yield BagMessage(conn.topic, int(log_time), message, conn.msgtype, bytes(raw))
+        except MessageError as err:
+            raise BagError(
+                f"{self.path}: message {count + 1} cannot be read: {_one_line(err)}"
+            ) from err
+        except GeneratorExit:
+            raise
+        except Exception as err:  # rosbags' reader and deserializer errors
+            raise BagError(
+                f"{self.path} is corrupt after {count} messages: {_one_line(err)}"
+            ) from err
+
+    def _salvaged_messages(self, wanted: set[str]) -> Iterator[BagMessage]:
+        store = jazzy_typestore()
+        for file in self._salvage:
+            scan = _Salvage(file)
+            for topic, msgtype, log_time, raw in scan.messages():
+                if topic not in wanted:
+                    continue
+                try:
+                    message = from_rosbags(store.deserialize_cdr(raw, msgtype))
+                except Exception as err:
+                    raise BagError(
+                        f"{file}: a {msgtype} message on {topic} cannot be decoded: "
+                        f"{_one_line(err)}"
+                    ) from err
+                yield BagMessage(topic, log_time, message, msgtype, raw)
+            if scan.problem:
+                raise BagError(scan.problem)
+        raise BagError(f"{self.path} could not be opened ({self._salvage_reason})")
+
+
+def _starts_with_magic(path: Path) -> bool:
+    try:
+        with path.open("rb") as stream:
+            return stream.read(len(_MCAP_MAGIC)) == _MCAP_MAGIC
+    except OSError:
+        return False
+
+
+# --------------------------------------------------------------------------- writing
+
+
+class BagWriter:
+    """Write a rosbag2 directory with one MCAP file (rosbag2 metadata version 9).
+
+    Parameters
+    ----------
+    path : str or Path
+        The bag directory to create; it must not exist.
+
+    Notes
+    -----
+    Topics are registered on first use (or with :meth:`add_topic`). Use as a context
+    manager: the writer is closed (metadata and MCAP summary written) even when an
+    exception leaves the block, so that what was written stays a valid bag.
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        from rosbags.rosbag2 import StoragePlugin, Writer
+
+        self.path = Path(path)
+        if self.path.exists():
+            raise BagError(f"{self.path} exists already; remove it or choose another output")
+        if not self.path.parent.is_dir():
+            raise BagError(f"cannot write {self.path}: {self.path.parent} is not a directory")
+        self._store = jazzy_typestore()
+        try:
+            self._writer: Any = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
+            self._writer.open()
+        except Exception as err:
+            raise BagError(f"cannot create {self.path}: {_one_line(err)}") from err
+        self._connections: dict[str, tuple[Any, str]] = {}
+        self._open = True
+        self.count = 0
+
+    def __enter__(self) -> BagWriter:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> Literal[False]:
+        self.close()
+        return False
+
+    def add_topic(self, topic: str, msgtype: str) -> None:
+        """Register ``topic`` with the ROS type ``msgtype`` (a Jazzy type)."""
+        known = self._connections.get(topic)
+        if known is not None:
+            if known[1] != msgtype:
+                raise BagError(f"topic {topic!r} has type {known[1]}, not {msgtype}")
+            return
+        try:
+            conn = self._writer.add_connection(topic, msgtype, typestore=self._store)
+        except Exception as err:
+            raise BagError(f"cannot add topic {topic!r} ({msgtype}): {_one_line(err)}") from err
+        self._connections[topic] = (conn, msgtype)
+
+    def write(self, topic: str, log_time_ns: int, message: Message) -> None:
+        """Write one of our messages on ``topic`` at ``log_time_ns``."""
+        store = self._store
+        raw = store.serialize_cdr(to_rosbags(message, store), message.ros_type)
+        self.write_raw(topic, log_time_ns, raw, message.ros_type)
+
+    def write_raw(
+        self, topic: str, log_time_ns: int, raw: bytes | memoryview, msgtype: str
+    ) -> None:
+        """Write CDR bytes of type ``msgtype`` on ``topic`` at ``log_time_ns``."""
+        if not self._open:
+            raise BagError(f"{self.path} is closed")
+        entry = self._connections.get(topic)
+        if entry is None:
+            self.add_topic(topic, msgtype)
+            entry = self._connections[topic]
+        self._writer.write(entry[0], int(log_time_ns), raw)
+        self.count += 1
+
+    def close(self) -> None:
+        """Finish the bag (idempotent)."""
+        if self._open:
+            self._open = False
+            self._writer.close()
+
+
+# --------------------------------------------------------------------------- alignment
+
+
+@dataclass(frozen=True, eq=False)
+class AlignedSeries:
+    """Identification samples: one per encoder message, the command held.
+
+    ``t`` (int64 ns), ``u`` (the latest command at or before ``t``), ``y`` (the encoder);
+    ``skipped`` counts encoder samples before the first command.
+    """
+
+    t: np.ndarray
+    u: np.ndarray
+    y: np.ndarray
+    skipped: int
+
+
+def align(
+    cmd_t: np.ndarray, cmd_u: np.ndarray, enc_t: np.ndarray, enc_y: np.ndarray
+) -> AlignedSeries:
+    """Zero-order-hold alignment of a command stream to encoder times (batch form).
+
+    The pipeline's rule (:mod:`genbacklash_ros.pipeline`, ``sample_period = 0``): the input
+    of the sample at encoder time ``t`` is the latest command with time ``<= t``; samples
+    before the first command are skipped. Both streams must be sorted by time.
+
+    >>> s = align(np.array([10, 20]), np.array([1.0, 2.0]), np.array([5, 10, 15, 25]),
+    ...           np.array([0.1, 0.2, 0.3, 0.4]))
+    >>> s.u.tolist(), s.y.tolist(), s.skipped
+    ([1.0, 1.0, 2.0], [0.2, 0.3, 0.4], 1)
+    """
+    ct = np.asarray(cmd_t, dtype=np.int64)
+    et = np.asarray(enc_t, dtype=np.int64)
+    k = np.searchsorted(ct, et, side="right") - 1
+    keep = k >= 0
+    return AlignedSeries(
+        et[keep],
+        np.asarray(cmd_u, dtype=np.float64)[k[keep]],
+        np.asarray(enc_y, dtype=np.float64)[keep],
+        int(np.count_nonzero(~keep)),
+    )
+
+
+def _increasing(times: list[int], values: list[float]) -> tuple[np.ndarray, np.ndarray]:
+    """Drop samples whose time is not after the previous accepted one (as the pipeline)."""
+    t = np.asarray(times, dtype=np.int64)
+    v = np.asarray(values, dtype=np.float64)
+    if t.size < 2:
+        return t, v
+    keep = t > np.maximum.accumulate(np.concatenate(([np.iinfo(np.int64).min], t[:-1])))
+    return t[keep], v[keep]
+
+
+def read_aligned(
+    path: str | Path,
+    command_topic: str,
+    encoder_topic: str,
+    *,
+    joint: str = "",
+    command_index: int = 0,
+) -> AlignedSeries:
+    """Read a command and an encoder topic from a bag and align them (see :func:`align`).
+
+    Times are header stamps when the message has a non-zero one, else the log time (the
+    pipeline's default ``stamp_source = "header"``). Messages the adapters reject (joint
+    missing, index out of range, non-finite values) are skipped.
+    """
+    with BagReader(path) as reader:
+        cmd_kind = COMMAND_MSGTYPES[reader.topic(command_topic, COMMAND_MSGTYPES).msgtype]
+        enc_kind = ENCODER_MSGTYPES[reader.topic(encoder_topic, ENCODER_MSGTYPES).msgtype]
+        ct: list[int] = []
+        cu: list[float] = []
+        et: list[int] = []
+        ey: list[float] = []
+        for item in reader.messages([command_topic, encoder_topic]):
+            try:
+                if item.topic == command_topic:
+                    stamp, value = read_command(
+                        item.message, cmd_kind, index=command_index, joint=joint
+                    )
+                    ct.append(stamp or item.log_time_ns)
+                    cu.append(value)
+                if item.topic == encoder_topic:
+                    stamp, value = read_encoder(item.message, enc_kind, joint=joint)
+                    et.append(stamp or item.log_time_ns)
+                    ey.append(value)
+            except MessageError:
+                continue
+    if not ct:
+        raise BagError(f"no readable command on {command_topic!r} in {path}")
+    if not et:
+        raise BagError(f"no readable encoder reading on {encoder_topic!r} in {path}")
+    order_c = np.argsort(np.asarray(ct, dtype=np.int64), kind="stable")
+    order_e = np.argsort(np.asarray(et, dtype=np.int64), kind="stable")
+    c_t, c_u = _increasing([ct[i] for i in order_c], [cu[i] for i in order_c])
+    e_t, e_y = _increasing([et[i] for i in order_e], [ey[i] for i in order_e])
+    series = align(c_t, c_u, e_t, e_y)
+    if series.t.size == 0:
+        raise BagError(f"no encoder reading on {encoder_topic!r} follows the first command")
+    return series
