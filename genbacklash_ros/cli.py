@@ -26,7 +26,7 @@ from genbacklash_core import (
 )
 from genbacklash_core.data import NonFinitePolicy
 
-from . import replay_cli
+from . import node_cli, replay_cli  # node_cli imports no middleware
 from .csvio import Series, read_series_csv, write_series_csv
 
 __all__ = ["main"]
@@ -364,6 +364,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     demo.set_defaults(func=_cmd_demo)
     replay_cli.add_parser(sub)
+    node_cli.add_parser(sub)
     return parser
 
 
