@@ -479,8 +479,10 @@ class BagWriter:
         self.path = Path(path)
         if self.path.exists():
             raise BagError(f"{self.path} exists already; remove it or choose another output")
-        if not self.path.parent.is_dir():
-            raise BagError(f"cannot write {self.path}: {self.path.parent} is not a directory")
+        try:  # like `ros2 bag record -o a/b`, create missing parent directories
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise BagError(f"cannot write {self.path}: {_one_line(err)}") from err
         self._store = jazzy_typestore()
         try:
             self._writer: Any = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)

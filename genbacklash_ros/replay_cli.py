@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import shutil
 import sys
+from pathlib import Path
 
 from genbacklash_core import GenBacklashError
 
@@ -204,9 +206,21 @@ def _summary(result: ReplayResult) -> str:
     return "\n".join(lines)
 
 
+def _remove_old_output(path: Path) -> None:
+    """Delete a previous output bag (a rosbag2 directory or an .mcap file), nothing else."""
+    if path.is_dir() and (path / "metadata.yaml").is_file():
+        shutil.rmtree(path)
+    elif path.is_file() and path.suffix == ".mcap":
+        path.unlink()
+    elif path.exists():
+        raise BagError(f"--overwrite: {path} exists but is not a bag; not removing it")
+
+
 def cmd_replay(args: argparse.Namespace) -> int:
     """Run ``genbacklash replay``."""
     params = load_params_file(args.params_file) if args.params_file else None
+    if args.overwrite:
+        _remove_old_output(Path(args.output))
     result = replay(
         args.bag,
         args.output,
@@ -254,6 +268,9 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     add_bag_input_options(parser, required=True)
     parser.add_argument(
         "-o", "--output", required=True, metavar="OUT", help="output bag directory (new)"
+    )
+    parser.add_argument(
+        "--overwrite", action="store_true", help="replace OUT if it is a bag from an earlier run"
     )
     parser.add_argument("--report", metavar="DIR", help="write PNG plots and index.html into DIR")
     parser.add_argument(

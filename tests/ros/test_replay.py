@@ -157,3 +157,23 @@ def test_replay_help(capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit):
         main(["replay", "--help"])
     assert "/backlash_identifier/estimate" in capsys.readouterr().out
+
+
+def test_existing_output_needs_overwrite_and_overwrite_spares_non_bags(
+    example_bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "nested" / "out"  # missing parents are created
+    args = ["replay", str(example_bag), *TOPICS, "-o", str(out), "--no-progress"]
+    assert main(args) == EXIT_OK
+    assert main(args) == EXIT_BAD_INPUT
+    assert "exists already" in capsys.readouterr().err
+    assert main([*args, "--overwrite"]) == EXIT_OK
+    with BagReader(out) as reader:
+        assert set(OUTPUT_TOPICS.values()) <= set(reader.topics)
+    keep = tmp_path / "notes"
+    keep.mkdir()
+    (keep / "a.txt").write_text("mine")
+    code = main(["replay", str(example_bag), *TOPICS, "-o", str(keep), "--overwrite"])
+    assert code == EXIT_BAD_INPUT
+    assert "is not a bag; not removing it" in capsys.readouterr().err
+    assert (keep / "a.txt").read_text() == "mine"
