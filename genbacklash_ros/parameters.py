@@ -134,9 +134,9 @@ class ParameterSpec:
     def range_text(self) -> str:
         """The allowed values as text (for the README and descriptors)."""
         if self.choices:
-            return " | ".join(self.choices)
+            return ", ".join(self.choices)
         if self.type == "bool":
-            return "true | false"
+            return "true, false"
         if self.min is None and self.max is None:
             return "any"
         low = "-inf" if self.min is None else _show(self.min)
