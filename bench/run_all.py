@@ -15,7 +15,7 @@ import time
 
 from _common import BENCH_DIR, OUTPUT_DIR, ROOT, machine_description, parse_args
 
-BENCHMARKS = ("kernel", "accuracy", "speed", "online", "closed_loop")
+BENCHMARKS = ("kernel", "accuracy", "speed", "online", "closed_loop", "diagnose")
 
 
 def main() -> None:

@@ -26,7 +26,7 @@ from genbacklash_core import (
 )
 from genbacklash_core.data import NonFinitePolicy
 
-from . import node_cli, replay_cli  # node_cli imports no middleware
+from . import diagnose_cli, node_cli, replay_cli  # node_cli imports no middleware
 from .csvio import Series, read_series_csv, write_series_csv
 
 __all__ = ["main"]
@@ -363,6 +363,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--out", default="demo_output", metavar="DIR", help="output directory (default demo_output)"
     )
     demo.set_defaults(func=_cmd_demo)
+    diagnose_cli.add_parser(sub)
     replay_cli.add_parser(sub)
     node_cli.add_parser(sub)
     return parser

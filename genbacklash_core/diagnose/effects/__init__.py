@@ -1,0 +1,39 @@
+"""The catalog of effects a diagnosis can name and add (names per GUIDE §4).
+
+Each module holds one effect: a detector (signature statistic, threshold, evidence) and an
+augmentation (how the model is extended and refitted). To add an effect, write a module with an
+object satisfying :class:`~genbacklash_core.diagnose.effects._base.Effect` and append it to
+:data:`CATALOG`.
+"""
+
+from __future__ import annotations
+
+from . import (
+    curved_branches,
+    gap_drift,
+    linear_dynamics,
+    output_offset,
+    saturation,
+    time_delay,
+)
+from ._base import Detection, Effect
+
+__all__ = ["CATALOG", "Detection", "Effect", "effect_names"]
+
+CATALOG: tuple[Effect, ...] = (
+    curved_branches.EFFECT,
+    linear_dynamics.EFFECT,
+    time_delay.EFFECT,
+    output_offset.EFFECT,
+    gap_drift.EFFECT,
+    saturation.EFFECT,
+)
+
+
+def effect_names() -> tuple[str, ...]:
+    """Names of the registered effects, in catalog order.
+
+    >>> effect_names()
+    ('curved_branches', 'linear_dynamics', 'time_delay', 'output_offset', 'gap_drift', 'saturation')
+    """
+    return tuple(effect.name for effect in CATALOG)

@@ -1,0 +1,390 @@
+"""The discrepancy loop: measure the gap, name the missing effect, add it, re-measure.
+
+1. Fit the starting model (the ideal backlash of eq. 1 unless told otherwise) on the
+   estimation segment and measure its validation gap.
+2. The estimation residual is tested against white noise independent of the input (Ljung-Box,
+   input cross-correlation, higher-order correlations), and every applicable detector of the
+   catalog looks for its signature; those whose signature passes its threshold nominate their
+   effect. If none does, stop. (The detectors run even on a residual that passes the generic
+   tests: with a white input a drifting gap, say, leaves a white residual uncorrelated with
+   the input, which only its own signature reveals.)
+3. Effects that mimic each other are told apart in the detectors, by their evidence: a dead
+   time and a lag by the shape of the error step response (a box or a decay), so only the one
+   the evidence points to is nominated (both when it is unclear).
+4. Each nominee's augmentation is fitted on the estimation data; they are ranked by the change
+   of the BIC, the same yardstick for every effect - not by the order they are tried in.
+5. The best is accepted only if it lowers the BIC by more than a margin *and* lowers the
+   validation gap significantly (a one-sided Newey-West test on the squared errors, plus a
+   minimum relative drop); otherwise the next nominee is checked.
+6. When none passes alone, the best two nominees are tried with the best follow-up each, as a
+   pair against the current model: two effects can hide each other (an offset pins a dead-zone
+   constant and the lag then fits badly; the offset alone extrapolates poorly). If no pair
+   passes either, stop.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+
+from genbacklash_core._typing import ArrayLike, FloatArray
+from genbacklash_core.backlash import GeneralBacklash
+from genbacklash_core.cascade import Cascade
+from genbacklash_core.data import NonFinitePolicy, check_excitation, prepare_series
+from genbacklash_core.errors import GenBacklashError
+from genbacklash_core.identify import _detect_sign, identify_backlash, identify_cascade
+from genbacklash_core.structure import as_order
+
+from .context import Context, build_context
+from .effects import CATALOG, Detection, Effect
+from .fit import ModelFit, fit_model
+from .gap import GapReport, Split, measure_gap, split_record
+from .model import AugmentedModel
+from .result import Diagnosis, DiagnosisStep, Round, Trial
+from .settings import DiagnoseSettings
+from .stats import long_run_variance
+
+__all__ = ["StartStructure", "diagnose", "gap_drop_test"]
+
+_LOOK_AHEAD = 2  # nominees (and follow-ups of each) tried as pairs when none passes alone
+_SIGN_LAGS = 10  # lags of the input-output covariance that decide the branch sense
+
+
+@dataclass(frozen=True)
+class StartStructure:
+    """A starting structure to identify: branch degree and linear orders (``na = 0``: none).
+
+    Examples
+    --------
+    >>> StartStructure(degree=3).degree
+    3
+    >>> StartStructure(na=0, nb=1)
+    Traceback (most recent call last):
+    ...
+    genbacklash_core.errors.GenBacklashError: a linear block needs na >= 1 (got na=0, nb=1)
+    """
+
+    degree: int = 1
+    na: int = 0
+    nb: int = 0
+
+    def __post_init__(self) -> None:
+        for name in ("degree", "na", "nb"):
+            object.__setattr__(self, name, as_order(name, getattr(self, name)))
+        if self.degree < 1:
+            raise GenBacklashError(f"degree must be >= 1, got {self.degree}")
+        if self.na < 0 or self.nb < 0:
+            raise GenBacklashError(f"na and nb must be >= 0, got na={self.na}, nb={self.nb}")
+        if self.na == 0 and self.nb > 0:
+            raise GenBacklashError(f"a linear block needs na >= 1 (got na={self.na}, nb={self.nb})")
+
+
+Start = AugmentedModel | GeneralBacklash | Cascade | StartStructure | None
+
+
+def _plain_start(u: FloatArray, y: FloatArray, degree: int, sign: float) -> AugmentedModel:
+    """A straight-line start: the least-squares slope of y on u (its size), dead zones 5% of
+    the span."""
+    uc = u - np.mean(u)
+    slope = abs(float(uc @ (y - np.mean(y))) / float(uc @ uc))
+    slope = sign * (slope if np.isfinite(slope) and slope > 0.0 else 1.0)
+    c = 0.05 * float(np.ptp(u))
+    m = (slope, *([0.0] * (degree - 1)))
+    return AugmentedModel(GeneralBacklash(m, c, m, c))
+
+
+def _start_fit(start: Start, u: FloatArray, y: FloatArray) -> ModelFit:
+    if start is None:
+        start = StartStructure()
+    if isinstance(start, StartStructure):
+        if start.na:
+            result = identify_cascade(u, y, start.degree, start.na, start.nb)
+            return fit_model(AugmentedModel(result.model), u, y)
+        # The branch sense from the input-output covariance over a few lags: with a lag or a
+        # dead time the output follows the input late, and lag 0 alone can get it wrong.
+        sign = _detect_sign(u, y, _SIGN_LAGS)
+        # The paper's iteration can settle on a degenerate model when the data hold effects
+        # the start lacks (a long dead time, a slow lag); a plain straight-line start guards.
+        result = identify_backlash(u, y, start.degree, sign=sign)
+        fits = [fit_model(AugmentedModel(result.model), u, y)]
+        fits.append(fit_model(_plain_start(u, y, start.degree, sign), u, y))
+        return min(fits, key=lambda fit: fit.sse)
+    if isinstance(start, AugmentedModel):
+        model = start
+    elif isinstance(start, (GeneralBacklash, Cascade)):
+        model = AugmentedModel(start)
+    else:
+        raise GenBacklashError(
+            "start must be an AugmentedModel, GeneralBacklash, Cascade, StartStructure or None, "
+            f"got {type(start).__name__}"
+        )
+    try:
+        return fit_model(model, u, y)
+    except GenBacklashError as err:
+        raise GenBacklashError(f"the starting model does not fit the data: {err}") from err
+
+
+def gap_drop_test(y: FloatArray, before: FloatArray, after: FloatArray) -> tuple[float, float]:
+    """One-sided test that ``after`` simulates ``y`` better than ``before``.
+
+    The loss difference ``d_t = (y - before)^2 - (y - after)^2`` is tested for a positive mean
+    with a Newey-West variance (a Diebold-Mariano test). Returns ``(t, p)``.
+
+    >>> y = np.zeros(200); rng = np.random.default_rng(0)
+    >>> t, p = gap_drop_test(y, rng.normal(0, 2, 200), rng.normal(0, 1, 200))
+    >>> p < 0.01
+    True
+    """
+    d = (y - before) ** 2 - (y - after) ** 2
+    lrv = long_run_variance(d)
+    if lrv <= 0.0:
+        return (math.inf, 0.0) if np.mean(d) > 0 else (0.0, 1.0)
+    t = float(np.mean(d)) / math.sqrt(lrv / d.size)
+    return t, float(stats.norm.sf(t))
+
+
+def _judge(
+    y_val: FloatArray,
+    report: GapReport,
+    candidate: GapReport,
+    bic_change: float,
+    settings: DiagnoseSettings,
+) -> tuple[bool, str]:
+    val = report.split.validation
+    t, p = gap_drop_test(y_val, report.y_sim[val], candidate.y_sim[val])
+    drop = 1.0 - candidate.gap / report.gap if report.gap > 0 else 0.0
+    numbers = (
+        f"BIC {bic_change:+.1f} on the estimation data, validation gap {report.gap:.4f} -> "
+        f"{candidate.gap:.4f} ({-100 * drop:+.1f}%, one-sided test t = {t:.1f}, p = {p:.2g})"
+    )
+    if bic_change > -settings.bic_margin:
+        return False, f"rejected: the BIC does not drop by {settings.bic_margin:g} ({numbers})"
+    if drop < settings.min_gap_drop:
+        return False, (
+            f"rejected: the validation gap drops less than {100 * settings.min_gap_drop:g}% "
+            f"({numbers})"
+        )
+    if p >= settings.gap_alpha:
+        return False, f"rejected: the gap drop is not significant ({numbers})"
+    return True, f"accepted: {numbers}"
+
+
+@dataclass(frozen=True, eq=False)
+class _Candidate:
+    """A nominated effect's augmentation, fitted (internal)."""
+
+    detection: Detection
+    fit: ModelFit
+    bic_change: float
+
+    @property
+    def effect(self) -> str:
+        return self.detection.effect
+
+
+@dataclass(frozen=True, eq=False)
+class _Run:
+    """The record and options one diagnosis works on (internal)."""
+
+    u: FloatArray
+    y: FloatArray
+    split: Split
+    effects: tuple[Effect, ...]
+    settings: DiagnoseSettings
+
+    def nominate(
+        self, context: Context
+    ) -> tuple[tuple[Detection, ...], list[_Candidate], list[Trial]]:
+        """Run the detectors, fit the nominees' augmentations, rank them by the BIC change."""
+        current = context.fit
+        detections = tuple(
+            effect.detect(context) for effect in self.effects if effect.applicable(current.model)
+        )
+        by_name = {effect.name: effect for effect in self.effects}
+        candidates: list[_Candidate] = []
+        failed: list[Trial] = []
+        for found in detections:
+            if not found.fires:
+                continue
+            augmented = by_name[found.effect].augment(context, found)
+            if augmented is None:
+                failed.append(Trial(found.effect, math.nan, None, False, "no valid fit"))
+                continue
+            candidates.append(_Candidate(found, augmented, augmented.bic - current.bic))
+        candidates.sort(key=lambda c: c.bic_change)
+        return detections, candidates, failed
+
+    def judge(self, before: GapReport, after: GapReport, bic_change: float) -> tuple[bool, str]:
+        """Accept an augmentation? (BIC margin, validation gap drop, its significance)."""
+        return _judge(self.y[self.split.validation], before, after, bic_change, self.settings)
+
+    def look_ahead(
+        self, report: GapReport, candidates: list[_Candidate], alone: dict[str, str]
+    ) -> tuple[list[tuple[_Candidate, GapReport, str]], Round | None]:
+        """Two effects may only pay off together (an offset hiding a lag, say): try the best
+        nominees with the best follow-up each, judged as a pair against the current model."""
+        settings = self.settings
+        est = self.split.estimation
+        extra: Round | None = None
+        firsts = [c for c in candidates if c.bic_change < -settings.bic_margin][:_LOOK_AHEAD]
+        for first in firsts:
+            first_report = measure_gap(first.fit.model, self.u, self.y, self.split)
+            context = build_context(self.u[est], self.y[est], first.fit, settings)
+            detections, seconds, trials = self.nominate(context)
+            for second in seconds[:_LOOK_AHEAD]:
+                if second.bic_change > -settings.bic_margin:
+                    continue
+                after = measure_gap(second.fit.model, self.u, self.y, self.split)
+                total = first.bic_change + second.bic_change
+                ok, verdict = self.judge(report, after, total)
+                verdict = f"together with {first.effect}, {verdict}"
+                trials.append(Trial(second.effect, second.bic_change, after.gap, ok, verdict))
+                if ok:
+                    note = (
+                        f"accepted together with the next step ({second.effect}): alone it was "
+                        f"{alone.get(first.effect, 'not judged')}"
+                    )
+                    extra = Round(first_report.gap, context.analysis, detections, tuple(trials))
+                    return [(first, first_report, note), (second, after, verdict)], extra
+            extra = Round(first_report.gap, context.analysis, detections, tuple(trials))
+        return [], extra
+
+
+def diagnose(
+    u: ArrayLike,
+    y: ArrayLike,
+    *,
+    start: Start = None,
+    settings: DiagnoseSettings | None = None,
+    catalog: Sequence[Effect] | None = None,
+    nonfinite: NonFinitePolicy = "raise",
+) -> Diagnosis:
+    """Find where a backlash model and the measurements disagree, name the missing effects and
+    add them while the validation gap drops significantly.
+
+    Parameters
+    ----------
+    u, y : array_like, shape (N,)
+        Command and measured position.
+    start : AugmentedModel, GeneralBacklash, Cascade or StartStructure, optional
+        The starting model (refitted on the estimation segment), or a structure to identify;
+        default the ideal backlash of eq. (1) (degree 1, no dynamics).
+    settings : DiagnoseSettings, optional
+        Validation fraction and thresholds.
+    catalog : sequence of Effect, optional
+        The effects to consider; default :data:`~genbacklash_core.diagnose.effects.CATALOG`.
+    nonfinite : {"raise", "drop"}
+        Policy for NaN/inf samples.
+
+    Returns
+    -------
+    Diagnosis
+
+    Raises
+    ------
+    NonFiniteInputError, NotEnoughExcitationError, GenBacklashError
+
+    Examples
+    --------
+    >>> from genbacklash_core.diagnose.synthetic import synthetic_case
+    >>> case = synthetic_case(["time_delay"], seed=1, n_samples=1500)
+    >>> result = diagnose(case.u, case.y)
+    >>> result.effects, result.model.delay == case.truth.delay
+    (('time_delay',), True)
+    >>> result.gap_final < 0.5 * result.gap_initial
+    True
+    """
+    settings = DiagnoseSettings() if settings is None else settings
+    effects = tuple(CATALOG if catalog is None else catalog)
+    uu, yy = prepare_series(u, y, nonfinite)
+    split = split_record(uu.size, settings.validation)
+    u_est, y_est = uu[split.estimation], yy[split.estimation]
+    check_excitation(u_est, y_est, 4)
+    run = _Run(uu, yy, split, effects, settings)
+
+    current = _start_fit(start, u_est, y_est)
+    initial = current
+    report = measure_gap(current.model, uu, yy, split)
+    reports = [report]
+    steps: list[DiagnosisStep] = []
+    rounds: list[Round] = []
+    reason = f"stopped after the step limit ({settings.max_steps})"
+    while True:
+        context = build_context(u_est, y_est, current, settings)
+        analysis = context.analysis
+        noise = analysis.consistent_with_noise(settings.alpha)
+        tests = (
+            f"Ljung-Box p = {analysis.ljung_box.p_value:.2g}, input cross-correlation "
+            f"p = {analysis.cross_portmanteau.p_value:.2g}"
+        )
+        if len(steps) >= settings.max_steps:
+            rounds.append(Round(report.gap, analysis, (), ()))
+            break
+        detections, candidates, trials = run.nominate(context)
+        if not candidates and not trials:
+            rounds.append(Round(report.gap, analysis, detections, ()))
+            reason = (
+                f"the residual is consistent with noise ({tests}, no higher-order structure) "
+                "and no detector finds its signature"
+                if noise
+                else f"the residual is not consistent with noise ({tests}) but no detector in "
+                "the catalog recognises its signature"
+            )
+            break
+        accepted: list[tuple[_Candidate, GapReport, str]] = []
+        alone: dict[str, str] = {}
+        for candidate in candidates:
+            if accepted:
+                trials.append(
+                    Trial(candidate.effect, candidate.bic_change, None, False, "not needed")
+                )
+                continue
+            after = measure_gap(candidate.fit.model, uu, yy, split)
+            ok, verdict = run.judge(report, after, candidate.bic_change)
+            trials.append(Trial(candidate.effect, candidate.bic_change, after.gap, ok, verdict))
+            alone[candidate.effect] = verdict
+            if ok:
+                accepted = [(candidate, after, verdict)]
+        rounds.append(Round(report.gap, analysis, detections, tuple(trials)))
+        if not accepted and len(steps) + 2 <= settings.max_steps:
+            accepted, extra = run.look_ahead(report, candidates, alone)
+            if extra is not None:
+                rounds.append(extra)
+        if not accepted:
+            names = ", ".join(c.effect for c in candidates) or "none fitted"
+            reason = (
+                f"no nominated effect ({names}) improves the model significantly on both the "
+                f"estimation and the validation data ({tests})"
+            )
+            break
+        for candidate, after, verdict in accepted:
+            dropped = [e for e in current.model.effects if e not in candidate.fit.model.effects]
+            note = f" (it replaces {', '.join(dropped)}, which it explains)" if dropped else ""
+            steps.append(
+                DiagnosisStep(
+                    candidate.effect,
+                    f"{candidate.detection.evidence}; {verdict}{note}",
+                    report.gap,
+                    after.gap,
+                    candidate.bic_change,
+                    candidate.fit.model,
+                )
+            )
+            current, report = candidate.fit, after
+            reports.append(report)
+    return Diagnosis(
+        steps=tuple(steps),
+        gap_initial=reports[0].gap,
+        gap_final=report.gap,
+        model=current.model,
+        fit=current,
+        initial_fit=initial,
+        split=split,
+        reports=tuple(reports),
+        rounds=tuple(rounds),
+        reason=reason,
+    )

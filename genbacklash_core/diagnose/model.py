@@ -1,0 +1,291 @@
+"""The augmented model: the paper's general backlash (or cascade) plus the effects a diagnosis adds.
+
+The model output is
+
+    y(t) = sat( G(q) x(t) + o ),    x = general backlash of u(t - d) with gaps c(t) = c + k s(t)
+
+where the backlash is eqs. (11)-(13)/(20), ``G(q)`` the linear block of eq. (30) (absent for a
+backlash alone, where ``y = x + o``), ``d`` a dead time in samples, ``o`` an output offset,
+``k`` a gap drift (wear) along ``s(t)`` = the sample index or the input travel so far, and
+``sat`` an output limit. The base model classes stay untouched; this wrapper composes them.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+
+from genbacklash_core._typing import ArrayLike, FloatArray
+from genbacklash_core.backlash import GeneralBacklash
+from genbacklash_core.cascade import Cascade
+from genbacklash_core.errors import GenBacklashError
+from genbacklash_core.linear import LinearBlock
+from genbacklash_core.structure import as_order
+
+__all__ = ["AugmentedModel", "Drift", "DriftBasis", "Saturation", "drift_coordinate"]
+
+DriftBasis = Literal["time", "travel"]
+_BASES = ("time", "travel")
+
+
+def drift_coordinate(u: ArrayLike, basis: DriftBasis) -> FloatArray:
+    """The coordinate ``s(t)`` the gap drifts along: sample index, or input travel so far.
+
+    >>> drift_coordinate([0.0, 1.0, 0.5], "time").tolist()
+    [0.0, 1.0, 2.0]
+    >>> drift_coordinate([0.0, 1.0, 0.5], "travel").tolist()
+    [0.0, 1.0, 1.5]
+    """
+    uu = np.asarray(u, dtype=np.float64)
+    if basis == "time":
+        return np.arange(uu.size, dtype=np.float64)
+    if basis == "travel":
+        return np.concatenate([[0.0], np.cumsum(np.abs(np.diff(uu)))])
+    raise GenBacklashError(f"drift basis must be 'time' or 'travel', got {basis!r}")
+
+
+@dataclass(frozen=True)
+class Drift:
+    """Gap growth (wear): ``c_L(t) = c_L + rate s(t)`` and ``c_R(t) = c_R + rate s(t)``.
+
+    Parameters
+    ----------
+    rate : float
+        Growth of each dead-zone constant per sample (``basis="time"``) or per unit of input
+        travel (``basis="travel"``); negative when the gap closes.
+    basis : {"time", "travel"}
+        What the gap drifts along, see :func:`drift_coordinate`.
+
+    Examples
+    --------
+    >>> Drift(1e-4, "time").rate
+    0.0001
+    """
+
+    rate: float
+    basis: DriftBasis = "time"
+
+    def __post_init__(self) -> None:
+        if isinstance(self.rate, bool) or not isinstance(self.rate, (int, float, np.floating)):
+            raise GenBacklashError(f"drift rate must be a number, got {self.rate!r}")
+        if not math.isfinite(self.rate):
+            raise GenBacklashError(f"drift rate must be finite, got {self.rate}")
+        if self.basis not in _BASES:
+            raise GenBacklashError(f"drift basis must be 'time' or 'travel', got {self.basis!r}")
+        object.__setattr__(self, "rate", float(self.rate))
+
+
+@dataclass(frozen=True)
+class Saturation:
+    """Output limits ``low <= y <= high``; either side may be absent (None).
+
+    Examples
+    --------
+    >>> Saturation(None, 1.5).high
+    1.5
+    >>> Saturation(2.0, 1.0)
+    Traceback (most recent call last):
+    ...
+    genbacklash_core.errors.GenBacklashError: saturation needs low < high, got low=2.0, high=1.0
+    """
+
+    low: float | None = None
+    high: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.low is None and self.high is None:
+            raise GenBacklashError("saturation needs at least one limit (low or high)")
+        for name in ("low", "high"):
+            value = getattr(self, name)
+            if value is None:
+                continue
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.floating)):
+                raise GenBacklashError(f"saturation {name} must be a number, got {value!r}")
+            if not math.isfinite(value):
+                raise GenBacklashError(f"saturation {name} must be finite, got {value}")
+            object.__setattr__(self, name, float(value))
+        if self.low is not None and self.high is not None and not self.low < self.high:
+            raise GenBacklashError(
+                f"saturation needs low < high, got low={self.low}, high={self.high}"
+            )
+
+    @property
+    def sides(self) -> tuple[bool, bool]:
+        """Which limits are present: ``(low, high)``."""
+        return self.low is not None, self.high is not None
+
+
+@dataclass(frozen=True)
+class AugmentedModel:
+    """A general backlash or cascade with dead time, output offset, gap drift and saturation.
+
+    Parameters
+    ----------
+    base : GeneralBacklash or Cascade
+        The paper's model (eqs. 13/21, or 21 + 30).
+    delay : int
+        Dead time ``d >= 0`` in samples: the base model sees ``u(t - d)``.
+    offset : float
+        Constant added to the output (an encoder zero that is not the backlash's).
+    drift : Drift, optional
+        Gap growth with time or travel (wear).
+    saturation : Saturation, optional
+        Output limits (a hard stop or a sensor range).
+
+    Examples
+    --------
+    >>> bl = GeneralBacklash.ideal(1.0, 0.3, 0.3)
+    >>> model = AugmentedModel(bl, delay=2, offset=0.5)
+    >>> model.simulate([0.0, 1.0, 1.0, 1.0, 0.0]).tolist()
+    [0.5, 0.5, 0.5, 1.2, 1.2]
+    >>> model.effects
+    ('time_delay', 'output_offset')
+    """
+
+    base: GeneralBacklash | Cascade
+    delay: int = 0
+    offset: float = 0.0
+    drift: Drift | None = None
+    saturation: Saturation | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.base, (GeneralBacklash, Cascade)):
+            raise GenBacklashError(
+                f"base must be a GeneralBacklash or a Cascade, got {type(self.base).__name__}"
+            )
+        delay = as_order("delay", self.delay)
+        if delay < 0:
+            raise GenBacklashError(f"delay must be >= 0 samples, got {delay}")
+        object.__setattr__(self, "delay", delay)
+        if isinstance(self.offset, bool) or not isinstance(self.offset, (int, float, np.floating)):
+            raise GenBacklashError(f"offset must be a number, got {self.offset!r}")
+        if not math.isfinite(self.offset):
+            raise GenBacklashError(f"offset must be finite, got {self.offset}")
+        object.__setattr__(self, "offset", float(self.offset))
+        if self.drift is not None and not isinstance(self.drift, Drift):
+            raise GenBacklashError(f"drift must be a Drift or None, got {self.drift!r}")
+        if self.saturation is not None and not isinstance(self.saturation, Saturation):
+            raise GenBacklashError(
+                f"saturation must be a Saturation or None, got {self.saturation!r}"
+            )
+
+    @property
+    def backlash(self) -> GeneralBacklash:
+        """The backlash part of the base model."""
+        return self.base.backlash if isinstance(self.base, Cascade) else self.base
+
+    @property
+    def cascade(self) -> bool:
+        """True when a linear block follows the backlash."""
+        return isinstance(self.base, Cascade)
+
+    @property
+    def effects(self) -> tuple[str, ...]:
+        """Names of the catalog effects this model carries beyond an ideal backlash."""
+        names = []
+        if self.backlash.degree > 1:
+            names.append("curved_branches")
+        if self.cascade:
+            names.append("linear_dynamics")
+        if self.delay:
+            names.append("time_delay")
+        if self.offset != 0.0:
+            names.append("output_offset")
+        if self.drift is not None:
+            names.append("gap_drift")
+        if self.saturation is not None:
+            names.append("saturation")
+        return tuple(names)
+
+    def simulate(self, u: ArrayLike, y_start: float | None = None) -> FloatArray:
+        """Free-run output for input ``u``.
+
+        Parameters
+        ----------
+        u : array_like, shape (N,)
+            Input; before the first sample it is held at ``u[0]`` (for the dead time).
+        y_start : float, optional
+            Measured output at the first sample: the backlash state (and a linear block's
+            steady state) starts where it explains this value. Default: from rest (0).
+        """
+        from .spec import ModelSpec  # spec builds on this module
+
+        uu = np.asarray(u, dtype=np.float64)
+        if uu.ndim != 1 or uu.size == 0:
+            raise GenBacklashError(f"u must be a non-empty 1-D array, got shape {uu.shape}")
+        spec = ModelSpec.of(self)
+        return spec.simulate(spec.vector(self), uu, y_start).y
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> AugmentedModel:
+        """A model from the identify or diagnose JSON (the inverse of :meth:`to_dict`).
+
+        Accepts ``genbacklash identify --json`` output (``model``, ``backlash`` and, for a
+        cascade, ``linear``), the ``model`` object of ``genbacklash diagnose --json`` (which
+        adds ``delay``, ``offset``, ``drift``, ``saturation``), or a whole diagnose result.
+
+        >>> model = AugmentedModel(GeneralBacklash.ideal(1.0, 0.2, 0.3), delay=2)
+        >>> AugmentedModel.from_dict(model.to_dict()) == model
+        True
+        """
+        if "steps" in data and isinstance(data.get("model"), Mapping):
+            data = data["model"]  # a whole diagnose result
+        try:
+            bl = data["backlash"]
+            backlash = GeneralBacklash(
+                tuple(bl["m_left"]), bl["c_left"], tuple(bl["m_right"]), bl["c_right"]
+            )
+            base: GeneralBacklash | Cascade = backlash
+            kind = data.get("model", "cascade" if "linear" in data else "backlash")
+            if kind == "cascade":
+                linear = data["linear"]
+                base = Cascade(backlash, LinearBlock(tuple(linear["a"]), tuple(linear["b"])))
+            elif kind != "backlash":
+                raise GenBacklashError(f"'model' must be 'backlash' or 'cascade', got {kind!r}")
+            drift = data.get("drift")
+            saturation = data.get("saturation")
+            return cls(
+                base,
+                delay=data.get("delay", 0),
+                offset=data.get("offset", 0.0),
+                drift=None if drift is None else Drift(drift["rate"], drift.get("basis", "time")),
+                saturation=(
+                    None
+                    if saturation is None
+                    else Saturation(saturation.get("low"), saturation.get("high"))
+                ),
+            )
+        except (KeyError, TypeError, AttributeError) as err:
+            raise GenBacklashError(
+                f"not a model description (identify/diagnose JSON): missing or malformed {err}"
+            ) from err
+
+    def to_dict(self) -> dict[str, Any]:
+        """The model part of the JSON contract: the identify shape plus the added effects."""
+        backlash = self.backlash
+        out: dict[str, Any] = {
+            "model": "cascade" if self.cascade else "backlash",
+            "backlash": {
+                "m_left": list(backlash.m_left),
+                "c_left": backlash.c_left,
+                "m_right": list(backlash.m_right),
+                "c_right": backlash.c_right,
+            },
+        }
+        if isinstance(self.base, Cascade):
+            out["linear"] = {"a": list(self.base.linear.a), "b": list(self.base.linear.b)}
+        out["delay"] = self.delay
+        out["offset"] = self.offset
+        out["drift"] = (
+            None if self.drift is None else {"rate": self.drift.rate, "basis": self.drift.basis}
+        )
+        out["saturation"] = (
+            None
+            if self.saturation is None
+            else {"low": self.saturation.low, "high": self.saturation.high}
+        )
+        return out

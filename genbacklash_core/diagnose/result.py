@@ -1,0 +1,176 @@
+"""The outcome of a diagnosis: the steps taken, the gaps, the final model (GUIDE §4 contract)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from genbacklash_core.errors import GenBacklashError
+
+from .effects import Detection
+from .fit import ModelFit
+from .gap import GapReport, Split
+from .model import AugmentedModel
+from .residuals import ResidualAnalysis
+
+__all__ = ["Diagnosis", "DiagnosisStep", "Round", "Trial"]
+
+
+def _check_gap(name: str, value: float) -> None:
+    if not (isinstance(value, float) and (value >= 0.0 or math.isinf(value))):
+        raise GenBacklashError(f"{name} must be a float >= 0, got {value!r}")
+
+
+@dataclass(frozen=True)
+class DiagnosisStep:
+    """One accepted effect.
+
+    Attributes
+    ----------
+    effect : str
+        Catalog name (GUIDE §4).
+    evidence : str
+        The detector's sentence and the improvement that got the effect accepted.
+    gap_before, gap_after : float
+        Validation gap before and after adding it.
+    bic_change : float
+        Change of the BIC on the estimation data (negative: better).
+    model : AugmentedModel
+        The model after the step.
+    """
+
+    effect: str
+    evidence: str
+    gap_before: float
+    gap_after: float
+    bic_change: float
+    model: AugmentedModel
+
+    def __post_init__(self) -> None:
+        if not self.effect or not self.evidence:
+            raise GenBacklashError("a step needs an effect name and its evidence")
+        _check_gap("gap_before", self.gap_before)
+        _check_gap("gap_after", self.gap_after)
+
+    def to_dict(self) -> dict[str, Any]:
+        """``{"effect", "evidence", "gap_before", "gap_after"}`` (GUIDE §4)."""
+        return {
+            "effect": self.effect,
+            "evidence": self.evidence,
+            "gap_before": self.gap_before,
+            "gap_after": self.gap_after,
+        }
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One augmentation tried in a round, and the verdict."""
+
+    effect: str
+    bic_change: float
+    gap_after: float | None
+    accepted: bool
+    verdict: str
+
+
+@dataclass(frozen=True, eq=False)
+class Round:
+    """One pass of the loop: the model's gap, its residual tests, detections and trials."""
+
+    gap: float
+    analysis: ResidualAnalysis
+    detections: tuple[Detection, ...]
+    trials: tuple[Trial, ...]
+
+
+@dataclass(frozen=True, eq=False)
+class Diagnosis:
+    """Result of :func:`~genbacklash_core.diagnose.diagnose`.
+
+    Attributes
+    ----------
+    steps : tuple of DiagnosisStep
+        Accepted effects in order (empty when nothing is missing).
+    gap_initial, gap_final : float
+        Validation gap of the starting and of the final model.
+    model : AugmentedModel
+        The final model.
+    fit : ModelFit
+        Its fit on the estimation segment.
+    initial_fit : ModelFit
+        The starting model's fit on the estimation segment.
+    split : Split
+        Estimation and validation segments.
+    reports : tuple of GapReport
+        Gap and breakdown of the starting model and after each step.
+    rounds : tuple of Round
+        Every pass of the loop (the last one found nothing to add or hit the step limit).
+    reason : str
+        Why the loop stopped.
+    """
+
+    steps: tuple[DiagnosisStep, ...]
+    gap_initial: float
+    gap_final: float
+    model: AugmentedModel
+    fit: ModelFit
+    initial_fit: ModelFit
+    split: Split
+    reports: tuple[GapReport, ...]
+    rounds: tuple[Round, ...]
+    reason: str
+
+    def __post_init__(self) -> None:
+        _check_gap("gap_initial", self.gap_initial)
+        _check_gap("gap_final", self.gap_final)
+        if len(self.reports) != len(self.steps) + 1:
+            raise GenBacklashError(
+                f"need one gap report per step plus the start, got {len(self.reports)} for "
+                f"{len(self.steps)} steps"
+            )
+
+    @property
+    def initial_model(self) -> AugmentedModel:
+        """The starting model, fitted on the estimation segment."""
+        return self.initial_fit.model
+
+    @property
+    def effects(self) -> tuple[str, ...]:
+        """Names of the accepted effects, in order."""
+        return tuple(step.effect for step in self.steps)
+
+    def model_dict(self) -> dict[str, Any]:
+        """The identify JSON shape (GUIDE §4) plus the added effects' fields."""
+        shape = self.model.to_dict()
+        out: dict[str, Any] = {"model": shape.pop("model"), "backlash": shape.pop("backlash")}
+        if "linear" in shape:
+            out["linear"] = shape.pop("linear")
+        out["iterations"] = self.fit.steps
+        out["converged"] = self.fit.converged
+        out["reason"] = self.fit.reason
+        out["fit"] = {"nrmse": self.fit.nrmse}
+        out.update(shape)  # delay, offset, drift, saturation
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON object of ``genbacklash diagnose --json`` (GUIDE §4)."""
+        return {
+            "steps": [step.to_dict() for step in self.steps],
+            "gap_initial": self.gap_initial,
+            "gap_final": self.gap_final,
+            "model": self.model_dict(),
+        }
+
+    def summary(self) -> str:
+        """A few readable lines: the steps, the gaps and why the loop stopped."""
+        lines = [f"validation gap {self.gap_initial:.4f} with the starting model"]
+        for i, step in enumerate(self.steps, 1):
+            lines.append(
+                f"{i}. {step.effect}: gap {step.gap_before:.4f} -> {step.gap_after:.4f}. "
+                f"{step.evidence}"
+            )
+        if not self.steps:
+            lines.append("no missing effect named")
+        lines.append(f"final gap {self.gap_final:.4f}; {self.reason}")
+        return "\n".join(lines)

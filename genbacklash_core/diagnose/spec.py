@@ -1,0 +1,430 @@
+"""The augmented model as a flat parameter vector: simulation, Jacobian and validity.
+
+Layout: the base model's natural parameters (:class:`~genbacklash_core.structure.Structure`),
+then, when present, ``offset``, ``drift rate``, ``saturation low``, ``saturation high``. The
+dead time and the drift basis are structural (not fitted by gradient steps).
+
+The Jacobian generalises :mod:`genbacklash_core.refine`: while a branch is engaged the backlash
+output is the branch value, so its sensitivity is the branch derivative; while it holds, the
+sensitivity is the one at the last engagement. With a drifting gap the branch derivative in
+``k`` is the one in ``c`` times ``s(t)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+from scipy import signal
+
+from genbacklash_core._typing import BoolArray, FloatArray
+from genbacklash_core.backlash import evaluate_branch
+from genbacklash_core.errors import GenBacklashError
+from genbacklash_core.play import play_operator
+from genbacklash_core.simulate import play_bounds
+from genbacklash_core.structure import Structure
+
+from .model import AugmentedModel, Drift, DriftBasis, Saturation, drift_coordinate
+
+__all__ = ["ModelSpec", "SimulationOutput", "shift_input"]
+
+
+class SimulationOutput(NamedTuple):
+    """Backlash output ``x``, pre-limit output ``y_free = G x + o`` and output ``y``."""
+
+    x: FloatArray
+    y_free: FloatArray
+    y: FloatArray
+
+
+def shift_input(u: FloatArray, delay: int) -> FloatArray:
+    """``u(t - d)``, holding ``u[0]`` before the first sample.
+
+    >>> shift_input(np.array([1.0, 2.0, 3.0]), 1).tolist()
+    [1.0, 1.0, 2.0]
+    """
+    if delay == 0:
+        return u
+    out = np.empty_like(u)
+    head = min(delay, u.size)
+    out[:head] = u[0]
+    out[head:] = u[: u.size - head]
+    return out
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """Structure of an :class:`AugmentedModel`: what is fitted and how it is laid out.
+
+    Examples
+    --------
+    >>> from genbacklash_core import GeneralBacklash
+    >>> model = AugmentedModel(GeneralBacklash.ideal(1.0, 0.2, 0.3), offset=0.1)
+    >>> spec = ModelSpec.of(model)
+    >>> spec.names()
+    ('m_left_1', 'c_left', 'm_right_1', 'c_right', 'offset')
+    >>> spec.model(spec.vector(model)) == model
+    True
+    """
+
+    structure: Structure
+    delay: int = 0
+    offset: bool = False
+    drift: DriftBasis | None = None
+    saturation: tuple[bool, bool] = (False, False)
+
+    @classmethod
+    def of(cls, model: AugmentedModel) -> ModelSpec:
+        """The spec of an existing model (an offset of exactly 0 counts as absent)."""
+        return cls(
+            Structure.of(model.base),
+            model.delay,
+            model.offset != 0.0,
+            None if model.drift is None else model.drift.basis,
+            (False, False) if model.saturation is None else model.saturation.sides,
+        )
+
+    @property
+    def n_parameters(self) -> int:
+        """Length of the flat vector."""
+        return (
+            self.structure.n_parameters
+            + int(self.offset)
+            + int(self.drift is not None)
+            + sum(self.saturation)
+        )
+
+    @property
+    def n_free(self) -> int:
+        """Free parameters for information criteria: the vector plus a dead time when present."""
+        return self.n_parameters + int(self.delay > 0)
+
+    def names(self) -> tuple[str, ...]:
+        """Parameter names in vector order."""
+        names = list(self.structure.names())
+        if self.offset:
+            names.append("offset")
+        if self.drift is not None:
+            names.append("drift_rate")
+        if self.saturation[0]:
+            names.append("saturation_low")
+        if self.saturation[1]:
+            names.append("saturation_high")
+        return tuple(names)
+
+    def _index(self) -> tuple[int | None, int | None, int | None, int | None]:
+        k = self.structure.n_parameters
+        slots: list[int | None] = []
+        for present in (self.offset, self.drift is not None, *self.saturation):
+            slots.append(k if present else None)
+            k += int(present)
+        return slots[0], slots[1], slots[2], slots[3]
+
+    def vector(self, model: AugmentedModel) -> FloatArray:
+        """Flat parameters of ``model`` (which must have this spec's structure)."""
+        theta = np.empty(self.n_parameters)
+        theta[: self.structure.n_parameters] = model.base.parameters()
+        i_off, i_drift, i_low, i_high = self._index()
+        if i_off is not None:
+            theta[i_off] = model.offset
+        if i_drift is not None:
+            theta[i_drift] = 0.0 if model.drift is None else model.drift.rate
+        sat = model.saturation
+        if i_low is not None:
+            theta[i_low] = sat.low if sat is not None and sat.low is not None else np.nan
+        if i_high is not None:
+            theta[i_high] = sat.high if sat is not None and sat.high is not None else np.nan
+        return theta
+
+    def model(self, theta: FloatArray) -> AugmentedModel:
+        """The validated model object for ``theta``."""
+        i_off, i_drift, i_low, i_high = self._index()
+        base = self.structure.model(theta[: self.structure.n_parameters])
+        saturation = None
+        if i_low is not None or i_high is not None:
+            saturation = Saturation(
+                None if i_low is None else float(theta[i_low]),
+                None if i_high is None else float(theta[i_high]),
+            )
+        drift = None
+        if i_drift is not None and self.drift is not None:
+            drift = Drift(float(theta[i_drift]), self.drift)
+        return AugmentedModel(
+            base,
+            self.delay,
+            0.0 if i_off is None else float(theta[i_off]),
+            drift,
+            saturation,
+        )
+
+    # ------------------------------------------------------------------ pieces
+
+    def _parts(
+        self, theta: FloatArray
+    ) -> tuple[FloatArray, float, float, float | None, float | None]:
+        i_off, i_drift, i_low, i_high = self._index()
+        return (
+            theta[: self.structure.n_parameters],
+            0.0 if i_off is None else float(theta[i_off]),
+            0.0 if i_drift is None else float(theta[i_drift]),
+            None if i_low is None else float(theta[i_low]),
+            None if i_high is None else float(theta[i_high]),
+        )
+
+    def coordinate(self, u: FloatArray) -> FloatArray | None:
+        """The drift coordinate ``s(t)`` of the record, or None without drift."""
+        return None if self.drift is None else drift_coordinate(u, self.drift)
+
+    def _gain(self, p: FloatArray) -> float:
+        if not self.structure.cascade:
+            return 1.0
+        a, b = self.structure.linear_part(p)
+        den = 1.0 + float(np.sum(b))
+        gain = float(np.sum(a)) / den if den != 0.0 else 0.0
+        return gain if np.isfinite(gain) and abs(gain) > 1e-9 else 1.0
+
+    def problem(
+        self, theta: FloatArray, u_range: tuple[float, float], s_max: float = 0.0
+    ) -> str | None:
+        """Why ``theta`` is not a valid model on the data, or None when it is."""
+        if not np.all(np.isfinite(theta)):
+            return "a parameter became non-finite"
+        p, _, rate, low, high = self._parts(theta)
+        checked = p
+        if self.drift is not None and rate * s_max < 0.0:
+            # The branches are closest where the gap is smallest (eqs. 11-12 move apart as
+            # c grows): check the validity there.
+            checked = p.copy()
+            n = self.structure.degree
+            checked[n] += rate * s_max
+            checked[2 * n + 1] += rate * s_max
+        problem = self.structure.problem(checked, u_range)
+        if problem is not None:
+            return problem
+        if low is not None and high is not None and not low < high:
+            return f"the saturation limits are not ordered (low={low:.3g}, high={high:.3g})"
+        return None
+
+    # ------------------------------------------------------------------ simulation
+
+    def simulate(
+        self, theta: FloatArray, u: FloatArray, y_start: float | None = None
+    ) -> SimulationOutput:
+        """Free-run simulation of the model ``theta`` on input ``u``.
+
+        The backlash state starts at ``x0 = (y_start - o) / G(1)`` (0 when ``y_start`` is
+        None) and a linear block at its steady state for ``x0``.
+        """
+        p, offset, rate, low, high = self._parts(theta)
+        structure = self.structure
+        ud = shift_input(u, self.delay)
+        m_left, c_left, m_right, c_right = structure.split(p)
+        s = self.coordinate(u)
+        if s is None:
+            left, right = structure.branches(p, ud)  # eqs. (11)-(12), (16)-(17)
+        else:
+            grow = rate * s  # c(t) = c + k s(t)
+            left = evaluate_branch(m_left, ud + (c_left + grow))
+            right = evaluate_branch(m_right, ud - (c_right + grow))
+        x0 = 0.0 if y_start is None else (float(y_start) - offset) / self._gain(p)
+        x = play_operator(*play_bounds(left, right), x0)  # eq. (20)
+        if structure.cascade:
+            a, b = structure.linear_part(p)
+            num = np.concatenate([[0.0], a])
+            den = np.concatenate([[1.0], b])
+            zi = signal.lfilter_zi(num, den) * x0 if x0 != 0.0 else None
+            if zi is None:
+                y_lin = np.asarray(signal.lfilter(num, den, x), dtype=np.float64)  # eq. (30)
+            else:
+                y_lin = np.asarray(signal.lfilter(num, den, x, zi=zi)[0], dtype=np.float64)
+        else:
+            y_lin = x
+        y_free = y_lin + offset
+        y = y_free
+        if low is not None or high is not None:
+            y = np.clip(y_free, -np.inf if low is None else low, np.inf if high is None else high)
+        return SimulationOutput(x, y_free, y)
+
+    def engaged(
+        self, theta: FloatArray, u: FloatArray, out: SimulationOutput, y_start: float | None
+    ) -> tuple[BoolArray, BoolArray]:
+        """Where the left and where the right branch is engaged (eqs. 18-19), as booleans."""
+        structure = self.structure
+        p, offset, rate, _, _ = self._parts(theta)
+        m_left, c_left, m_right, c_right = structure.split(p)
+        ud = shift_input(u, self.delay)
+        s = self.coordinate(u)
+        grow = 0.0 if s is None else rate * s
+        left = evaluate_branch(m_left, ud + (c_left + grow))
+        right = evaluate_branch(m_right, ud - (c_right + grow))
+        x0 = 0.0 if y_start is None else (float(y_start) - offset) / self._gain(p)
+        x_prev = np.concatenate([[x0], out.x[:-1]])
+        f1 = (left - x_prev) * structure.sign <= 0.0  # eq. (18)
+        f2 = ((x_prev - right) * structure.sign <= 0.0) & ~f1  # eq. (19)
+        return f1, f2
+
+    # ------------------------------------------------------------------ Jacobian
+
+    def _backlash_sensitivity(
+        self, theta: FloatArray, u: FloatArray, x: FloatArray, x0: float
+    ) -> tuple[FloatArray, BoolArray]:
+        """``dx/d(backlash parameters[, drift rate])``, shape (N, 2n+2[+1]), column-major.
+
+        Also returns where no branch has engaged yet (the output still holds ``x0``).
+        """
+        structure = self.structure
+        p, _, rate, _, _ = self._parts(theta)
+        n = structure.degree
+        m_left, c_left, m_right, c_right = structure.split(p)
+        ud = shift_input(u, self.delay)
+        s = self.coordinate(u)
+        grow = 0.0 if s is None else rate * s
+        xi1 = ud + (c_left + grow)  # eq. (16)
+        xi2 = ud - (c_right + grow)  # eq. (17)
+        left = evaluate_branch(m_left, xi1)
+        right = evaluate_branch(m_right, xi2)
+        x_prev = np.concatenate([[x0], x[:-1]])
+        f1 = (left - x_prev) * structure.sign <= 0.0  # eq. (18): left branch engaged
+        f2 = ((x_prev - right) * structure.sign <= 0.0) & ~f1  # eq. (19)
+        last = np.where(f1 | f2, np.arange(u.size), -1)
+        np.maximum.accumulate(last, out=last)  # the last engagement at or before t
+        never = last < 0
+        source = np.where(never, 0, last)
+        columns = structure.n_backlash + int(s is not None)
+        jac = np.empty((u.size, columns), order="F")
+
+        def held(engaged_value: FloatArray, column: int) -> None:
+            np.take(engaged_value, source, out=jac[:, column])
+            jac[never, column] = 0.0
+
+        power1 = np.ones_like(xi1)
+        power2 = np.ones_like(xi2)
+        dleft = np.zeros_like(xi1)
+        dright = np.zeros_like(xi2)
+        for i in range(1, n + 1):
+            dleft += i * m_left[i - 1] * power1  # dL/dc_L
+            dright -= i * m_right[i - 1] * power2  # dR/dc_R
+            power1 = power1 * xi1
+            power2 = power2 * xi2
+            held(np.where(f1, power1, 0.0), i - 1)  # dL/dm_Li = xi1^i
+            held(np.where(f2, power2, 0.0), n + i)  # dR/dm_Ri = xi2^i
+        held(np.where(f1, dleft, 0.0), n)
+        held(np.where(f2, dright, 0.0), 2 * n + 1)
+        if s is not None:  # d/dk: the c-derivative times s(t) on whichever branch is engaged
+            held(np.where(f1, dleft * s, np.where(f2, dright * s, 0.0)), columns - 1)
+        return jac, never
+
+    def jacobian(
+        self, theta: FloatArray, u: FloatArray, out: SimulationOutput, y_start: float | None
+    ) -> FloatArray:
+        """``dy/dtheta`` of the free-run simulation ``out`` (the start state held fixed)."""
+        structure = self.structure
+        p, offset, _, low, high = self._parts(theta)
+        x0 = 0.0 if y_start is None else (float(y_start) - offset) / self._gain(p)
+        jx, never = self._backlash_sensitivity(theta, u, out.x, x0)
+        jac = np.zeros((u.size, self.n_parameters), order="F")
+        n_bl = structure.n_backlash
+        i_off, i_drift, i_low, i_high = self._index()
+        if structure.cascade:
+            a, b = structure.linear_part(p)
+            num = np.concatenate([[0.0], a])
+            den = np.concatenate([[1.0], b])
+            for col in range(n_bl):
+                jac[:, col] = signal.lfilter(num, den, jx[:, col])  # (A/B) dx/dp
+            if i_drift is not None:
+                jac[:, i_drift] = signal.lfilter(num, den, jx[:, -1])
+            y_lin = out.y_free - offset
+            col = n_bl
+            for i in range(2, structure.na + 1):
+                shifted = np.zeros_like(out.x)
+                shifted[i:] = out.x[:-i]
+                jac[:, col] = signal.lfilter([1.0], den, shifted)  # dy/da_i
+                col += 1
+            for j in range(1, structure.nb + 1):
+                shifted = np.zeros_like(y_lin)
+                shifted[j:] = y_lin[:-j]
+                jac[:, col] = -signal.lfilter([1.0], den, shifted)  # dy/db_j
+                col += 1
+        else:
+            jac[:, :n_bl] = jx[:, :n_bl]
+            if i_drift is not None:
+                jac[:, i_drift] = jx[:, -1]
+        if i_off is not None:
+            jac[:, i_off] = 1.0
+            if not structure.cascade:
+                jac[never, i_off] = 0.0  # x0 = y_start - o: the output holds y_start
+        if low is not None or high is not None:
+            clipped_low = out.y_free < low if low is not None else np.zeros(u.size, dtype=bool)
+            clipped_high = out.y_free > high if high is not None else np.zeros(u.size, dtype=bool)
+            jac[clipped_low | clipped_high, :] = 0.0
+            if i_low is not None:
+                jac[clipped_low, i_low] = 1.0
+            if i_high is not None:
+                jac[clipped_high, i_high] = 1.0
+        return jac
+
+    def extended(
+        self,
+        *,
+        degree: int | None = None,
+        orders: tuple[int, int] | None = None,
+        delay: int | None = None,
+        offset: bool | None = None,
+        drift: DriftBasis | None = None,
+        saturation: tuple[bool, bool] | None = None,
+    ) -> ModelSpec:
+        """A spec with some parts replaced (``orders`` is ``(na, nb)``)."""
+        s = self.structure
+        na, nb = (s.na, s.nb) if orders is None else orders
+        return ModelSpec(
+            Structure(s.degree if degree is None else degree, na, nb, s.sign),
+            self.delay if delay is None else delay,
+            self.offset if offset is None else offset,
+            self.drift if drift is None else drift,
+            self.saturation if saturation is None else saturation,
+        )
+
+    def embed(self, model: AugmentedModel) -> FloatArray:
+        """Parameters of ``model`` placed in this (larger) spec; new parts start neutral.
+
+        Higher branch coefficients and linear terms start at 0, an offset at the model's,
+        a drift rate at 0. Saturation limits have no neutral value and must be set by the
+        caller (they are NaN here).
+        """
+        old = ModelSpec.of(model)
+        s_new, s_old = self.structure, old.structure
+        if s_new.sign != s_old.sign:
+            raise GenBacklashError("cannot embed a model of the other branch sense")
+        if s_new.degree < s_old.degree:
+            raise GenBacklashError(
+                f"cannot embed a degree-{s_old.degree} model in degree {s_new.degree}"
+            )
+        theta = np.full(self.n_parameters, np.nan)
+        p_old = model.base.parameters()
+        n_old, n_new = s_old.degree, s_new.degree
+        p = np.zeros(s_new.n_parameters)
+        p[:n_old] = p_old[:n_old]  # m_left
+        p[n_new] = p_old[n_old]  # c_left
+        p[n_new + 1 : n_new + 1 + n_old] = p_old[n_old + 1 : 2 * n_old + 1]  # m_right
+        p[2 * n_new + 1] = p_old[2 * n_old + 1]  # c_right
+        if s_new.cascade and s_old.cascade:
+            a_old, b_old = s_old.linear_part(p_old)
+            a = np.zeros(s_new.na)
+            b = np.zeros(s_new.nb)
+            a[: min(a.size, a_old.size)] = a_old[: a.size]
+            b[: min(b.size, b_old.size)] = b_old[: b.size]
+            p[s_new.n_backlash : s_new.n_backlash + s_new.na - 1] = a[1:]
+            p[s_new.n_backlash + s_new.na - 1 :] = b
+        theta[: s_new.n_parameters] = p
+        i_off, i_drift, i_low, i_high = self._index()
+        if i_off is not None:
+            theta[i_off] = model.offset
+        if i_drift is not None:
+            theta[i_drift] = 0.0 if model.drift is None else model.drift.rate
+        sat = model.saturation
+        if i_low is not None and sat is not None and sat.low is not None:
+            theta[i_low] = sat.low
+        if i_high is not None and sat is not None and sat.high is not None:
+            theta[i_high] = sat.high
+        return theta
