@@ -140,7 +140,7 @@ class WindowedSettings:
 
     window: int = 1500
     refit_every: int = 25
-    refit_fraction: float = 0.1
+    refit_fraction: float = 0.15
     iterations: int = 3
     tol: float = 1e-4
     settle: float = 0.2
