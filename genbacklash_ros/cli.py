@@ -27,15 +27,13 @@ from genbacklash_core import (
 from genbacklash_core.data import NonFinitePolicy
 
 from . import diagnose_cli, node_cli, replay_cli  # node_cli imports no middleware
-from .csvio import Series, read_series_csv, write_series_csv
+from .csvio import Series, write_series_csv
 
 __all__ = ["main"]
 
 EXIT_OK = 0
 EXIT_BAD_INPUT = 2
 EXIT_NOT_CONVERGED = 3
-
-_BAG_SUFFIXES = (".mcap", ".db3")
 
 
 class _Progress:
@@ -100,17 +98,6 @@ def _identify(
         progress.close()
 
 
-def _load(path: str, args: argparse.Namespace | None = None) -> Series:
-    file = Path(path)
-    if file.is_dir() or file.suffix.lower() in _BAG_SUFFIXES:
-        if args is None:
-            raise GenBacklashError(f"{file} looks like a bag; give a CSV with columns u,y")
-        return replay_cli.load_bag_series(args)
-    if not file.exists():
-        raise GenBacklashError(f"{file} does not exist")
-    return read_series_csv(file)
-
-
 def _parameter_table(
     result: IdentificationResult, truth: GeneralBacklash | Cascade | None = None
 ) -> str:
@@ -139,7 +126,7 @@ def _summary(result: IdentificationResult) -> str:
 
 
 def _cmd_identify(args: argparse.Namespace) -> int:
-    series = _load(args.data, args)
+    series = replay_cli.load_series(args)
     result = _identify(
         series,
         model=args.model,

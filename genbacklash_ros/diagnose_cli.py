@@ -22,13 +22,11 @@ from genbacklash_core.diagnose import (
     effect_names,
 )
 
-from .csvio import Series, read_series_csv
-from .replay_cli import add_bag_input_options, load_bag_series
+from .replay_cli import add_bag_input_options, load_series
 
 __all__ = ["add_parser", "cmd_diagnose", "parse_start"]
 
 EXIT_OK = 0
-_BAG_SUFFIXES = (".mcap", ".db3")
 
 _DESCRIPTION = """\
 Find where a backlash model and the measurements disagree, name the missing effect, add it,
@@ -110,16 +108,6 @@ def parse_start(text: str) -> StartStructure | AugmentedModel:
     return AugmentedModel.from_dict(data)
 
 
-def _load(args: argparse.Namespace) -> Series:
-    """The (u, y) series of a CSV file, or of a bag with ``--command`` and ``--encoder``."""
-    file = Path(args.data)
-    if file.is_dir() or file.suffix.lower() in _BAG_SUFFIXES:
-        return load_bag_series(args)
-    if not file.exists():
-        raise GenBacklashError(f"{file} does not exist")
-    return read_series_csv(file)
-
-
 def _model_lines(result: Diagnosis) -> list[str]:
     model = result.model
     names = model.base.parameter_names
@@ -162,7 +150,7 @@ def _text(result: Diagnosis) -> str:
 
 def cmd_diagnose(args: argparse.Namespace) -> int:
     """Run the diagnosis for parsed arguments; print text or JSON; write the report."""
-    series = _load(args)
+    series = load_series(args)
     start = None if args.start is None else parse_start(args.start)
     settings = DiagnoseSettings(validation=args.validation)
     result = diagnose(

@@ -16,7 +16,7 @@ from pathlib import Path
 from genbacklash_core import GenBacklashError
 
 from .bagio import BagError, read_aligned
-from .csvio import Series
+from .csvio import Series, read_series_csv
 from .parameters import load_params_file
 from .replay import OUTPUT_TOPICS, ReplayResult, replay
 from .simbags import COMMAND_TOPIC, ENCODER_TOPIC, SimulatedBag
@@ -118,6 +118,22 @@ def load_bag_series(args: argparse.Namespace) -> Series:
             file=sys.stderr,
         )
     return Series(u=series.u, y=series.y)
+
+
+BAG_SUFFIXES = (".mcap", ".db3")
+
+
+def load_series(args: argparse.Namespace) -> Series:
+    """The (u, y) data of ``args.data``: a CSV file, or a bag with the bag options.
+
+    Shared by ``identify`` and ``diagnose``.
+    """
+    file = Path(args.data)
+    if file.is_dir() or file.suffix.lower() in BAG_SUFFIXES:
+        return load_bag_series(args)
+    if not file.exists():
+        raise GenBacklashError(f"{file} does not exist")
+    return read_series_csv(file)
 
 
 # --------------------------------------------------------------------------- simulate
