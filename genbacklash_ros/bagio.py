@@ -37,7 +37,7 @@ from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import Any, BinaryIO, Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -142,11 +142,8 @@ class _Truncated(Exception):
     """The MCAP records end before the file does (internal)."""
 
 
-def _read(stream: BinaryIO, size: int) -> bytes:
-    data = stream.read(size)
-    if len(data) != size:
-        raise _Truncated
-    return data
+class _ChunkDamaged(Exception):
+    """The records inside a chunk stop making sense (internal; args: what was kept)."""
 
 
 def _string(buf: bytes, pos: int) -> tuple[str, int]:
@@ -207,10 +204,37 @@ class _Salvage:
             data = body[pos + 8 : pos + 8 + length]
             inner = decompress(data, compression, size, crc)
             found: list[tuple[str, str, int, bytes]] = []
-            for sub_op, sub_body in self._records(inner):
-                found.extend(self._record(sub_op, sub_body))
+            damage: Exception | None = None
+            try:
+                for sub_op, sub_body in self._records(inner):
+                    found.extend(self._record(sub_op, sub_body))
+            except (_Truncated, struct.error, UnicodeDecodeError) as err:
+                # a chunk without a CRC (rosbags writes none) damaged inside: its records
+                # up to the damage are intact, the rest is lost
+                damage = _ChunkDamaged(f"{len(found)} messages of the chunk read before it")
+                damage.__cause__ = err
             found.sort(key=lambda item: item[2])
             yield from found
+            if damage is not None:
+                raise damage
+
+    def _partial_chunk(self, body: bytes) -> Iterator[tuple[str, str, int, bytes]]:
+        """The complete message records of an uncompressed chunk cut short (a compressed
+        one cannot be read in part: nothing)."""
+        try:
+            compression, pos = _string(body, 28)
+        except (_Truncated, struct.error, UnicodeDecodeError):
+            return
+        if compression:
+            return
+        found: list[tuple[str, str, int, bytes]] = []
+        try:
+            for sub_op, sub_body in self._records(body[pos + 8 :]):
+                found.extend(self._record(sub_op, sub_body))
+        except (_Truncated, struct.error, UnicodeDecodeError):
+            pass  # the record cut by the end of the file
+        found.sort(key=lambda item: item[2])
+        yield from found
 
     def messages(self) -> Iterator[tuple[str, str, int, bytes]]:
         count = 0
@@ -228,13 +252,24 @@ class _Salvage:
                         raise _Truncated
                     op = head[0]
                     (size,) = struct.unpack_from("<Q", head, 1)
-                    body = _read(stream, size)
+                    body = stream.read(size)
+                    if len(body) != size:
+                        if op == _OP_CHUNK:  # cut inside a chunk: keep its complete records
+                            for item in self._partial_chunk(body):
+                                count += 1
+                                yield item
+                        raise _Truncated
                     if op == _OP_FOOTER:
                         return
                     for item in self._record(op, body):
                         count += 1
                         yield item
                     offset += 9 + size
+        except _ChunkDamaged as err:
+            self.problem = (
+                f"{self.path} is corrupt inside the chunk at byte {offset} ({err}); "
+                f"read {count} messages before the damage"
+            )
         except _Truncated:
             self.problem = (
                 f"{self.path} is truncated (records end at byte {offset}); "
@@ -423,28 +458,43 @@ class BagReader:
         except GeneratorExit:
             raise
         except Exception as err:  # rosbags' reader and deserializer errors
-            raise BagError(
-                f"{self.path} is corrupt after {count} messages: {_one_line(err)}"
-            ) from err
+            reason = f"{self.path} is corrupt after {count} messages: {_one_line(err)}"
+            files = [f for f in _mcap_files(self.path) if f.is_file() and _starts_with_magic(f)]
+            if not files:
+                raise BagError(reason) from err
+            # rosbags reads through the summary's indexes, so damage anywhere (a chunk,
+            # an index) can stop it early: scan the records from the start instead and keep
+            # every intact chunk before the damage (the CRCs tell).
+            self._salvage, self._salvage_reason = files, reason
+            yield from self._salvaged_messages(wanted, skip=count)
 
-    def _salvaged_messages(self, wanted: set[str]) -> Iterator[BagMessage]:
+    def _salvaged_messages(self, wanted: set[str], skip: int = 0) -> Iterator[BagMessage]:
+        """The messages a record-by-record scan finds, after the first ``skip`` of them
+        (those yielded already), then :class:`BagError` saying where the damage is."""
         store = jazzy_typestore()
+        seen = 0
         for file in self._salvage:
             scan = _Salvage(file)
             for topic, msgtype, log_time, raw in scan.messages():
                 if topic not in wanted:
                     continue
+                seen += 1
+                if seen <= skip:
+                    continue
                 try:
                     message = from_rosbags(store.deserialize_cdr(raw, msgtype))
                 except Exception as err:
                     raise BagError(
-                        f"{file}: a {msgtype} message on {topic} cannot be decoded: "
+                        f"{file} is corrupt: a {msgtype} message on {topic} cannot be decoded: "
                         f"{_one_line(err)}"
                     ) from err
                 yield BagMessage(topic, log_time, message, msgtype, raw)
             if scan.problem:
                 raise BagError(scan.problem)
-        raise BagError(f"{self.path} could not be opened ({self._salvage_reason})")
+        raise BagError(
+            f"{self.path} could not be read normally ({self._salvage_reason}); "
+            f"a record-by-record scan recovered {seen} messages"
+        )
 
 
 def _starts_with_magic(path: Path) -> bool:
