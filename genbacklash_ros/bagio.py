@@ -37,7 +37,7 @@ from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import Any, Literal
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 
@@ -66,6 +66,7 @@ __all__ = [
     "BagMessage",
     "BagReader",
     "BagWriter",
+    "RawMessage",
     "TopicInfo",
     "align",
     "read_aligned",
@@ -126,6 +127,15 @@ class BagMessage:
     topic: str
     log_time_ns: int
     message: Message
+    msgtype: str
+    raw: bytes
+
+
+class RawMessage(NamedTuple):
+    """One message of a bag as stored: topic, log time (ns), ROS type, CDR bytes."""
+
+    topic: str
+    log_time_ns: int
     msgtype: str
     raw: bytes
 
@@ -429,11 +439,27 @@ class BagReader:
     # messages
 
     def messages(self, topics: Sequence[str]) -> Iterator[BagMessage]:
-        """The messages of ``topics`` in log-time order.
+        """The messages of ``topics`` in log-time order, decoded into our dataclasses.
 
         Raises :class:`BagError` for an unknown topic or unsupported type (before yielding
         anything), and for a corrupt message or a truncated file (after yielding the
         messages before the damage).
+        """
+        store = jazzy_typestore()
+        for item in self.raw_messages(topics):
+            try:
+                message = from_rosbags(store.deserialize_cdr(item.raw, item.msgtype))
+            except Exception as err:  # rosbags' deserializer errors, MessageError
+                raise BagError(
+                    f"{self.path} is corrupt: a {item.msgtype} message on {item.topic} "
+                    f"(log time {item.log_time_ns} ns) cannot be decoded: {_one_line(err)}"
+                ) from err
+            yield BagMessage(item.topic, item.log_time_ns, message, item.msgtype, item.raw)
+
+    def raw_messages(self, topics: Sequence[str]) -> Iterator[RawMessage]:
+        """The messages of ``topics`` in log-time order as stored (CDR bytes, not decoded).
+
+        The same checks and the same handling of damage as :meth:`messages`.
         """
         for name in topics:
             self.topic(name)
@@ -448,16 +474,11 @@ class BagReader:
         count = 0
         try:
             for conn, log_time, raw in reader.messages(connections=connections):
-                message = from_rosbags(reader.deserialize(raw, conn.msgtype))
                 count += 1
-                yield BagMessage(conn.topic, int(log_time), message, conn.msgtype, bytes(raw))
-        except MessageError as err:
-            raise BagError(
-                f"{self.path}: message {count + 1} cannot be read: {_one_line(err)}"
-            ) from err
+                yield RawMessage(conn.topic, int(log_time), conn.msgtype, bytes(raw))
         except GeneratorExit:
             raise
-        except Exception as err:  # rosbags' reader and deserializer errors
+        except Exception as err:  # rosbags' reader errors
             reason = f"{self.path} is corrupt after {count} messages: {_one_line(err)}"
             files = [f for f in _mcap_files(self.path) if f.is_file() and _starts_with_magic(f)]
             if not files:
@@ -468,10 +489,9 @@ class BagReader:
             self._salvage, self._salvage_reason = files, reason
             yield from self._salvaged_messages(wanted, skip=count)
 
-    def _salvaged_messages(self, wanted: set[str], skip: int = 0) -> Iterator[BagMessage]:
+    def _salvaged_messages(self, wanted: set[str], skip: int = 0) -> Iterator[RawMessage]:
         """The messages a record-by-record scan finds, after the first ``skip`` of them
         (those yielded already), then :class:`BagError` saying where the damage is."""
-        store = jazzy_typestore()
         seen = 0
         for file in self._salvage:
             scan = _Salvage(file)
@@ -481,14 +501,7 @@ class BagReader:
                 seen += 1
                 if seen <= skip:
                     continue
-                try:
-                    message = from_rosbags(store.deserialize_cdr(raw, msgtype))
-                except Exception as err:
-                    raise BagError(
-                        f"{file} is corrupt: a {msgtype} message on {topic} cannot be decoded: "
-                        f"{_one_line(err)}"
-                    ) from err
-                yield BagMessage(topic, log_time, message, msgtype, raw)
+                yield RawMessage(topic, log_time, msgtype, raw)
             if scan.problem:
                 raise BagError(scan.problem)
         raise BagError(

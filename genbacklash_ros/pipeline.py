@@ -387,17 +387,41 @@ class BacklashPipeline:
                 )
             kind, index, joint = self._command_kind, self._index, self._joint
             header_ns, value = read_command(msg, kind, index=index, joint=joint)
+        except MessageError as err:
+            self._drop("command_invalid", f"command: {err}")
+            return []
+        accepted = self.on_command_value(header_ns, value, receive_ns)
+        if accepted is None:
+            return []
+        stamp, sent, outputs = accepted
+        out_msg = compensated_command(msg, sent, kind, index=index, joint=joint)
+        outputs.insert(0, Output("compensated_command", out_msg, stamp))
+        return outputs
+
+    def on_command_value(
+        self, header_ns: int | None, value: float, receive_ns: int
+    ) -> tuple[int, float, list[Output]] | None:
+        """A command already read from its message (header stamp, 0 when none): ``(time,
+        compensated value, periodic outputs now due)``, or None when it is dropped.
+        ``header_ns`` is None (or 0) for a message without a header.
+
+        :meth:`on_command` is this plus the adapters; a transport that decodes messages
+        itself (bag replay reads the value straight from the CDR bytes) calls it directly
+        and writes the compensated value into its own copy of the message.
+        """
+        try:
+            if not math.isfinite(value):
+                raise MessageError(f"value {value} is not finite")
             stamp = header_ns if self._use_header and header_ns else int(receive_ns)
             last = self._last_cmd_ns
             if last is not None and stamp <= last:
                 key = "command_duplicate" if stamp == last else "command_out_of_order"
                 self._drop(key, f"command time {stamp} ns is not after the previous {last} ns")
-                return []
+                return None
             sent = self._compensate(value)
-            out_msg = compensated_command(msg, sent, kind, index=index, joint=joint)
         except MessageError as err:
             self._drop("command_invalid", f"command: {err}")
-            return []
+            return None
         self._last_cmd_ns = stamp
         self._last_sent = sent
         self._cmd_t.append(stamp)
@@ -406,9 +430,9 @@ class BacklashPipeline:
             self._trim_commands()
         self._commands += 1
         self._compensated += 1
-        outputs = [Output("compensated_command", out_msg, stamp)]
+        outputs: list[Output] = []
         self._advance(stamp, outputs, heavy=False)
-        return outputs
+        return stamp, sent, outputs
 
     def on_encoder(self, msg: object, receive_ns: int) -> list[Output]:
         """An encoder message received at ``receive_ns``: any periodic outputs now due."""
@@ -416,6 +440,16 @@ class BacklashPipeline:
             header_ns, value = read_encoder(msg, self._encoder_kind, joint=self._joint)
         except MessageError as err:
             self._drop("encoder_invalid", f"encoder: {err}")
+            return []
+        return self.on_encoder_value(header_ns, value, receive_ns)
+
+    def on_encoder_value(
+        self, header_ns: int | None, value: float, receive_ns: int
+    ) -> list[Output]:
+        """An encoder reading already read from its message (header stamp, 0 when none):
+        any periodic outputs now due (:meth:`on_encoder` is this plus the adapters)."""
+        if not math.isfinite(value):
+            self._drop("encoder_invalid", f"encoder: value {value} is not finite")
             return []
         stamp = header_ns if self._use_header and header_ns else int(receive_ns)
         last = self._last_enc_ns
@@ -433,6 +467,11 @@ class BacklashPipeline:
             self._feed()
         self._advance(stamp, outputs, heavy=True)
         return outputs
+
+    def reject(self, stream: Literal["command", "encoder"], reason: str) -> None:
+        """A message of ``stream`` its transport could not read (e.g. bytes that do not
+        decode): counted and reported like one the adapters reject."""
+        self._drop(f"{stream}_invalid", f"{stream}: {reason}")
 
     def finish(self, *, refit: bool = True) -> list[Output]:
         """End of the data (a replay's last message, a node shutting down).

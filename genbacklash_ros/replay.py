@@ -24,23 +24,16 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import cast
 
 import numpy as np
 
 from genbacklash_core import Estimate
 
 from .bagio import COMMAND_MSGTYPES, ENCODER_MSGTYPES, BagError, BagReader, BagWriter
-from .messages import (
-    CommandMessage,
-    DiagnosticArray,
-    Float64MultiArray,
-    MessageError,
-    read_command,
-    read_encoder,
-)
+from .messages import DiagnosticArray, Float64MultiArray, MessageError
 from .parameters import NodeParameters
 from .pipeline import BacklashPipeline, Output, PipelineStats
+from .raw_values import RawValueReader, UndecodableMessage
 
 __all__ = ["OUTPUT_TOPICS", "ReplayHistory", "ReplayResult", "replay"]
 
@@ -160,6 +153,30 @@ class _Progress:
             self._bar.close()
 
 
+class _CorruptMessages:
+    """Messages whose bytes do not decode: skipped (the replay goes on, like the node),
+    and reported at the end, since they mean the bag is damaged."""
+
+    def __init__(self) -> None:
+        self.count = 0
+        self.first = ""
+
+    def note(self, err: MessageError, topic: str, log_time: int) -> None:
+        if isinstance(err, UndecodableMessage):
+            self.count += 1
+            if not self.first:
+                self.first = f"{topic} at log time {log_time} ns: {err}"
+
+    def summary(self, bag: Path) -> str:
+        if not self.count:
+            return ""
+        which = "message was" if self.count == 1 else "messages were"
+        return (
+            f"{bag} is corrupt: {self.count} {which} not decodable and skipped "
+            f"(first: {self.first})"
+        )
+
+
 def _replay_params(
     base: NodeParameters | None,
     command_msgtype: str,
@@ -242,11 +259,7 @@ def replay(
         run_params = _replay_params(params, cmd_info.msgtype, enc_info.msgtype, overrides)
         pipeline = BacklashPipeline(run_params)
         history = ReplayHistory(names=run_params.structure().names())
-        kind, index, joint_name = (
-            run_params.command_type,
-            run_params.command_index,
-            run_params.joint,
-        )
+        index, joint_name = run_params.command_index, run_params.joint
         use_header = run_params.stamp_source == "header"
         error = ""
         count = 0
@@ -259,52 +272,64 @@ def replay(
             writer.add_topic(OUTPUT_TOPICS["compensated_command"], cmd_info.msgtype)
             writer.add_topic(OUTPUT_TOPICS["diagnostics"], DiagnosticArray.ros_type)
 
-            def publish(outputs: list[Output], log_time: int, raw_value: float | None) -> None:
+            def publish(outputs: list[Output], log_time: int) -> None:
                 for out in outputs:
                     writer.write(OUTPUT_TOPICS[out.topic], log_time, out.message)
-                    if out.topic == "compensated_command" and raw_value is not None:
-                        _, sent = read_command(out.message, kind, index=index, joint=joint_name)
-                        history.command_t.append(out.stamp_ns)
-                        history.command_raw.append(raw_value)
-                        history.command_sent.append(sent)
-                    elif out.topic == "estimate" and out.estimate is not None:
+                    if out.topic == "estimate" and out.estimate is not None:
                         history.estimate_t.append(out.stamp_ns)
                         history.estimates.append(out.estimate)
 
+            # Values come straight from the CDR bytes (RawValueReader: a layout learnt from
+            # rosbags, the adapters' rules) and the compensated command is the command's
+            # bytes with its value replaced: no message objects on the way.
+            read_cmd = RawValueReader(cmd_info.msgtype, "command", index=index, joint=joint_name)
+            read_enc = RawValueReader(enc_info.msgtype, "encoder", joint=joint_name)
+            corrupt = _CorruptMessages()
+            comp_topic = OUTPUT_TOPICS["compensated_command"]
+            cmd_type = cmd_info.msgtype
+            write_raw = writer.write_raw
+            enc_t, enc_y = history.encoder_t, history.encoder_y
             try:
-                for item in reader.messages([command_topic, encoder_topic]):
+                for topic, log_time, msgtype, raw in reader.raw_messages(
+                    [command_topic, encoder_topic]
+                ):
                     count += 1
                     bar.step()
-                    last_log = item.log_time_ns
-                    writer.write_raw(item.topic, item.log_time_ns, item.raw, item.msgtype)
-                    if item.topic == command_topic:
-                        raw_value: float | None
+                    last_log = log_time
+                    write_raw(topic, log_time, raw, msgtype)
+                    if topic == command_topic:
                         try:
-                            _, raw_value = read_command(
-                                item.message, kind, index=index, joint=joint_name
-                            )
-                        except MessageError:
-                            raw_value = None
-                        command = cast(CommandMessage, item.message)  # type checked by topic()
-                        outs = pipeline.on_command(command, item.log_time_ns)
-                        publish(outs, item.log_time_ns, raw_value)
+                            header_ns, value = read_cmd.read(raw)
+                        except MessageError as err:
+                            pipeline.reject("command", str(err))
+                            corrupt.note(err, topic, log_time)
+                            continue
+                        accepted = pipeline.on_command_value(header_ns, value, log_time)
+                        if accepted is None:
+                            continue
+                        stamp, sent, outs = accepted
+                        write_raw(comp_topic, log_time, read_cmd.patch(raw, sent), cmd_type)
+                        history.command_t.append(stamp)
+                        history.command_raw.append(value)
+                        history.command_sent.append(sent)
                     else:
                         try:
-                            stamp, value = read_encoder(
-                                item.message, run_params.encoder_type, joint=joint_name
-                            )
-                            history.encoder_t.append(
-                                stamp if use_header and stamp else item.log_time_ns
-                            )
-                            history.encoder_y.append(value)
-                        except MessageError:
-                            pass
-                        publish(pipeline.on_encoder(item.message, item.log_time_ns), last_log, None)
+                            header_ns, value = read_enc.read(raw)
+                        except MessageError as err:
+                            pipeline.reject("encoder", str(err))
+                            corrupt.note(err, topic, log_time)
+                            continue
+                        enc_t.append(header_ns if use_header and header_ns else log_time)
+                        enc_y.append(value)
+                        outs = pipeline.on_encoder_value(header_ns, value, log_time)
+                    if outs:
+                        publish(outs, log_time)
             except BagError as err:
                 error = str(err)
             finally:
                 bar.close()
-            publish(pipeline.finish(), last_log, None)
+            error = error or corrupt.summary(Path(bag))
+            publish(pipeline.finish(), last_log)
             messages_out = writer.count
     return ReplayResult(
         Path(output),

@@ -263,8 +263,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
         print(f"wrote {index}", file=sys.stderr)
     if result.error:
         print(
-            f"genbacklash replay: error: {result.error}; kept {result.output} (valid up to "
-            "the damage)",
+            f"genbacklash replay: error: {result.error}; kept {result.output} (a valid bag "
+            f"of the {result.messages_in} messages read)",
             file=sys.stderr,
         )
         return EXIT_BAD_INPUT
