@@ -2,8 +2,9 @@
 
 Both online identifiers (:class:`~genbacklash_core.windowed.WindowedIdentifier` and
 :class:`~genbacklash_core.recursive.RecursiveIdentifier`) follow one interface,
-:class:`OnlineIdentifier`: ``update(u, y) -> Estimate`` for one sample and
-``update_many(u, y) -> Estimate`` for a batch of samples (the same result, vectorised). An
+:class:`OnlineIdentifier`: ``update(u, y) -> Estimate`` for one sample,
+``update_many(u, y) -> Estimate`` for a batch of samples (the same result, vectorised), and
+``seed(estimate)`` to continue from a saved estimate after a restart. An
 :class:`Estimate` is frozen: the natural parameters in
 :class:`~genbacklash_core.structure.Structure` order, their covariance, the recent residual, an
 excitation measure, a state out of five and a confidence in ``[0, 1]`` that a compensator uses
@@ -322,6 +323,15 @@ class OnlineIdentifier(Protocol):
 
     def reset(self) -> None:
         """Forget everything, as if newly constructed."""
+        ...
+
+    def seed(self, estimate: Estimate) -> Estimate:
+        """Forget everything and continue from a saved ``estimate`` (e.g. a checkpoint's)."""
+        ...
+
+    @property
+    def from_seed(self) -> bool:
+        """True while the estimate still rests mainly on the seed of :meth:`seed`."""
         ...
 
 

@@ -67,6 +67,7 @@ from .windowed import (
     FitFailure,
     SampleRing,
     WindowFit,
+    _merge_index,
     block_conditioning,
     cold_fit,
     conditioning_floor,
@@ -77,6 +78,7 @@ from .windowed import (
     parameter_blocks,
     samples_since_change,
     scaled_inverse,
+    seed_prior,
     settling_samples,
 )
 
@@ -221,6 +223,13 @@ class RecursiveIdentifier:
     True
     >>> ident.update(0.5, 0.1).samples
     3001
+
+    After a restart, continue from a saved estimate instead of a new batch fit:
+
+    >>> again = RecursiveIdentifier(degree=3)
+    >>> seeded = again.seed(est)
+    >>> seeded.state.value, bool(np.allclose(seeded.parameters, est.parameters))
+    ('converged', True)
     """
 
     def __init__(
@@ -315,6 +324,117 @@ class RecursiveIdentifier:
         self._x_resting = 0  # samples since x last changed, up to x(t-2)
         self._settling = 0  # samples the linear block takes to settle
         self._y_lags: list[float] = []  # [y(t-1), .., y(t-nb)]
+        self._seed_pending = False  # seeded; waiting for the samples the first row needs
+        self._seeded = False  # the recursion started from a seed (until a re-initialisation)
+
+    def seed(self, estimate: Estimate) -> Estimate:
+        """Continue from a saved ``estimate`` (e.g. a checkpoint's) instead of a batch fit.
+
+        Forgets all samples, then starts the recursion from the estimate: ``theta`` from its
+        parameters (eq. 34 inverted), the information ``R`` from its covariance and residual
+        (``cov_theta = sigma^2 R^-1``, so that new rows weigh against it as they did before),
+        the floor ``R_0`` and the coverage reference from that ``R``. The first samples only
+        fill the signals a regressor row needs (two for a backlash; for a cascade until the
+        internal ``x`` is determined, at most ``initial_samples``); meanwhile the estimate is
+        the saved one. The state then follows the relative standard deviation as usual.
+
+        Raises :class:`GenBacklashError` (the identifier unchanged) when the estimate cannot
+        seed it: another structure, another branch sense than the one given, no valid model,
+        or no finite covariance and residual.
+
+        Parameters
+        ----------
+        estimate : Estimate
+            The saved estimate.
+
+        Returns
+        -------
+        Estimate
+            The new current estimate: the saved parameters and covariance. The sample
+            count goes on from the estimate's ``samples``.
+
+        Examples
+        --------
+        >>> from genbacklash_core import Structure, paper_example
+        >>> truth = paper_example(1).model
+        >>> saved = Estimate(Structure(3), truth.parameters(), np.eye(8) * 1e-6, 0.02, 0.6,
+        ...                  "converged", 0.9, 5000)
+        >>> ident = RecursiveIdentifier(degree=3)
+        >>> est = ident.seed(saved)
+        >>> est.state.value, est.model == truth, ident.from_seed
+        ('converged', True, True)
+        >>> data = paper_example(1).generate(seed=1, n_samples=600)
+        >>> after = ident.update_many(data.u, data.y)
+        >>> after.state.value, bool(np.max(np.abs(after.parameters - truth.parameters())) < 0.02)
+        ('converged', True)
+        """
+        prior = seed_prior(self._template, self._sign_known, estimate)
+        self.reset()
+        s = self.settings
+        saved = estimate.structure
+        structure = Structure(saved.degree, saved.na, saved.nb, saved.sign)
+        info = prior.information
+        cov = scaled_inverse(info)
+        if cov is None:  # seed_prior checked that info is positive definite
+            raise GenBacklashError("cannot seed: the estimate's information is singular")
+        self._structure = structure
+        self._sign_now = True
+        self._theta = prior.theta.copy()
+        self._info = info.copy()
+        self._floor = info / s.covariance_bound  # R_0: P <= bound * P_seed
+        self._cov = cov
+        self._recent = info * min(1.0, s.excitation_memory / prior.rows)
+        self._blocks = parameter_blocks(structure)
+        self._set_frozen(np.zeros(len(self._blocks), dtype=bool))
+        self._conditioning_floor = conditioning_floor(
+            structure,
+            block_conditioning(structure, info),
+            s.min_conditioning,
+            s.min_linear_conditioning,
+        )
+        self._valid_theta = self._theta.copy()
+        self._valid_cov = self._cov.copy()
+        self._short = self._long = prior.sigma2
+        self._excitation = estimate.excitation
+        n = structure.degree
+        left, right = float(info[1, 1]), float(info[n + 2, n + 2])  # engaged rows per branch
+        self._share_left, self._share_right = left / prior.rows, right / prior.rows
+        if structure.cascade:
+            self._settling = settling_samples(structure, prior.p)
+        self._ever_started = True
+        self._seeded = True
+        self._seed_pending = True
+        self._samples = estimate.samples
+        self._next_attempt = self._samples + max(structure.na, structure.nb, 1) + 1
+        self._reason = f"seeded from a saved estimate ({estimate.state.value})"
+        return self.estimate
+
+    @property
+    def from_seed(self) -> bool:
+        """True while the estimate rests mainly on a seed (:meth:`seed`): fewer informative
+        samples than the recursion remembers (``1 / (1 - forgetting)``, at most ``buffer``)
+        have updated it since, and it was not re-initialised."""
+        memory = min(self._memory, float(self.settings.buffer))
+        return self._seeded and self._since_start < memory
+
+    def _start_seeded(self) -> None:
+        """Start the recursion from the seed once the buffered samples give the first row's
+        signals (for a cascade: once the internal ``x`` no longer depends on its start)."""
+        s = self.settings
+        structure = self._structure
+        u, y = self._ring.window()
+        if structure.cascade and u.size < s.initial_samples:
+            p = structure.from_theta(self._theta)
+            lo, hi = play_bounds(*structure.branches(p, u))
+            if _merge_index(lo, hi, play_operator(lo, hi, -math.inf)) < 0:
+                self._next_attempt = self._samples + 16
+                return
+        self._deadband = s.input_deadband * float(np.ptp(u))
+        self._u_range = (float(u.min()), float(u.max()))
+        self._carry_from_window(self._theta, u, y)
+        self._seed_pending = False
+        self._running = True
+        self._reason = ""
 
     def update(self, u: float, y: float) -> Estimate:
         """Take one sample: one recursive least-squares step. Returns the current estimate."""
@@ -383,6 +503,9 @@ class RecursiveIdentifier:
         intervals, until one fits; after a few rejections any converged fit is taken (the
         noise may really have grown).
         """
+        if self._seed_pending:
+            self._start_seeded()
+            return
         s = self.settings
         attempt = self._attempts
         self._attempts += 1
@@ -447,7 +570,7 @@ class RecursiveIdentifier:
         self._share_left, self._share_right = self._initial_shares(fit)
         self._since_start = 0
         self._since_check = 0
-        self._carry_from_window(fit, u, y)
+        self._carry_from_window(fit.theta, u, y)
         if self._ever_started:
             self._restarts += 1
         self._ever_started = True
@@ -464,7 +587,7 @@ class RecursiveIdentifier:
         right = float(np.count_nonzero(phi[:, n + 2] != 0.0)) / total  # the -f2 column
         return left, right
 
-    def _carry_from_window(self, fit: WindowFit, u: FloatArray, y: FloatArray) -> None:
+    def _carry_from_window(self, theta: FloatArray, u: FloatArray, y: FloatArray) -> None:
         """The signals the next regressor row needs, from the end of the initial window."""
         structure = self._structure
         self._u1 = float(u[-1])
@@ -472,7 +595,7 @@ class RecursiveIdentifier:
         self._y1 = float(y[-1])
         if not structure.cascade:
             return
-        p = structure.from_theta(fit.theta)
+        p = structure.from_theta(theta)
         lo, hi = play_bounds(*structure.branches(p, u))
         x = play_operator(lo, hi, -math.inf)  # eq. (36); determined after the first engagement
         lags = max(structure.na, 2) - 1
@@ -853,6 +976,7 @@ class RecursiveIdentifier:
     def _diverge(self, why: str) -> None:
         """Stop the recursion, report the last valid estimate, re-initialise from the buffer."""
         self._running = False
+        self._seeded = False
         self._theta = self._valid_theta.copy()
         self._cov = self._valid_cov.copy()
         self._scale_before = self._long
@@ -872,7 +996,7 @@ class RecursiveIdentifier:
         cov_theta = self._long * self._cov  # sigma^2 P
         p_list = natural_from_theta(structure, theta_list)
         rel = relative_std_of(p_list, natural_variances(structure, theta_list, cov_theta))
-        if not self._running:
+        if not self._running and not self._seed_pending:
             state, reason = EstimatorState.DIVERGED, self._reason
         elif self._excitation < self.settings.min_excitation:
             state = EstimatorState.NO_EXCITATION
@@ -889,6 +1013,8 @@ class RecursiveIdentifier:
             converged = rel <= self.settings.converged_std
             state = EstimatorState.CONVERGED if converged else EstimatorState.CONVERGING
             reason = f"recursive update; relative std {rel:.3g}"
+            if self._seed_pending:
+                reason = f"{self._reason}; relative std {rel:.3g}"
             if self._restarts:
                 reason += f"; re-initialised {self._restarts} time(s)"
         return Estimate.trusted(

@@ -279,6 +279,20 @@ def natural_from_theta(structure: Structure, theta: list[float]) -> list[float]:
     ]
 
 
+def theta_from_natural(structure: Structure, p: FloatArray) -> FloatArray:
+    """The separated vector of eqs. (23)/(33) from natural parameters (inverse of eq. 34)."""
+    n = structure.degree
+    theta = np.empty(structure.n_parameters)
+    theta[0] = p[0]
+    theta[1] = p[0] * p[n]  # m_L1 c_L
+    theta[2 : n + 1] = p[1:n]
+    theta[n + 1] = p[n + 1]
+    theta[n + 2] = p[n + 1] * p[2 * n + 1]  # m_R1 c_R
+    theta[n + 3 : 2 * n + 2] = p[n + 2 : 2 * n + 1]
+    theta[2 * n + 2 :] = p[2 * n + 2 :]
+    return theta
+
+
 def natural_variances(
     structure: Structure, theta: list[float], theta_covariance: FloatArray
 ) -> list[float]:
@@ -536,13 +550,92 @@ def poorly_excited(structure: Structure, conditioning: FloatArray, floor: FloatA
     return None
 
 
-def solve_normal(phi: FloatArray, target: FloatArray) -> tuple[FloatArray, FloatArray] | None:
+@dataclass(frozen=True)
+class SeedPrior:
+    """A saved estimate as prior information for the regression (internal).
+
+    ``information`` is the ``Phi^T Phi`` the estimate's covariance implies
+    (``cov_theta = sigma2 (Phi^T Phi)^-1``, the covariance of eqs. 23/33), in units of
+    regression rows, so that it adds to the information of new rows; ``rows`` is how many
+    engaged rows it stands for and ``sigma2`` their equation-error variance.
+    """
+
+    p: FloatArray
+    theta: FloatArray
+    information: FloatArray
+    sigma2: float
+    rows: float
+
+    def scaled(self, weight: float) -> SeedPrior:
+        """The same prior standing for ``weight`` times as many rows."""
+        return SeedPrior(
+            self.p, self.theta, self.information * weight, self.sigma2, self.rows * weight
+        )
+
+
+def seed_prior(template: Structure, sign_known: bool, estimate: Estimate) -> SeedPrior:
+    """The prior information of a saved ``estimate`` for an identifier of ``template``.
+
+    Raises :class:`GenBacklashError` when the estimate cannot seed it: not an
+    :class:`Estimate`, another degree or linear order, another branch sense than a known one,
+    no valid model, or no usable uncertainty (a non-finite or non-positive residual, a
+    covariance that is not finite and positive definite).
+    """
+    if not isinstance(estimate, Estimate):
+        raise GenBacklashError(f"cannot seed from {estimate!r}: not an Estimate")
+    saved = estimate.structure
+    if (saved.degree, saved.na, saved.nb) != (template.degree, template.na, template.nb):
+        raise GenBacklashError(
+            f"cannot seed: the estimate has degree {saved.degree}, na {saved.na}, nb "
+            f"{saved.nb}; the identifier degree {template.degree}, na {template.na}, nb "
+            f"{template.nb}"
+        )
+    if sign_known and saved.sign != template.sign:
+        raise GenBacklashError(
+            f"cannot seed: the estimate's branch sense {saved.sign:+g} is not the "
+            f"identifier's {template.sign:+g}"
+        )
+    if estimate.model is None:
+        raise GenBacklashError("cannot seed: the estimate holds no valid model")
+    sigma2 = estimate.residual**2
+    if not (math.isfinite(sigma2) and sigma2 > 0.0):
+        raise GenBacklashError(
+            f"cannot seed: the estimate's residual {estimate.residual!r} is not a positive number"
+        )
+    p = np.array(estimate.parameters, dtype=np.float64)
+    theta = theta_from_natural(saved, p)
+    inverse = scaled_inverse(np.array(estimate.covariance, dtype=np.float64))
+    bad = "cannot seed: the estimate's covariance is not finite and positive definite"
+    if inverse is None:
+        raise GenBacklashError(bad)
+    jac = theta_jacobian(saved, theta)
+    information = sigma2 * (jac.T @ inverse @ jac)  # (cov_theta / sigma2)^-1, delta method
+    information = 0.5 * (information + information.T)
+    try:
+        np.linalg.cholesky(information)
+    except np.linalg.LinAlgError as err:
+        raise GenBacklashError(bad) from err
+    n = saved.degree
+    # the f1 and -f2 columns of eq. (22) are +-1 on engaged rows: their squares count them
+    rows = float(information[1, 1] + information[n + 2, n + 2])
+    return SeedPrior(p, theta, information, sigma2, max(rows, 1.0))
+
+
+def solve_normal(
+    phi: FloatArray, target: FloatArray, prior: SeedPrior | None = None
+) -> tuple[FloatArray, FloatArray] | None:
     """Least squares by column-scaled normal equations: ``(theta, (Phi^T Phi)^-1)``.
 
+    With a ``prior`` (information ``R_0`` about ``theta_0``) the regularised least squares
+    ``(Phi^T Phi + R_0) theta = Phi^T z + R_0 theta_0``, and ``(Phi^T Phi + R_0)^-1``.
     None when the normalised information matrix is (numerically) singular, i.e. when its
     smallest eigenvalue is below ``1e-10`` times its largest.
     """
     gram = phi.T @ phi
+    rhs = phi.T @ target
+    if prior is not None:
+        gram = gram + prior.information
+        rhs = rhs + prior.information @ prior.theta
     scale = np.sqrt(np.diag(gram))
     if not np.all(scale > 0.0) or not np.all(np.isfinite(gram)):
         return None  # a regressor is identically zero, e.g. a branch never engaged
@@ -551,7 +644,7 @@ def solve_normal(phi: FloatArray, target: FloatArray) -> tuple[FloatArray, Float
     if not values[0] > 1e-10 * values[-1]:
         return None
     inverse = (vectors / values) @ vectors.T / outer
-    theta = inverse @ (phi.T @ target)
+    theta = inverse @ rhs
     return np.asarray(theta, dtype=np.float64), np.asarray(inverse, dtype=np.float64)
 
 
@@ -578,6 +671,7 @@ def fit_window(
     deadband: float,
     recent: int | None = None,
     min_excitation: float = 0.0,
+    prior: SeedPrior | None = None,
 ) -> WindowFit | FitFailure:
     """Up to ``iterations`` warm-started iterations of the paper's method on one window.
 
@@ -588,7 +682,9 @@ def fit_window(
     dead zone of the wrong sign ends the iteration at the previous one; the final estimate
     must be valid on the window's input range (branches apart, stable linear block). The
     excitation is the informative share of the ``recent`` latest samples at ``p_start``;
-    below ``min_excitation`` nothing is fitted.
+    below ``min_excitation`` nothing is fitted. A ``prior`` (a saved estimate's information,
+    :func:`seed_prior`) joins each regression as ``prior.rows`` earlier rows would: the
+    least squares are regularised towards it and the residual variance is pooled with its.
     """
     size = structure.n_parameters
     u_range = (float(u.min()), float(u.max()))
@@ -612,7 +708,7 @@ def fit_window(
                     True,
                 )
         m = rows.target.size
-        if m < 2 * size:
+        if m < (2 * size if prior is None else 1):
             if accepted is not None:
                 break
             return FitFailure(
@@ -620,7 +716,7 @@ def fit_window(
                 excitation,
                 True,
             )
-        solved = solve_normal(rows.phi, rows.target)
+        solved = solve_normal(rows.phi, rows.target, prior)
         if solved is None:
             if accepted is not None:
                 break
@@ -642,7 +738,11 @@ def fit_window(
             break
         error = rows.target - rows.phi @ theta
         rss = float(error @ error)
-        sigma2 = rss / max(m - size, 1)
+        count: float = m
+        if prior is not None:  # pooled with the rows the prior stands for
+            rss += prior.sigma2 * prior.rows
+            count = m + prior.rows
+        sigma2 = rss / max(count - size, 1)
         covariance = natural_covariance(structure, theta, sigma2 * inverse)
         change = np.abs(p_new - p)
         std = np.sqrt(np.maximum(np.diag(covariance), 0.0))
@@ -655,7 +755,7 @@ def fit_window(
             information=rows.phi.T @ rows.phi,
             covariance=covariance,
             sigma2=sigma2,
-            residual=math.sqrt(rss / m),
+            residual=math.sqrt(rss / count),
             settled=settled,
             rows=rows,
             excitation=excitation,
@@ -765,6 +865,13 @@ class WindowedIdentifier:
     True
     >>> ident.update(0.5, 0.1).samples
     301
+
+    After a restart, continue from a saved estimate instead of a cold start:
+
+    >>> again = WindowedIdentifier(degree=3)
+    >>> seeded = again.seed(est)
+    >>> seeded.state.value, bool(np.array_equal(seeded.parameters, est.parameters))
+    ('converged', True)
     """
 
     def __init__(
@@ -826,7 +933,94 @@ class WindowedIdentifier:
         self._cold_failures = 0
         self._conditioning_ref = np.zeros(len(parameter_blocks(self._template)))
         self._span_ref = 0.0  # widest input span of an accepted fit
+        self._seed: SeedPrior | None = None  # a saved estimate the window still leans on
+        self._seed_samples = 0  # samples of the window the seed stands for
         self._estimate = Estimate.empty(self._structure)
+
+    def seed(self, estimate: Estimate) -> Estimate:
+        """Continue from a saved ``estimate`` (e.g. a checkpoint's) instead of a cold start.
+
+        Forgets all samples, then takes the estimate's parameters as the current estimate
+        and as the start of the next warm-started iterations: no cold start runs. The
+        estimate's covariance and residual give the information of the window it was fitted
+        on, which joins the next fits as a prior (:func:`seed_prior`) standing for the part of
+        that window the new samples have not replaced yet: ``min(window, samples)`` samples
+        at first, fewer as the window fills, none once it is full. So the estimate continues
+        smoothly, with the uncertainty it had, while the window refills. Output-error
+        refinement (``refine``) resumes once the seed has left the window.
+
+        The state is ``converged`` when the estimate was settled (converged, or frozen for
+        lack of excitation) and its relative standard deviation is within
+        ``converged_std``; otherwise ``converging``. The confidence follows from it as
+        usual. Raises :class:`GenBacklashError` (the identifier unchanged) when the estimate
+        cannot seed it: another structure, another branch sense than the one given, no
+        valid model, or no finite covariance and residual.
+
+        Parameters
+        ----------
+        estimate : Estimate
+            The saved estimate; its ``samples`` (when > 0) tell how full its window was.
+
+        Returns
+        -------
+        Estimate
+            The new current estimate: the saved parameters and covariance. The sample
+            count goes on from the estimate's ``samples``.
+
+        Examples
+        --------
+        >>> from genbacklash_core import Structure, paper_example
+        >>> truth = paper_example(1).model
+        >>> saved = Estimate(Structure(3), truth.parameters(), np.eye(8) * 1e-6, 0.02, 0.6,
+        ...                  "converged", 0.9, 5000)
+        >>> ident = WindowedIdentifier(degree=3)
+        >>> est = ident.seed(saved)
+        >>> est.state.value, est.model == truth, ident.from_seed
+        ('converged', True, True)
+        >>> data = paper_example(1).generate(seed=1, n_samples=600)
+        >>> after = ident.update_many(data.u, data.y)
+        >>> after.state.value, bool(np.max(np.abs(after.parameters - truth.parameters())) < 0.02)
+        ('converged', True)
+        """
+        prior = seed_prior(self._template, self._sign_known, estimate)
+        self.reset()
+        s = self.settings
+        structure = estimate.structure
+        self._structure = Structure(structure.degree, structure.na, structure.nb, structure.sign)
+        self._sign_known_now = True
+        self._seed = prior
+        self._seed_samples = min(s.window, estimate.samples) if estimate.samples else s.window
+        self._p = prior.p.copy()
+        self._reported = prior.p.copy()
+        self._covariance = np.array(estimate.covariance, dtype=np.float64)
+        self._residual = estimate.residual
+        self._excitation = estimate.excitation
+        rel = relative_std(prior.p, self._covariance)
+        settled = estimate.state in (EstimatorState.CONVERGED, EstimatorState.NO_EXCITATION)
+        converged = settled and rel <= s.converged_std
+        self._state = EstimatorState.CONVERGED if converged else EstimatorState.CONVERGING
+        self._reason = (
+            f"seeded from a saved estimate ({estimate.state.value}); relative std {rel:.3g}"
+        )
+        self._needs_cold = False
+        self._restarted = False  # the next fit continues from the seed (steadiness test)
+        self._samples = self._last_fit_at = estimate.samples
+        self._next_fit = self._samples + self.min_samples
+        self._rebuild()
+        return self._estimate
+
+    @property
+    def from_seed(self) -> bool:
+        """True while the window still leans on a seed (:meth:`seed`): it has not yet
+        taken as many new samples as the seed stands for."""
+        return self._seed_weight() > 0.0
+
+    def _seed_weight(self) -> float:
+        """Share of the seed's samples still counted (those new samples did not replace)."""
+        if self._seed is None:
+            return 0.0
+        kept = min(self._seed_samples, self.settings.window - len(self._ring))
+        return max(kept, 0) / self._seed_samples
 
     def update(self, u: float, y: float) -> Estimate:
         """Take one sample; refit when due. Returns the current estimate."""
@@ -871,9 +1065,10 @@ class WindowedIdentifier:
         """Fit the window now instead of at the next scheduled sample; the new estimate.
 
         For a final estimate at the end of a record (a replay, a benchmark): without it the
-        estimate may be up to ``K`` samples old. The schedule restarts from here.
+        estimate may be up to ``K`` samples old. The schedule restarts from here. Right
+        after :meth:`seed`, until ``min_samples`` new samples arrived, the seed stands.
         """
-        if self._samples:
+        if len(self._ring) >= (1 if self._seed is None else self.min_samples):
             self._fit()
         return self._publish()
 
@@ -909,6 +1104,7 @@ class WindowedIdentifier:
         )
 
     def _cold_start(self, u: FloatArray, y: FloatArray) -> None:
+        self._seed = None  # a restart after divergence: the seed is discredited
         found = cold_fit(self._structure, self._sign_known_now, u, y)
         if isinstance(found, str):
             self._cold_failed(found)
@@ -945,6 +1141,10 @@ class WindowedIdentifier:
     def _warm_fit(self, u: FloatArray, y: FloatArray) -> None:
         assert self._p is not None
         s = self.settings
+        weight = self._seed_weight()
+        if weight <= 0.0:
+            self._seed = None
+        prior = None if self._seed is None else self._seed.scaled(weight)
         outcome = fit_window(
             self._structure,
             u,
@@ -956,6 +1156,7 @@ class WindowedIdentifier:
             deadband=self._deadband(u),
             recent=self._samples - self._last_fit_at,
             min_excitation=s.min_excitation,
+            prior=prior,
         )
         floor = conditioning_floor(
             self._structure, self._conditioning_ref, s.min_conditioning, s.min_linear_conditioning
@@ -1005,7 +1206,7 @@ class WindowedIdentifier:
         self._span_ref = max(self._span_ref, float(np.ptp(u)))
         self._p = fit.p
         reported = fit.p
-        if s.refine:
+        if s.refine and self._seed is None:
             previous = self._reported
             start = fit.p if self._restarted or previous is None else previous
             if self._structure.problem(start, (float(u.min()), float(u.max()))) is not None:

@@ -5,14 +5,19 @@ covariance, residual, excitation, state, confidence, samples, reason) and the da
 was taken at, under a format ``version``. :func:`save_checkpoint` writes it atomically: a
 temporary file in the same directory is written, flushed and fsync'ed, then renamed over the
 target (``os.replace``), and the directory is fsync'ed; a crash at any point leaves either
-the old file or the new one, never a half-written one. :func:`load_checkpoint` validates
-everything and raises :class:`CheckpointError` with the reason on a corrupt file.
+the old file or the new one, never a half-written one (a process killed while writing leaves
+its temporary file behind: :func:`warm_start`, run when the node starts again, removes it).
+:func:`load_checkpoint` validates everything and raises :class:`CheckpointError` with the
+reason on a corrupt file.
 
 :func:`warm_start` turns a checkpoint into a start for the node: the identifier is created
-with the checkpoint's branch sense, and the checkpoint's estimate is returned as the *prior*
-the pipeline compensates and publishes with until the identifier has its own estimate. The
-online identifiers offer no way to seed their internal state (window buffer, information
-matrix) from parameters alone, so the warm start does not reach inside them.
+with the checkpoint's branch sense and *seeded* with the checkpoint's estimate
+(:meth:`~genbacklash_core.WindowedIdentifier.seed`,
+:meth:`~genbacklash_core.RecursiveIdentifier.seed`): it continues from the saved parameters
+and their uncertainty instead of a cold start, so the estimate after a restart is the saved
+one and goes on from there without a warm-up. The checkpoint's estimate is also returned as
+the *prior*, which the pipeline publishes and compensates with should the identifier not take
+the seed (then until it has an estimate of its own).
 
 Examples
 --------
@@ -53,6 +58,7 @@ __all__ = [
     "checkpoint_from_dict",
     "checkpoint_to_dict",
     "load_checkpoint",
+    "remove_stale_temporaries",
     "save_checkpoint",
     "warm_start",
 ]
@@ -239,6 +245,25 @@ def write_atomic(path: str | Path, text: str) -> Path:
     return target
 
 
+def remove_stale_temporaries(path: str | Path) -> int:
+    """Remove the temporary files a writer of ``path`` killed mid-write left; how many.
+
+    They are named ``.<name>.<random>.tmp`` next to ``path`` (see :func:`write_atomic`).
+    Call it when no other process writes ``path``, e.g. when the node starts.
+    """
+    target = Path(path)
+    removed = 0
+    try:
+        leftovers = list(target.parent.glob(f".{target.name}.*.tmp"))
+    except OSError:
+        return 0
+    for leftover in leftovers:
+        with contextlib.suppress(OSError):
+            leftover.unlink()
+            removed += 1
+    return removed
+
+
 def save_checkpoint(
     path: str | Path, estimate: Estimate | Checkpoint, time_ns: int | None = None
 ) -> Path:
@@ -292,31 +317,41 @@ class WarmStart:
     Attributes
     ----------
     identifier : OnlineIdentifier
-        A fresh identifier; with the checkpoint's branch sense when one was used.
+        A fresh identifier; with the checkpoint's branch sense and seeded with its estimate
+        when one was used (see ``seeded``).
     prior : Estimate or None
         The checkpoint's estimate (samples reset to 0), to compensate and publish with until
-        the identifier has one of its own; None when there is no usable checkpoint.
+        the identifier has one of its own (at once when it was seeded); None when there is
+        no usable checkpoint.
     note : str
         What happened, for the log and the diagnostics: ``""`` when no checkpoint file is
         configured or it does not exist yet.
     problem : bool
         True when a checkpoint exists but could not be used (corrupt, other structure).
+    seeded : bool
+        True when the identifier continues from the checkpoint's estimate.
     """
 
     identifier: OnlineIdentifier
     prior: Estimate | None
     note: str = ""
     problem: bool = False
+    seeded: bool = False
 
 
 def warm_start(params: NodeParameters, path: str | Path | None = None) -> WarmStart:
     """An identifier for ``params``, warm-started from the checkpoint at ``path``.
 
-    ``path`` defaults to ``params.checkpoint_file``. A missing file starts cold without a
+    ``path`` defaults to ``params.checkpoint_file``. Temporary files a killed writer left
+    next to it are removed (:func:`remove_stale_temporaries`). A missing file starts cold without a
     note; a corrupt file, one of another structure, or one without parameters starts cold
-    with a note saying why (never an exception: a node must still come up).
+    with a note saying why (never an exception: a node must still come up). A checkpoint
+    whose estimate cannot seed the identifier (no finite covariance or residual) still
+    stands in as the prior until the identifier converges; the note says so.
     """
     file = params.checkpoint_file if path is None else str(path)
+    if file:
+        remove_stale_temporaries(file)  # of a node killed while it wrote a checkpoint
     if not file or not Path(file).exists():
         return WarmStart(params.make_identifier(), None)
     try:
@@ -332,6 +367,15 @@ def warm_start(params: NodeParameters, path: str | Path | None = None) -> WarmSt
         note = f"checkpoint {file} holds no valid model; starting cold"
         return WarmStart(params.make_identifier(), None, note, True)
     identifier = params.make_identifier(sign=estimate.structure.sign)
+    saved_at = f"saved at data time {checkpoint.time_ns / 1e9:.3f} s"
+    try:
+        identifier.seed(estimate)
+    except GenBacklashError as err:
+        seeded = False
+        how = f"{saved_at}; its estimate stands in until the identifier converges: {err}"
+    else:
+        seeded = True
+        how = f"{saved_at}; the identifier continues from its estimate"
     prior = Estimate(
         estimate.structure,
         estimate.parameters,
@@ -341,7 +385,6 @@ def warm_start(params: NodeParameters, path: str | Path | None = None) -> WarmSt
         estimate.state,
         estimate.confidence,
         0,
-        f"from checkpoint {file} (saved at data time {checkpoint.time_ns / 1e9:.3f} s): "
-        f"{estimate.reason}",
+        f"from checkpoint {file} ({saved_at}): {estimate.reason}",
     )
-    return WarmStart(identifier, prior, f"warm start from checkpoint {file}")
+    return WarmStart(identifier, prior, f"warm start from checkpoint {file} ({how})", seeded=seeded)

@@ -358,8 +358,9 @@ class BacklashPipeline:
 
     @property
     def using_checkpoint(self) -> bool:
-        """True while the checkpoint's estimate stands in for the identifier's."""
-        return self.estimate is self._prior
+        """True while the estimate rests on the checkpoint: the identifier continues from it
+        and still leans on it (``from_seed``), or its estimate stands in for the identifier's."""
+        return self.estimate is self._prior or self._identifier.from_seed
 
     @property
     def stats(self) -> PipelineStats:
@@ -505,8 +506,10 @@ class BacklashPipeline:
         est = self.estimate
         level = level_of(est.state)
         parts = [f"{est.state.value}: {est.reason}" if est.reason else est.state.value]
-        if self.using_checkpoint:
+        if self.estimate is self._prior:
             parts.insert(0, "using the checkpoint's estimate until the identifier converges")
+        elif self.using_checkpoint:
+            parts.insert(0, "continuing from the checkpoint's estimate")
         loud = {k: n for k, n in self._period_drops.items() if k not in _QUIET_DROPS}
         if loud:
             level = max(level, DiagnosticStatus.WARN)

@@ -7,6 +7,7 @@ import pytest
 
 from genbacklash_core import (
     Cascade,
+    Estimate,
     EstimatorState,
     GenBacklashError,
     GeneralBacklash,
@@ -14,6 +15,8 @@ from genbacklash_core import (
     NonFiniteInputError,
     RecursiveIdentifier,
     RecursiveSettings,
+    Structure,
+    WindowedIdentifier,
     paper_example,
     track,
 )
@@ -301,3 +304,101 @@ def test_nonfinite_samples() -> None:
         ident.update_many([np.nan, 1.0, np.inf], [0.0, 0.5, 1.0])
     dropping = RecursiveIdentifier(3, settings=RecursiveSettings(nonfinite="drop"))
     assert dropping.update_many([0.0, np.nan, 1.0], [0.0, 1.0, 2.0]).samples == 2
+
+
+# --------------------------------------------------------------------------- seeding (restart)
+
+
+def _saved(
+    number: int = 1, n: int = 6000, seed: int = 3
+) -> tuple[Estimate, np.ndarray, np.ndarray]:
+    """An identifier's estimate after ``n`` samples (what a checkpoint holds), and the data
+    that follow it."""
+    ex = paper_example(number)
+    data = ex.generate(seed, n_samples=n + 3000)
+    ident = RecursiveIdentifier(*_args(number))
+    est = ident.update_many(data.u[:n], data.y[:n])
+    assert est.state is EstimatorState.CONVERGED
+    return est, data.u[n:], data.y[n:]
+
+
+@pytest.mark.parametrize("number", [1, 3])
+def test_seed_continues_as_if_never_stopped(number: int) -> None:
+    """A seeded recursion follows the uninterrupted one closely: the information matrix
+    recovered from the covariance weighs the new rows as the old one did."""
+    ex = paper_example(number)
+    data = ex.generate(3, n_samples=9000)
+    through = RecursiveIdentifier(*_args(number))
+    saved = through.update_many(data.u[:6000], data.y[:6000])
+    ident = RecursiveIdentifier(*_args(number))
+    first = ident.seed(saved)
+    assert np.allclose(first.parameters, saved.parameters, rtol=1e-12, atol=1e-12)
+    assert np.allclose(first.covariance, saved.covariance, rtol=1e-6, atol=1e-15)
+    assert first.state is EstimatorState.CONVERGED and ident.from_seed
+    assert first.confidence == pytest.approx(saved.confidence)
+    assert first.samples == saved.samples and ident.restarts == 0
+    std = saved.std()
+    u, y = data.u[6000:], data.y[6000:]
+    a = track(through, u, y, every=50)
+    b = track(ident, u, y, every=50)
+    assert all(e.state is EstimatorState.CONVERGED for e in b)
+    assert max(np.max(np.abs(e.parameters - first.parameters) / std) for e in b[:4]) < 3.0
+    # the two runs differ by a fraction of the uncertainty only
+    assert (
+        max(np.max(np.abs(e.parameters - f.parameters) / std) for e, f in zip(a, b, strict=True))
+        < 1.0
+    )
+    assert _error(b[-1].parameters, ex.model.parameters()) < 0.03
+    assert not ident.from_seed  # the recursion has taken more rows than it remembers
+
+
+def test_seeded_cascade_waits_for_its_internal_state() -> None:
+    saved, u, y = _saved(3)
+    ident = RecursiveIdentifier(3, 2, 2)
+    ident.seed(saved)
+    for k in range(20):  # sample by sample: the saved estimate holds while x is unknown
+        est = ident.update(float(u[k]), float(y[k]))
+        assert est.state is EstimatorState.CONVERGED and est.model is not None
+    est = ident.update_many(u[20:2000], y[20:2000])
+    assert est.state is EstimatorState.CONVERGED
+    assert _error(est.parameters, paper_example(3).model.parameters()) < 0.03
+
+
+def test_seed_from_a_windowed_estimate() -> None:
+    data = EX1.generate(4, n_samples=5000)
+    saved = WindowedIdentifier(3).update_many(data.u[:3000], data.y[:3000])
+    ident = RecursiveIdentifier(3)
+    ident.seed(saved)
+    est = ident.update_many(data.u[3000:], data.y[3000:])
+    assert est.state is EstimatorState.CONVERGED
+    assert _error(est.parameters, EX1.model.parameters()) < 0.03
+
+
+def test_seed_refuses_what_it_cannot_use() -> None:
+    est, _, _ = _saved()
+    ident = RecursiveIdentifier(3)
+    with pytest.raises(
+        GenBacklashError, match="degree 3, na 0, nb 0; the identifier degree 3, na 2"
+    ):
+        RecursiveIdentifier(3, 2, 2).seed(est)
+    with pytest.raises(GenBacklashError, match=r"branch sense \+1 is not the identifier's -1"):
+        RecursiveIdentifier(3, sign=-1).seed(est)
+    with pytest.raises(GenBacklashError, match="holds no valid model"):
+        ident.seed(Estimate.empty(Structure(3)))
+    singular = Estimate(
+        Structure(3), est.parameters, np.zeros((8, 8)), 0.02, 0.5, "converged", 0.9, 10
+    )
+    with pytest.raises(GenBacklashError, match="covariance is not finite and positive definite"):
+        ident.seed(singular)
+    assert ident.estimate.state is EstimatorState.WARMING_UP and not ident.from_seed
+
+
+def test_divergence_after_a_seed_reinitialises_from_the_buffer() -> None:
+    saved, u, y = _saved()
+    ident = RecursiveIdentifier(3)
+    ident.seed(saved)
+    ident.update_many(u[:1000], y[:1000])
+    ident._theta[1] = -ident._theta[1]  # corrupt the state: c_left < 0
+    est = ident.update(float(u[1000]), float(y[1000]))
+    assert ident.restarts == 1 and not ident.from_seed
+    assert est.state is EstimatorState.CONVERGED

@@ -7,11 +7,13 @@ import pytest
 
 from genbacklash_core import (
     Cascade,
+    Estimate,
     EstimatorState,
     GenBacklashError,
     GeneralBacklash,
     LinearBlock,
     NonFiniteInputError,
+    Structure,
     WindowedIdentifier,
     WindowedSettings,
     identify_backlash,
@@ -305,3 +307,121 @@ def test_bad_series() -> None:
         ident.update_many([0.0, 1.0], [0.0])
     with pytest.raises(GenBacklashError, match="u and y must be numbers"):
         ident.update("left", 0.0)  # type: ignore[arg-type]
+
+
+# --------------------------------------------------------------------------- seeding (restart)
+
+
+def _saved(
+    number: int = 1, n: int = 5000, seed: int = 3
+) -> tuple[Estimate, np.ndarray, np.ndarray]:
+    """An identifier's estimate after ``n`` samples (what a checkpoint holds), and the data
+    that follow it."""
+    ex = paper_example(number)
+    data = ex.generate(seed, n_samples=n + 3000)
+    ident = WindowedIdentifier(*_args(number))
+    est = ident.update_many(data.u[:n], data.y[:n])
+    assert est.state is EstimatorState.CONVERGED
+    return est, data.u[n:], data.y[n:]
+
+
+@pytest.mark.parametrize("number", [1, 3])
+def test_seed_continues_without_a_transient(number: int) -> None:
+    saved, u, y = _saved(number)
+    ident = WindowedIdentifier(*_args(number))
+    first = ident.seed(saved)
+    # the estimate after the restart is the saved one, with its uncertainty and state
+    assert np.array_equal(first.parameters, saved.parameters)
+    assert np.allclose(first.covariance, saved.covariance)
+    assert first.state is EstimatorState.CONVERGED and ident.from_seed
+    assert first.confidence == pytest.approx(saved.confidence)
+    assert first.samples == saved.samples
+    # no cold start: converged throughout, the estimate moving within its noise
+    std = saved.std()
+    trace = track(ident, u[:2000], y[:2000], every=25)
+    assert all(e.state is EstimatorState.CONVERGED for e in trace)
+    assert min(e.confidence for e in trace) > 0.9 * first.confidence
+    early = trace[:20]  # the first 500 samples: mostly the seed's window still
+    assert max(np.max(np.abs(e.parameters - first.parameters) / std) for e in early) < 3.0
+    truth = paper_example(number).model.parameters()
+    assert _error(trace[-1].parameters, truth) < 0.03
+    assert not ident.from_seed  # the window (1500) holds new samples only
+
+
+def test_seed_beats_a_cold_start() -> None:
+    saved, u, y = _saved()
+    cold = WindowedIdentifier(3)
+    warm = WindowedIdentifier(3)
+    warm.seed(saved)
+    truth = EX1.model.parameters()
+    for k in range(0, 200, 10):
+        c = cold.update_many(u[k : k + 10], y[k : k + 10])
+        w = warm.update_many(u[k : k + 10], y[k : k + 10])
+        assert w.state is EstimatorState.CONVERGED and _error(w.parameters, truth) < 0.02
+    assert c.samples == 200 and w.samples == saved.samples + 200
+    # the cold identifier warmed up first: no estimate for its first samples
+    assert WindowedIdentifier(3).update_many(u[:30], y[:30]).state is EstimatorState.WARMING_UP
+
+
+def test_seed_tracks_a_drift_after_the_restart() -> None:
+    u, y, c_left, _ = drifting_gap_data(5, 12000, (2000, 12000))
+    through = WindowedIdentifier(3)
+    before = through.update_many(u[:6000], y[:6000])
+    restarted = WindowedIdentifier(3)
+    restarted.seed(before)
+    n = EX1.model.degree
+    for k in range(6000, 12000, 500):
+        a = through.update_many(u[k : k + 500], y[k : k + 500])
+        b = restarted.update_many(u[k : k + 500], y[k : k + 500])
+        assert b.state is EstimatorState.CONVERGED
+        assert abs(b.parameters[n] - a.parameters[n]) < 0.02  # c_left as without a restart
+    assert abs(b.parameters[n] - c_left[-1]) < 0.1
+
+
+def test_seed_refuses_what_it_cannot_use() -> None:
+    est, _, _ = _saved()
+    ident = WindowedIdentifier(3)
+    with pytest.raises(GenBacklashError, match="degree 3, na 0, nb 0; the identifier degree 2"):
+        WindowedIdentifier(2).seed(est)
+    with pytest.raises(GenBacklashError, match=r"branch sense \+1 is not the identifier's -1"):
+        WindowedIdentifier(3, sign=-1).seed(est)
+    with pytest.raises(GenBacklashError, match="holds no valid model"):
+        ident.seed(Estimate.empty(Structure(3)))
+    with pytest.raises(GenBacklashError, match="not an Estimate"):
+        ident.seed("converged")  # type: ignore[arg-type]
+    p = EX1.model.parameters()
+    no_noise = Estimate(Structure(3), p, np.eye(8) * 1e-6, 0.0, 0.5, "converged", 0.9, 100)
+    with pytest.raises(GenBacklashError, match=r"residual 0\.0 is not a positive number"):
+        ident.seed(no_noise)
+    nan_cov = Estimate(Structure(3), p, np.full((8, 8), np.nan), 0.02, 0.5, "converged", 0.9, 1)
+    with pytest.raises(GenBacklashError, match="covariance is not finite and positive definite"):
+        ident.seed(nan_cov)
+    assert ident.estimate.state is EstimatorState.WARMING_UP and not ident.from_seed
+
+
+def test_seed_state_follows_the_saved_confidence() -> None:
+    p = EX1.model.parameters()
+    loose = Estimate(Structure(3), p, np.eye(8) * 1e-2, 0.02, 0.5, "converged", 0.4, 800)
+    est = WindowedIdentifier(3).seed(loose)  # relative std 0.1 > converged_std 0.02
+    assert est.state is EstimatorState.CONVERGING and est.confidence <= 0.5
+    moving = Estimate(Structure(3), p, np.eye(8) * 1e-6, 0.02, 0.5, "converging", 0.5, 800)
+    assert WindowedIdentifier(3).seed(moving).state is EstimatorState.CONVERGING
+    frozen = Estimate(Structure(3), p, np.eye(8) * 1e-6, 0.02, 0.0, "no_excitation", 0.9, 800)
+    assert WindowedIdentifier(3).seed(frozen).state is EstimatorState.CONVERGED
+    ident = WindowedIdentifier(3)
+    ident.seed(frozen)
+    ident.reset()
+    assert not ident.from_seed and ident.estimate.state is EstimatorState.WARMING_UP
+
+
+def test_refit_right_after_a_seed_keeps_the_seed() -> None:
+    saved, u, y = _saved()
+    ident = WindowedIdentifier(3)
+    ident.seed(saved)
+    assert np.array_equal(ident.refit().parameters, saved.parameters)  # no samples yet
+    ident.update_many(u[:10], y[:10])
+    assert np.array_equal(ident.refit().parameters, saved.parameters)  # too few to fit
+    ident.update_many(u[10:100], y[10:100])
+    est = ident.refit()
+    assert est.state is EstimatorState.CONVERGED and est.samples == saved.samples + 100
+    assert np.all(np.abs(est.parameters - saved.parameters) <= 3.0 * saved.std())

@@ -274,3 +274,30 @@ def test_no_temporary_files_in_normal_use(tmp_path: Path) -> None:
     for k in range(3):
         save_checkpoint(tmp_path / "c.json", converged(), k)
     assert sorted(os.listdir(tmp_path)) == ["c.json"]
+
+
+@pytest.mark.parametrize("method", ["windowed", "recursive"])
+def test_warm_start_seeds_the_identifier(tmp_path: Path, method: str) -> None:
+    path = tmp_path / "c.json"
+    est = converged()
+    save_checkpoint(path, est, 3_000_000_000)
+    start = warm_start(NodeParameters(checkpoint_file=str(path), method=method))
+    assert start.seeded and "the identifier continues from its estimate" in start.note
+    own = start.identifier.estimate
+    assert own.state is EstimatorState.CONVERGED and start.identifier.from_seed
+    assert np.allclose(own.parameters, est.parameters, rtol=1e-12, atol=1e-12)
+    assert own.samples == est.samples  # the count goes on
+
+
+def test_warm_start_without_a_usable_covariance_lets_the_prior_stand_in(tmp_path: Path) -> None:
+    path = tmp_path / "c.json"
+    base = converged()
+    est = Estimate(
+        base.structure, base.parameters, np.zeros((8, 8)), 0.02, 0.6, "converged", 0.9, 10
+    )
+    save_checkpoint(path, est, 1)
+    start = warm_start(NodeParameters(checkpoint_file=str(path)))
+    assert not start.seeded and not start.problem
+    assert start.prior is not None and start.prior.model == est.model
+    assert "stands in until the identifier converges" in start.note
+    assert start.identifier.estimate.state is EstimatorState.WARMING_UP
