@@ -15,7 +15,17 @@ import time
 
 from _common import BENCH_DIR, OUTPUT_DIR, ROOT, machine_description, parse_args
 
-BENCHMARKS = ("kernel", "accuracy", "speed", "online", "closed_loop", "diagnose")
+BENCHMARKS = (
+    "kernel",
+    "accuracy",
+    "speed",
+    "online",
+    "closed_loop",
+    "diagnose",
+    "replay",
+    "dds_latency",
+    "soak",
+)
 
 
 def main() -> None:
