@@ -9,28 +9,38 @@ Degree 1 is the ideal backlash of eqs. (1)/(7).
 from __future__ import annotations
 
 import math
-import numbers
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.polynomial import Polynomial
 
 from ._typing import ArrayLike, FloatArray
-from .errors import GenBacklashError
+from .data import as_float_array, as_order, as_real
+from .errors import GenBacklashError, NonFiniteInputError
 
 __all__ = ["GeneralBacklash"]
 
 
 def _as_coefficients(name: str, values: object) -> tuple[float, ...]:
     try:
-        coefficients = tuple(float(v) for v in np.atleast_1d(np.asarray(values, dtype=float)))
-    except (TypeError, ValueError) as err:
+        array = as_float_array(name, values)
+    except GenBacklashError as err:
         raise GenBacklashError(f"{name} must be a sequence of numbers, got {values!r}") from err
+    if array.ndim > 1:
+        raise GenBacklashError(f"{name} must be a sequence of numbers, got shape {array.shape}")
+    coefficients = tuple(np.atleast_1d(array).tolist())
     if not coefficients:
         raise GenBacklashError(f"{name} must hold at least one coefficient (degree >= 1)")
     if not all(math.isfinite(c) for c in coefficients):
         raise GenBacklashError(f"{name} must be finite, got {coefficients}")
     return coefficients
+
+
+def _dead_zone(name: str, value: object) -> float:
+    try:
+        return as_real(name, value)
+    except GenBacklashError as err:
+        raise GenBacklashError(f"{name} must be a finite number, got {value!r}") from err
 
 
 def evaluate_branch(m: FloatArray, shifted: FloatArray) -> FloatArray:
@@ -44,11 +54,36 @@ def evaluate_branch(m: FloatArray, shifted: FloatArray) -> FloatArray:
         ``u + c_L`` for the left branch (eq. 16) or ``u - c_R`` for the right (eq. 17).
     """
     coefficients = np.asarray(m, dtype=np.float64).tolist()  # Python floats: cheaper scalars
-    acc = shifted * coefficients[-1]
-    for coefficient in coefficients[-2::-1]:
-        acc += coefficient
-        acc *= shifted
+    # Beyond the float range the value saturates to +-inf (finite input and coefficients give
+    # no NaN); callers check what must be finite.
+    with np.errstate(over="ignore", invalid="ignore"):
+        acc = shifted * coefficients[-1]
+        for coefficient in coefficients[-2::-1]:
+            acc += coefficient
+            acc *= shifted
     return np.asarray(acc, dtype=np.float64)
+
+
+def branch_input(u: ArrayLike) -> FloatArray:
+    """``u`` as a float array of finite samples, or a clear error."""
+    uu = as_float_array("u", u)
+    if not np.all(np.isfinite(uu)):
+        bad = int(np.count_nonzero(~np.isfinite(uu)))
+        raise NonFiniteInputError(
+            f"{bad} of {uu.size} input samples are NaN or infinite; clean the input first"
+        )
+    return uu
+
+
+def finite_branch(name: str, values: FloatArray, u: FloatArray) -> FloatArray:
+    """``values`` of a branch at ``u``, or an error when they overflowed float64."""
+    if not np.all(np.isfinite(values)):
+        largest = float(np.max(np.abs(u))) if u.size else 0.0
+        raise GenBacklashError(
+            f"the {name} branch overflows float64 for inputs up to |u| = {largest:.3g}; the "
+            "model cannot be evaluated there: rescale the input (e.g. to radians or metres)"
+        )
+    return values
 
 
 @dataclass(frozen=True)
@@ -94,10 +129,8 @@ class GeneralBacklash:
                 f"both branches need the same degree: m_left has {len(m_left)} "
                 f"coefficients, m_right {len(m_right)}"
             )
-        for name, value in (("c_left", self.c_left), ("c_right", self.c_right)):
-            real = isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
-            if not (real and math.isfinite(value)):
-                raise GenBacklashError(f"{name} must be a finite number, got {value!r}")
+        c_left, c_right = _dead_zone("c_left", self.c_left), _dead_zone("c_right", self.c_right)
+        for name, value in (("c_left", c_left), ("c_right", c_right)):
             if value <= 0:
                 raise GenBacklashError(f"{name} must be > 0 (a dead-zone width), got {value}")
         if m_left[0] == 0.0 or m_right[0] == 0.0:
@@ -111,8 +144,8 @@ class GeneralBacklash:
             )
         object.__setattr__(self, "m_left", m_left)
         object.__setattr__(self, "m_right", m_right)
-        object.__setattr__(self, "c_left", float(self.c_left))
-        object.__setattr__(self, "c_right", float(self.c_right))
+        object.__setattr__(self, "c_left", c_left)
+        object.__setattr__(self, "c_right", c_right)
         object.__setattr__(self, "_m_left_array", np.asarray(m_left, dtype=np.float64))
         object.__setattr__(self, "_m_right_array", np.asarray(m_right, dtype=np.float64))
 
@@ -158,8 +191,10 @@ class GeneralBacklash:
     @classmethod
     def from_parameters(cls, values: ArrayLike, degree: int) -> GeneralBacklash:
         """Inverse of :meth:`parameters`."""
-        p = np.asarray(values, dtype=float)
-        n = degree
+        p = as_float_array("values", values)
+        n = as_order("degree", degree)
+        if n < 1:
+            raise GenBacklashError(f"degree must be >= 1, got {n}")
         if p.shape != (2 * n + 2,):
             raise GenBacklashError(f"expected {2 * n + 2} parameters for degree {n}, got {p.shape}")
         return cls(tuple(p[:n]), float(p[n]), tuple(p[n + 1 : 2 * n + 1]), float(p[2 * n + 1]))
@@ -175,14 +210,22 @@ class GeneralBacklash:
         )  # eq. (23)
 
     def left(self, u: ArrayLike) -> FloatArray:
-        """Left branch ``L(u)`` (eq. 11)."""
-        uu = np.asarray(u, dtype=np.float64)
-        return evaluate_branch(self._m_left_array, uu + self.c_left)  # eqs. (11), (16)
+        """Left branch ``L(u)`` (eq. 11); ``+-inf`` where it exceeds the float range.
+
+        Raises :class:`~genbacklash_core.errors.NonFiniteInputError` for NaN/inf input.
+        """
+        uu = branch_input(u)
+        with np.errstate(over="ignore"):  # a huge |u + c_L| saturates to +-inf below
+            return evaluate_branch(self._m_left_array, uu + self.c_left)  # eqs. (11), (16)
 
     def right(self, u: ArrayLike) -> FloatArray:
-        """Right branch ``R(u)`` (eq. 12)."""
-        uu = np.asarray(u, dtype=np.float64)
-        return evaluate_branch(self._m_right_array, uu - self.c_right)  # eqs. (12), (17)
+        """Right branch ``R(u)`` (eq. 12); ``+-inf`` where it exceeds the float range.
+
+        Raises :class:`~genbacklash_core.errors.NonFiniteInputError` for NaN/inf input.
+        """
+        uu = branch_input(u)
+        with np.errstate(over="ignore"):
+            return evaluate_branch(self._m_right_array, uu - self.c_right)  # eqs. (12), (17)
 
     def branch_difference(self) -> Polynomial:
         """``L(u) - R(u)`` as a polynomial in ``u``."""
@@ -202,20 +245,40 @@ class GeneralBacklash:
         The model is only a backlash where the branches stay apart (the paper's condition
         below eq. 21); an empty tuple means the model is valid on the whole range.
         """
+        u_min, u_max = as_real("u_min", u_min), as_real("u_max", u_max)
         if not u_min < u_max:
             raise GenBacklashError(f"need u_min < u_max, got {u_min} and {u_max}")
-        difference = self.branch_difference()
+        with np.errstate(all="ignore"):  # overflow is checked below
+            difference = self.branch_difference()
+            coef = difference.coef
+            at_ends = [float(difference(end)) for end in (u_min, u_max)]
+            # coefficients too small to divide by (the companion matrix) cannot place a root
+            # where the polynomial is still finite: leave them out of the root search
+            trimmed = difference.trim(1e-290 * float(np.max(np.abs(coef))))
+            try:
+                roots = trimmed.roots() if trimmed.degree() > 0 else np.zeros(0)
+            except np.linalg.LinAlgError:
+                roots = np.full(1, np.nan)
+        if not (np.all(np.isfinite(coef)) and np.all(np.isfinite(roots))):
+            raise GenBacklashError(
+                "cannot locate where the branches cross: L(u) - R(u) overflows float64 "
+                "(the coefficients are too large or span too many orders of magnitude)"
+            )
+        if not all(math.isfinite(v) for v in at_ends):
+            raise GenBacklashError(
+                f"the branches overflow float64 on [{u_min:.3g}, {u_max:.3g}]; cannot compare "
+                "them there: use a narrower range"
+            )
         found: list[float] = []
-        coef = difference.coef
         if np.allclose(coef, 0.0):
-            return (float(u_min),)
-        for root in difference.roots():
+            return (u_min,)
+        for root in roots:
             real, imag = float(np.real(root)), float(np.imag(root))
             if abs(imag) <= 1e-9 * max(1.0, abs(real)) and u_min <= real <= u_max:
                 found.append(real)
-        for end in (u_min, u_max):
-            if difference(end) * self.sign <= 0.0 and end not in found:
-                found.append(float(end))
+        for end, value in zip((u_min, u_max), at_ends, strict=True):
+            if value * self.sign <= 0.0 and end not in found:
+                found.append(end)
         return tuple(sorted(found))
 
     def branches_separated(self, u_min: float, u_max: float) -> bool:

@@ -8,6 +8,7 @@ import numpy as np
 
 from ._typing import ArrayLike, FloatArray
 from .backlash import GeneralBacklash
+from .data import as_float_array, as_order
 from .errors import GenBacklashError
 from .linear import LinearBlock
 
@@ -47,7 +48,12 @@ class Cascade:
     @classmethod
     def from_parameters(cls, values: ArrayLike, degree: int, na: int, nb: int) -> Cascade:
         """Inverse of :meth:`parameters`."""
-        p = np.asarray(values, dtype=float)
+        p = as_float_array("values", values)
+        degree, na, nb = as_order("degree", degree), as_order("na", na), as_order("nb", nb)
+        if degree < 1 or na < 1 or nb < 0:
+            raise GenBacklashError(
+                f"need degree >= 1, na >= 1 and nb >= 0, got degree={degree}, na={na}, nb={nb}"
+            )
         nbl = 2 * degree + 2
         if p.shape != (nbl + na - 1 + nb,):
             raise GenBacklashError(

@@ -27,6 +27,7 @@ import numpy as np
 from ._typing import ArrayLike, FloatArray
 from .backlash import GeneralBacklash
 from .cascade import Cascade
+from .data import as_float_array
 from .errors import GenBacklashError
 from .structure import Structure
 
@@ -58,9 +59,16 @@ class EstimatorState(str, Enum):
     DIVERGED = "diverged"
 
 
+def _number(name: str, value: object) -> float:
+    try:
+        return float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError) as err:
+        raise GenBacklashError(f"{name} must be a number, got {value!r}") from err
+
+
 def _frozen(values: ArrayLike, shape: tuple[int, ...], name: str) -> FloatArray:
     """``values`` as a read-only float array of ``shape`` (no copy when it already is one)."""
-    array = np.asarray(values, dtype=np.float64)
+    array = as_float_array(name, values)
     if array.shape != shape:
         raise GenBacklashError(f"{name} must have shape {shape}, got {array.shape}")
     if array.flags.writeable:
@@ -138,16 +146,20 @@ class Estimate:
             allowed = ", ".join(s.value for s in EstimatorState)
             raise GenBacklashError(f"state must be one of {allowed}, got {self.state!r}") from err
         object.__setattr__(self, "state", state)
-        confidence = float(self.confidence)
+        confidence = _number("confidence", self.confidence)
         if not 0.0 <= confidence <= 1.0:
             raise GenBacklashError(f"confidence must lie in [0, 1], got {confidence}")
         object.__setattr__(self, "confidence", confidence)
-        excitation = float(self.excitation)
+        excitation = _number("excitation", self.excitation)
         if not 0.0 <= excitation <= 1.0:
             raise GenBacklashError(f"excitation must lie in [0, 1], got {excitation}")
         object.__setattr__(self, "excitation", excitation)
-        object.__setattr__(self, "residual", float(self.residual))
-        if isinstance(self.samples, bool) or int(self.samples) != self.samples or self.samples < 0:
+        object.__setattr__(self, "residual", _number("residual", self.residual))
+        try:
+            whole = not isinstance(self.samples, bool) and int(self.samples) == self.samples
+        except (TypeError, ValueError, OverflowError):
+            whole = False
+        if not whole or self.samples < 0:
             raise GenBacklashError(f"samples must be a whole number >= 0, got {self.samples!r}")
         object.__setattr__(self, "samples", int(self.samples))
         object.__setattr__(self, "reason", str(self.reason))
@@ -234,7 +246,7 @@ class Estimate:
 
     def confidence_interval(self, level: float = 0.95) -> tuple[FloatArray, FloatArray]:
         """Two-sided normal confidence interval ``(lower, upper)`` per parameter."""
-        if not 0.0 < level < 1.0:
+        if not 0.0 < _number("level", level) < 1.0:
             raise GenBacklashError(f"level must lie strictly between 0 and 1, got {level}")
         half = NormalDist().inv_cdf(0.5 + level / 2.0) * self.std()
         return self.parameters - half, self.parameters + half
@@ -353,12 +365,9 @@ def track(
     """
     if isinstance(every, bool) or not isinstance(every, int) or every < 1:
         raise GenBacklashError(f"every must be a whole number >= 1, got {every!r}")
-    uu = np.asarray(u, dtype=np.float64)
-    yy = np.asarray(y, dtype=np.float64)
-    if uu.ndim != 1 or uu.shape != yy.shape:
-        raise GenBacklashError(
-            f"u and y must be one-dimensional of one length, got {uu.shape} and {yy.shape}"
-        )
+    if not callable(getattr(identifier, "update_many", None)):
+        raise GenBacklashError(f"identifier must be an OnlineIdentifier, got {identifier!r}")
+    uu, yy = as_series(u, y)
     out: list[Estimate] = []
     for start in range(0, uu.size, every):
         out.append(identifier.update_many(uu[start : start + every], yy[start : start + every]))
@@ -384,7 +393,8 @@ def confidence_of(state: EstimatorState, rel_std: float, converged_std: float) -
     """
     if state in (EstimatorState.WARMING_UP, EstimatorState.DIVERGED) or not math.isfinite(rel_std):
         return 0.0
-    value = 1.0 / (1.0 + (rel_std / converged_std) ** 2)
+    ratio = rel_std / converged_std
+    value = 1.0 / (1.0 + ratio * ratio)  # (not **: no OverflowError for a huge ratio)
     if state is EstimatorState.CONVERGING:
         value = min(value, 0.5)
     return value

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -9,6 +10,7 @@ import numpy as np
 from ._typing import FloatArray
 from .backlash import GeneralBacklash
 from .cascade import Cascade
+from .data import as_order, as_real
 from .errors import GenBacklashError
 from .linear import LinearBlock
 from .simulate import simulate_backlash, simulate_cascade
@@ -63,10 +65,12 @@ class PaperExample:
         SNR is the ratio of the output's and the noise's standard deviations (the paper's
         "square root of the ratio of output and noise variances").
         """
-        n = self.n_samples if n_samples is None else int(n_samples)
-        ratio = self.snr if snr is None else float(snr)
+        n = self.n_samples if n_samples is None else as_order("n_samples", n_samples)
+        ratio = self.snr if snr is None else as_real("snr", snr, finite=False)
         if n < 1 or not ratio > 0:
             raise GenBacklashError(f"need n_samples >= 1 and snr > 0, got {n} and {ratio}")
+        if as_order("seed", seed) < 0:
+            raise GenBacklashError(f"seed must be >= 0, got {seed}")
         rng = np.random.default_rng(seed)
         u = rng.uniform(-self.u_max, self.u_max, n)
         if isinstance(self.model, Cascade):
@@ -74,6 +78,8 @@ class PaperExample:
         else:
             clean = simulate_backlash(self.model, u)
         noise_std = float(np.std(clean)) / ratio
+        if not math.isfinite(noise_std):
+            raise GenBacklashError(f"snr {ratio:g} is too small: the noise overflows float64")
         y = clean + rng.normal(0.0, noise_std, n)
         return ExampleData(u=u, y=y, y_clean=clean, noise_std=noise_std)
 

@@ -10,6 +10,8 @@ iteration's noise bias.
 
 from __future__ import annotations
 
+import math
+import numbers
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -19,12 +21,21 @@ import numpy as np
 from ._typing import ArrayLike, FloatArray
 from .backlash import GeneralBacklash
 from .cascade import Cascade
-from .data import NonFinitePolicy, check_excitation, prepare_series
-from .errors import GenBacklashError
+from .data import (
+    NonFinitePolicy,
+    as_float_array,
+    as_order,
+    as_real,
+    check_excitation,
+    check_scale,
+    prepare_series,
+    scale_limits,
+)
+from .errors import GenBacklashError, NonFiniteInputError
 from .play import play_operator
 from .refine import RefinementResult, refine_parameters, simulate_parameters
 from .simulate import play_bounds
-from .structure import Structure, as_order
+from .structure import Structure
 
 __all__ = [
     "IdentificationResult",
@@ -126,13 +137,30 @@ class IdentificationResult:
 def nrmse(y: FloatArray, y_sim: FloatArray) -> float:
     """Normalised root-mean-square error ``||y - y_sim|| / ||y - mean(y)||``.
 
+    ``inf`` when ``y_sim`` holds NaN or inf (a simulation that blew up); NaN/inf in the
+    measured ``y`` raise :class:`~genbacklash_core.errors.NonFiniteInputError`.
+
     >>> nrmse(np.array([0.0, 1.0, 2.0]), np.array([0.0, 1.0, 2.0]))
     0.0
     """
-    spread = float(np.sum((y - np.mean(y)) ** 2))
+    yy, ys = as_float_array("y", y), as_float_array("y_sim", y_sim)
+    if yy.ndim != 1 or yy.shape != ys.shape or yy.size == 0:
+        raise GenBacklashError(
+            f"y and y_sim must be non-empty, one-dimensional and of one length, got shapes "
+            f"{yy.shape} and {ys.shape}"
+        )
+    if not np.all(np.isfinite(yy)):
+        raise NonFiniteInputError("y holds NaN or infinite samples; clean the data first")
+    if not np.all(np.isfinite(ys)):
+        return math.inf  # a simulation that blew up fits infinitely badly
+    scale = max(float(np.max(np.abs(yy))), float(np.max(np.abs(ys))))
+    if scale > 0.0:  # the ratio does not change with the scale; this keeps squares finite
+        yy, ys = yy / scale, ys / scale
+    spread = float(np.sum((yy - np.mean(yy)) ** 2))
     if spread == 0.0:
-        return 0.0 if np.array_equal(y, y_sim) else float("inf")
-    return float(np.sqrt(np.sum((y - y_sim) ** 2) / spread))
+        return 0.0 if np.array_equal(yy, ys) else math.inf
+    with np.errstate(over="ignore"):  # a nearly constant y: the ratio may overflow to inf
+        return float(np.sqrt(np.sum((yy - ys) ** 2) / spread))
 
 
 def _detect_sign(u: FloatArray, y: FloatArray, max_lag: int) -> float:
@@ -154,12 +182,17 @@ def _solve_least_squares(phi: FloatArray, target: FloatArray) -> FloatArray | No
     The column-scaled normal equations are formed once (cheap for the few columns here even
     at N = 1e6) and solved by ``numpy.linalg.lstsq``, whose rank decides singularity.
     """
-    gram = phi.T @ phi
+    gram = phi.T @ phi  # (called under _iterate's errstate: overflow is checked here)
+    rhs = phi.T @ target
+    if not (np.all(np.isfinite(gram)) and np.all(np.isfinite(rhs))):
+        return None  # the regressors overflow: an iterate far out of scale with the data
     scale = np.sqrt(np.diag(gram))
     if np.any(scale == 0.0):
         return None  # a regressor is identically zero, e.g. a branch never engaged
     scaled = gram / np.outer(scale, scale)
-    theta_scaled, _, rank, _ = np.linalg.lstsq(scaled, (phi.T @ target) / scale, rcond=1e-10)
+    if not np.all(np.isfinite(scaled)):
+        return None
+    theta_scaled, _, rank, _ = np.linalg.lstsq(scaled, rhs / scale, rcond=1e-10)
     if rank < phi.shape[1] or not np.all(np.isfinite(theta_scaled)):
         return None
     return np.asarray(theta_scaled / scale, dtype=np.float64)
@@ -250,6 +283,9 @@ class _IterationOutcome:
     period: int = 1  # length of the limit cycle the iteration settled in (1: a fixed point)
 
 
+# Far-off iterates overflow float64: their non-finite parameters and regressors are caught by
+# the validity check and the solver (a singular regression).
+@np.errstate(over="ignore", invalid="ignore")
 def _iterate(
     structure: Structure,
     u: FloatArray,
@@ -446,8 +482,22 @@ def _run(
         )
     if (problem := structure.problem(p)) is not None:
         raise GenBacklashError(f"invalid start: {problem}")
+    reach = float(np.max(np.abs(u))) + max(p[structure.degree], p[2 * structure.degree + 1])
+    if reach > (limit := scale_limits(structure.degree, u.size)[0]):
+        raise GenBacklashError(
+            f"invalid start: its dead zones put |u + c| up to {reach:.3g}, beyond the "
+            f"{limit:.3g} a degree-{structure.degree} regression on {u.size} samples takes"
+        )
+    max_iterations = as_order("max_iterations", max_iterations)
     if max_iterations < 1:
         raise GenBacklashError(f"max_iterations must be >= 1, got {max_iterations}")
+    tol = as_real("tol", tol)
+    if tol < 0.0:
+        raise GenBacklashError(f"tol must be >= 0, got {tol}")
+    if not isinstance(refine, (bool, np.bool_)):
+        raise GenBacklashError(f"refine must be True or False, got {refine!r}")
+    if callback is not None and not callable(callback):
+        raise GenBacklashError(f"callback must be callable or None, got {callback!r}")
 
     def attempt(start_p: FloatArray) -> _Candidate:
         return _candidate(
@@ -489,7 +539,7 @@ def _run(
 def _sign_option(sign: float | None, u: FloatArray, y: FloatArray, max_lag: int) -> float:
     if sign is None:
         return _detect_sign(u, y, max_lag)
-    if sign not in (1, -1):
+    if not isinstance(sign, numbers.Real) or sign not in (1, -1):
         raise GenBacklashError(f"sign must be +1, -1 or None (detect), got {sign!r}")
     return float(sign)
 
@@ -553,6 +603,9 @@ def identify_backlash(
     uu, xx = prepare_series(u, x, nonfinite)
     structure = Structure(degree, 0, 0, 1.0)
     check_excitation(uu, xx, structure.n_parameters)
+    check_scale(uu, xx, degree)
+    if start is not None and not isinstance(start, GeneralBacklash):
+        raise GenBacklashError(f"start must be a GeneralBacklash or None, got {start!r}")
     s = start.sign if start is not None else _sign_option(sign, uu, xx, 0)
     structure = Structure(degree, 0, 0, s)
     p0 = None
@@ -619,6 +672,9 @@ def identify_cascade(
     uu, yy = prepare_series(u, y, nonfinite)
     structure = Structure(degree, na, nb, 1.0)
     check_excitation(uu, yy, structure.n_parameters)
+    check_scale(uu, yy, degree)
+    if start is not None and not isinstance(start, Cascade):
+        raise GenBacklashError(f"start must be a Cascade or None, got {start!r}")
     s = start.backlash.sign if start is not None else _sign_option(sign, uu, yy, na + 3)
     structure = Structure(degree, na, nb, s)
     p0 = None

@@ -389,12 +389,29 @@ class _Branch:
         nearest the branch's zero crossing ``u = -shift``; merged over touching pieces.
         """
         derivative = [k * c for k, c in enumerate(self.m, 1)]  # dB/ds, ascending powers of s
-        while len(derivative) > 1 and derivative[-1] == 0.0:
+        if not all(math.isfinite(d) for d in derivative):
+            raise GenBacklashError(
+                f"the {name} branch's coefficients are too large to invert it (its slope "
+                "overflows float64)"
+            )
+        # leading terms too small to divide by cannot turn the slope where it is finite
+        negligible = 1e-290 * max(abs(d) for d in derivative)
+        while len(derivative) > 1 and abs(derivative[-1]) <= negligible:
             derivative.pop()
         cuts: list[float] = []
         if len(derivative) > 1:
-            for root in np.polynomial.polynomial.polyroots(derivative):
+            with np.errstate(all="ignore"):
+                try:
+                    roots = np.polynomial.polynomial.polyroots(derivative)
+                except np.linalg.LinAlgError as err:
+                    raise GenBacklashError(
+                        f"cannot find the monotone part of the {name} branch: its coefficients "
+                        "span too many orders of magnitude"
+                    ) from err
+            for root in roots:
                 real, imag = float(np.real(root)), float(np.imag(root))
+                if not math.isfinite(real):
+                    continue
                 if abs(imag) <= 1e-7 * max(1.0, abs(real)):
                     u = real - self.shift
                     if lo < u < hi:

@@ -13,7 +13,8 @@ import numpy as np
 from scipy import signal
 
 from ._typing import ArrayLike, FloatArray
-from .errors import GenBacklashError
+from .data import as_float_array
+from .errors import GenBacklashError, NonFiniteInputError
 
 __all__ = ["LinearBlock", "simulate_linear"]
 
@@ -38,8 +39,7 @@ class LinearBlock:
     b: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
-        a = tuple(float(v) for v in self.a)
-        b = tuple(float(v) for v in self.b)
+        a, b = _coefficients("a", self.a), _coefficients("b", self.b)
         if not a:
             raise GenBacklashError("a needs at least a_1 (na >= 1)")
         if a[0] != 1.0:
@@ -100,6 +100,13 @@ class LinearBlock:
         return simulate_linear(self, x)
 
 
+def _coefficients(name: str, values: object) -> tuple[float, ...]:
+    array = as_float_array(name, values)
+    if array.ndim != 1:
+        raise GenBacklashError(f"{name} must be a sequence of numbers, got {values!r}")
+    return tuple(array.tolist())
+
+
 def denominator_is_stable(denominator: FloatArray) -> bool:
     """True when the polynomial ``[1, b_1..b_p]`` in ``q^-1`` has all roots inside |z| < 1."""
     if len(denominator) <= 1:
@@ -114,5 +121,20 @@ def simulate_linear(block: LinearBlock, x: ArrayLike) -> FloatArray:
     >>> simulate_linear(LinearBlock(a=(1.0,), b=(-0.5,)), [1.0, 0.0, 0.0]).tolist()
     [0.0, 1.0, 0.5]
     """
-    xx = np.asarray(x, dtype=np.float64)
-    return np.asarray(signal.lfilter(block.numerator, block.denominator, xx), dtype=np.float64)
+    if not isinstance(block, LinearBlock):
+        raise GenBacklashError(f"block must be a LinearBlock, got {type(block).__name__}")
+    xx = as_float_array("x", x)
+    if xx.ndim != 1:
+        raise GenBacklashError(f"x must be one-dimensional, got shape {xx.shape}")
+    if not np.all(np.isfinite(xx)):
+        raise NonFiniteInputError("the input of the linear block holds NaN or infinite samples")
+    if xx.size == 0:
+        return np.zeros(0)
+    y = np.asarray(signal.lfilter(block.numerator, block.denominator, xx), dtype=np.float64)
+    if not np.all(np.isfinite(y)):
+        raise GenBacklashError(
+            "the linear block's output overflows float64"
+            + (" (the block is unstable)" if not block.stable else "")
+            + ": rescale the input, or check the block"
+        )
+    return y

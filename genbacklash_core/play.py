@@ -24,7 +24,8 @@ import math
 import numpy as np
 
 from ._typing import ArrayLike, FloatArray
-from .errors import GenBacklashError
+from .data import as_float_array, as_real
+from .errors import GenBacklashError, NonFiniteInputError
 
 __all__ = ["play_operator", "play_operator_loop"]
 
@@ -38,10 +39,27 @@ def play_operator_loop(lo: ArrayLike, hi: ArrayLike, x0: float = 0.0) -> FloatAr
     >>> play_operator_loop([0.0, 1.0, -1.0], [0.5, 2.0, 0.2], x0=3.0).tolist()
     [0.5, 1.0, 0.2]
     """
-    lo_list = np.asarray(lo, dtype=np.float64).tolist()
-    hi_list = np.asarray(hi, dtype=np.float64).tolist()
+    low, high, x = _bounds(lo, hi, x0)
+    return _loop(low, high, x)
+
+
+def _bounds(lo: ArrayLike, hi: ArrayLike, x0: float) -> tuple[FloatArray, FloatArray, float]:
+    """Validated bounds and start state: 1-D of one length, no NaN (infinities are open ends)."""
+    low = np.ascontiguousarray(as_float_array("lo", lo))
+    high = np.ascontiguousarray(as_float_array("hi", hi))
+    if low.ndim != 1 or low.shape != high.shape:
+        raise GenBacklashError(
+            f"lo and hi must be 1-D of one length, got {low.shape}, {high.shape}"
+        )
+    if np.isnan(low).any() or np.isnan(high).any():
+        raise NonFiniteInputError("lo and hi must not hold NaN (use +-inf for an open end)")
+    return low, high, as_real("x0", x0, finite=False)
+
+
+def _loop(lo: FloatArray, hi: FloatArray, x: float) -> FloatArray:
+    lo_list = lo.tolist()
+    hi_list = hi.tolist()
     out = [0.0] * len(lo_list)
-    x = float(x0)
     for t, (low, high) in enumerate(zip(lo_list, hi_list, strict=True)):
         if x < low:
             x = low
@@ -71,15 +89,10 @@ def play_operator(lo: ArrayLike, hi: ArrayLike, x0: float = 0.0) -> FloatArray:
     >>> play_operator([0.0, 1.0, -1.0], [0.5, 2.0, 0.2], x0=3.0).tolist()
     [0.5, 1.0, 0.2]
     """
-    low = np.ascontiguousarray(lo, dtype=np.float64)
-    high = np.ascontiguousarray(hi, dtype=np.float64)
-    if low.ndim != 1 or low.shape != high.shape:
-        raise GenBacklashError(
-            f"lo and hi must be 1-D of one length, got {low.shape}, {high.shape}"
-        )
+    low, high, x = _bounds(lo, hi, x0)
     n = low.size
     if n < _LOOP_BELOW:
-        return play_operator_loop(low, high, x0)
+        return _loop(low, high, x)
     size = max(8, math.isqrt(n) // _BLOCK_DIVISOR)  # S: samples per block
     blocks = -(-n // size)  # B: number of blocks
     pad = size * blocks - n
@@ -101,7 +114,6 @@ def play_operator(lo: ArrayLike, hi: ArrayLike, x0: float = 0.0) -> FloatArray:
 
     # Scan over blocks: the state entering each block.
     starts = np.empty(blocks)
-    x = float(x0)
     for j, (bl, bh) in enumerate(zip(block_lo.tolist(), block_hi.tolist(), strict=True)):
         starts[j] = x
         if x < bl:

@@ -48,7 +48,7 @@ import numpy as np
 from scipy import signal
 
 from ._typing import ArrayLike, BoolArray, FloatArray
-from .data import NonFinitePolicy
+from .data import NonFinitePolicy, scale_limits
 from .errors import GenBacklashError, NonFiniteInputError
 from .estimate import (
     Estimate,
@@ -143,7 +143,8 @@ class RecursiveSettings:
         ``converged`` needs every parameter's standard deviation below
         ``converged_std * max(1, max|p|)``; also the confidence scale.
     nonfinite : {"raise", "drop"}
-        NaN/inf samples raise, or are skipped.
+        NaN/inf samples, and samples too large for the regression (beyond
+        :func:`~genbacklash_core.data.scale_limits`), raise, or are skipped.
 
     Notes
     -----
@@ -250,6 +251,8 @@ class RecursiveIdentifier:
         if not isinstance(settings, RecursiveSettings):
             raise GenBacklashError(f"settings must be RecursiveSettings, got {settings!r}")
         self.settings = settings
+        # larger samples would overflow the regression: treated like NaN (``nonfinite``)
+        self._u_limit, self._y_limit = scale_limits(self._template.degree, settings.buffer)
         self._estimate: Estimate | None = None
         self.reset()
 
@@ -439,11 +442,12 @@ class RecursiveIdentifier:
     def update(self, u: float, y: float) -> Estimate:
         """Take one sample: one recursive least-squares step. Returns the current estimate."""
         uf, yf = as_sample(u, y)
-        if not (math.isfinite(uf) and math.isfinite(yf)):
+        if not (abs(uf) <= self._u_limit and abs(yf) <= self._y_limit):  # NaN fails too
             if self.settings.nonfinite == "drop":
                 return self.estimate
             raise NonFiniteInputError(
-                f"sample {self._samples} is not finite (u={uf!r}, y={yf!r}); pass "
+                f"sample {self._samples} is not finite (u={uf!r}, y={yf!r}) or beyond "
+                f"|u| <= {self._u_limit:.3g}, |y| <= {self._y_limit:.3g}; pass "
                 "nonfinite='drop' in the settings to skip such samples"
             )
         self._ring.push(uf, yf)
@@ -462,14 +466,15 @@ class RecursiveIdentifier:
     def update_many(self, u: ArrayLike, y: ArrayLike) -> Estimate:
         """Take a series of samples, in blocks of ``settings.block`` (see the module notes)."""
         uu, yy = as_series(u, y)
-        bad = ~(np.isfinite(uu) & np.isfinite(yy))
+        bad = ~((np.abs(uu) <= self._u_limit) & (np.abs(yy) <= self._y_limit))  # NaN too
         if bad.any():
             if self.settings.nonfinite == "drop":
                 uu, yy = uu[~bad], yy[~bad]
             else:
                 where = int(np.argmax(bad))
                 raise NonFiniteInputError(
-                    f"{int(bad.sum())} of {uu.size} samples are not finite (first at index "
+                    f"{int(bad.sum())} of {uu.size} samples are not finite or beyond |u| <= "
+                    f"{self._u_limit:.3g}, |y| <= {self._y_limit:.3g} (first at index "
                     f"{where}); pass nonfinite='drop' in the settings to skip such samples"
                 )
         start = 0
@@ -537,7 +542,7 @@ class RecursiveIdentifier:
             self._reason = "batch fit failed: singular information matrix"
             return
         before = self._scale_before
-        limit = s.divergence_ratio**2 * before
+        limit = s.divergence_ratio * s.divergence_ratio * before  # (** may overflow)
         if attempt < _MAX_REJECTIONS and math.isfinite(before) and fit.sigma2 > limit:
             self._reason = (
                 f"batch fit rejected: residual {math.sqrt(fit.sigma2):.3g} against "
@@ -916,7 +921,8 @@ class RecursiveIdentifier:
 
     def _track_errors(self, squared: FloatArray) -> None:
         """Running means of the squared one-step errors (short: divergence; long: scale)."""
-        limit = self.settings.divergence_ratio**2 * self._long
+        ratio = self.settings.divergence_ratio
+        limit = ratio * ratio * self._long  # (not **: an OverflowError for a huge ratio)
         if squared.size == 1:
             value = float(squared[0])
             self._short += (value - self._short) / _SHORT_MEMORY
@@ -947,7 +953,7 @@ class RecursiveIdentifier:
         if theta[1] / m_l1 <= 0.0 or theta[n + 2] / m_r1 <= 0.0:
             self._diverge("a dead-zone constant became negative")
             return
-        ratio2 = self.settings.divergence_ratio**2
+        ratio2 = self.settings.divergence_ratio * self.settings.divergence_ratio
         if self._since_start > 2 * _SHORT_MEMORY and self._short > ratio2 * self._long:
             self._diverge(
                 f"the one-step error blew up (RMS {math.sqrt(self._short):.3g} against a "

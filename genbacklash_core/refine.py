@@ -19,6 +19,7 @@ unstable linear block) are rejected like steps that raise the cost.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -27,7 +28,8 @@ from scipy import signal
 from ._typing import FloatArray
 from .backlash import GeneralBacklash
 from .cascade import Cascade
-from .errors import GenBacklashError
+from .data import as_order, as_real, check_scale, prepare_series
+from .errors import GenBacklashError, NotEnoughExcitationError
 from .play import play_operator
 from .simulate import play_bounds
 from .structure import Structure
@@ -148,6 +150,11 @@ def _jacobian(
     return jac
 
 
+_OVERFLOW = "the simulation error or its Jacobian overflows float64: the model is far out of scale"
+
+
+# Far out of scale with the data a model overflows float64: checked where it matters.
+@np.errstate(over="ignore", invalid="ignore")
 def refine_parameters(
     structure: Structure,
     p_start: FloatArray,
@@ -170,12 +177,16 @@ def refine_parameters(
     residual = y - yhat
     cost = float(residual @ residual)
     cost_start = cost
+    if not math.isfinite(cost):
+        return p, 0, False, cost, cost, _OVERFLOW
     damping = 1e-3
     accepted = 0
     for _ in range(max_iterations):
         jac = _jacobian(structure, p, u, x, yhat, x0)
         gram = jac.T @ jac
         grad = jac.T @ residual
+        if not (np.all(np.isfinite(gram)) and np.all(np.isfinite(grad))):
+            return p, accepted, accepted > 0, cost_start, cost, _OVERFLOW
         scale = np.sqrt(np.diag(gram))
         scale[scale == 0.0] = 1.0
         scaled = gram / np.outer(scale, scale)
@@ -238,11 +249,22 @@ def refine_output_error(
     >>> bool(np.max(np.abs(out.model.parameters() - ex.model.parameters())) < 0.05)
     True
     """
+    if not isinstance(model, (GeneralBacklash, Cascade)):
+        raise GenBacklashError(f"model must be a GeneralBacklash or a Cascade, got {model!r}")
     structure = Structure.of(model)
-    uu = np.asarray(u, dtype=np.float64)
-    yy = np.asarray(y, dtype=np.float64)
-    start_state = (float(yy[0]) if not structure.cascade else 0.0) if x0 is None else float(x0)
+    uu, yy = prepare_series(u, y)
+    if uu.size == 0:
+        raise NotEnoughExcitationError("no samples to refine on")
+    check_scale(uu, yy, structure.degree)
+    max_iterations = as_order("max_iterations", max_iterations)
+    if max_iterations < 0:
+        raise GenBacklashError(f"max_iterations must be >= 0, got {max_iterations}")
+    tol = as_real("tol", tol)
+    start_state = (float(yy[0]) if not structure.cascade else 0.0) if x0 is None else x0
+    start_state = as_real("x0", start_state)
     p, steps, converged, cost0, cost1, reason = refine_parameters(
         structure, model.parameters(), uu, yy, start_state, max_iterations=max_iterations, tol=tol
     )
+    if not math.isfinite(cost0):
+        raise GenBacklashError(f"cannot refine this model on these data: {reason}")
     return RefinementResult(structure.model(p), steps, converged, cost0, cost1, reason)

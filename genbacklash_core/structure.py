@@ -8,7 +8,6 @@ and turn it into a validated model object only at the end.
 from __future__ import annotations
 
 import functools
-import operator
 from dataclasses import dataclass
 
 import numpy as np
@@ -16,6 +15,7 @@ import numpy as np
 from ._typing import FloatArray
 from .backlash import GeneralBacklash, evaluate_branch
 from .cascade import Cascade
+from .data import as_order
 from .errors import GenBacklashError
 from .linear import LinearBlock, denominator_is_stable
 
@@ -30,16 +30,6 @@ def _crossing_grid(u_min: float, u_max: float) -> FloatArray:
     grid = np.linspace(u_min, u_max, _CROSSING_GRID)
     grid.flags.writeable = False
     return grid
-
-
-def as_order(name: str, value: object) -> int:
-    """``value`` as a Python int (a degree or model order), or a clear error."""
-    if isinstance(value, bool):
-        raise GenBacklashError(f"{name} must be a whole number, got {value!r}")
-    try:
-        return operator.index(value)  # type: ignore[arg-type]
-    except TypeError as err:
-        raise GenBacklashError(f"{name} must be a whole number, got {value!r}") from err
 
 
 @dataclass(frozen=True)
@@ -169,7 +159,10 @@ class Structure:
         if u_range is not None:
             grid = _crossing_grid(float(u_range[0]), float(u_range[1]))
             left, right = self.branches(p, grid)
-            crossed = (left - right) * self.sign <= 0.0
+            if not (np.all(np.isfinite(left)) and np.all(np.isfinite(right))):
+                return "the branches overflow float64 on the input range"
+            with np.errstate(over="ignore"):  # an infinite difference still has its sign
+                crossed = (left - right) * self.sign <= 0.0
             if crossed.any():
                 where = grid[crossed]
                 return (

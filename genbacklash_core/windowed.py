@@ -28,7 +28,7 @@ import numpy as np
 from scipy import signal
 
 from ._typing import ArrayLike, BoolArray, FloatArray
-from .data import NonFinitePolicy
+from .data import NonFinitePolicy, scale_limits
 from .errors import GenBacklashError, NonFiniteInputError
 from .estimate import (
     Estimate,
@@ -110,8 +110,9 @@ class WindowedSettings:
         Consecutive fits that leave the valid set (crossing branches, flipped slope, unstable
         linear block) before the state is ``diverged`` and a cold restart is tried.
     nonfinite : {"raise", "drop"}
-        NaN/inf samples raise :class:`~genbacklash_core.errors.NonFiniteInputError`, or are
-        skipped.
+        NaN/inf samples, and samples too large for the regression (beyond
+        :func:`~genbacklash_core.data.scale_limits`, ~1e30 for a cubic), raise
+        :class:`~genbacklash_core.errors.NonFiniteInputError`, or are skipped.
 
     Notes
     -----
@@ -301,8 +302,10 @@ def natural_variances(
     diag = theta_covariance.diagonal().tolist()
 
     def ratio_variance(k: int) -> float:  # var(theta_{k+1} / theta_k), delta method
-        g0 = -theta[k + 1] / theta[k] ** 2
+        if theta[k] == 0.0:  # m_1 vanished: c is undetermined
+            return math.inf
         g1 = 1.0 / theta[k]
+        g0 = -theta[k + 1] * g1 * g1  # (not / theta**2: no OverflowError or ZeroDivisionError)
         c01 = float(theta_covariance[k, k + 1])
         return float(g0 * g0 * diag[k] + 2.0 * g0 * g1 * c01 + g1 * g1 * diag[k + 1])
 
@@ -319,17 +322,19 @@ def natural_variances(
 
 def scaled_inverse(gram: FloatArray) -> FloatArray | None:
     """Inverse of a symmetric positive definite matrix, column-scaled; None when singular."""
-    scale = np.sqrt(np.diag(gram))
-    if not np.all(scale > 0.0) or not np.all(np.isfinite(gram)):
+    diag = np.diag(gram)
+    if not np.all(diag > 0.0) or not np.all(np.isfinite(gram)):  # NaN fails too
         return None
-    outer = np.outer(scale, scale)
-    try:
-        inverse = np.linalg.inv(gram / outer)
-    except np.linalg.LinAlgError:
-        return None
+    scale = np.sqrt(diag)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # checked below
+        outer = np.outer(scale, scale)
+        try:
+            inverse = np.linalg.inv(gram / outer) / outer
+        except np.linalg.LinAlgError:
+            return None
     if not np.all(np.isfinite(inverse)):
         return None
-    return np.asarray(inverse / outer, dtype=np.float64)
+    return np.asarray(inverse, dtype=np.float64)
 
 
 @dataclass
@@ -597,7 +602,7 @@ def seed_prior(template: Structure, sign_known: bool, estimate: Estimate) -> See
         )
     if estimate.model is None:
         raise GenBacklashError("cannot seed: the estimate holds no valid model")
-    sigma2 = estimate.residual**2
+    sigma2 = estimate.residual * estimate.residual  # inf, not OverflowError, when huge
     if not (math.isfinite(sigma2) and sigma2 > 0.0):
         raise GenBacklashError(
             f"cannot seed: the estimate's residual {estimate.residual!r} is not a positive number"
@@ -608,9 +613,10 @@ def seed_prior(template: Structure, sign_known: bool, estimate: Estimate) -> See
     bad = "cannot seed: the estimate's covariance is not finite and positive definite"
     if inverse is None:
         raise GenBacklashError(bad)
-    jac = theta_jacobian(saved, theta)
-    information = sigma2 * (jac.T @ inverse @ jac)  # (cov_theta / sigma2)^-1, delta method
-    information = 0.5 * (information + information.T)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # cholesky checks
+        jac = theta_jacobian(saved, theta)
+        information = sigma2 * (jac.T @ inverse @ jac)  # (cov_theta / sigma2)^-1, delta method
+        information = 0.5 * (information + information.T)
     try:
         np.linalg.cholesky(information)
     except np.linalg.LinAlgError as err:
@@ -618,6 +624,11 @@ def seed_prior(template: Structure, sign_known: bool, estimate: Estimate) -> See
     n = saved.degree
     # the f1 and -f2 columns of eq. (22) are +-1 on engaged rows: their squares count them
     rows = float(information[1, 1] + information[n + 2, n + 2])
+    if not sigma2 * max(rows, 1.0) <= 1e200:  # the fits add it to sums of squares
+        raise GenBacklashError(
+            f"cannot seed: the estimate's residual {estimate.residual!r} and covariance are "
+            "too large to use (the information they stand for overflows float64)"
+        )
     return SeedPrior(p, theta, information, sigma2, max(rows, 1.0))
 
 
@@ -892,6 +903,8 @@ class WindowedIdentifier:
         if not isinstance(settings, WindowedSettings):
             raise GenBacklashError(f"settings must be WindowedSettings, got {settings!r}")
         self.settings = settings
+        # larger samples would overflow the regression: treated like NaN (``nonfinite``)
+        self._u_limit, self._y_limit = scale_limits(self._template.degree, settings.window)
         self.reset()
 
     # ---- public interface
@@ -1025,11 +1038,12 @@ class WindowedIdentifier:
     def update(self, u: float, y: float) -> Estimate:
         """Take one sample; refit when due. Returns the current estimate."""
         uf, yf = as_sample(u, y)
-        if not (math.isfinite(uf) and math.isfinite(yf)):
+        if not (abs(uf) <= self._u_limit and abs(yf) <= self._y_limit):  # NaN fails too
             if self.settings.nonfinite == "drop":
                 return self._estimate
             raise NonFiniteInputError(
-                f"sample {self._samples} is not finite (u={uf!r}, y={yf!r}); pass "
+                f"sample {self._samples} is not finite (u={uf!r}, y={yf!r}) or beyond "
+                f"|u| <= {self._u_limit:.3g}, |y| <= {self._y_limit:.3g}; pass "
                 "nonfinite='drop' in the settings to skip such samples"
             )
         self._ring.push(uf, yf)
@@ -1041,14 +1055,15 @@ class WindowedIdentifier:
     def update_many(self, u: ArrayLike, y: ArrayLike) -> Estimate:
         """Take a series of samples; identical to :meth:`update` on each, vectorised."""
         uu, yy = as_series(u, y)
-        bad = ~(np.isfinite(uu) & np.isfinite(yy))
+        bad = ~((np.abs(uu) <= self._u_limit) & (np.abs(yy) <= self._y_limit))  # NaN too
         if bad.any():
             if self.settings.nonfinite == "drop":
                 uu, yy = uu[~bad], yy[~bad]
             else:
                 where = int(np.argmax(bad))
                 raise NonFiniteInputError(
-                    f"{int(bad.sum())} of {uu.size} samples are not finite (first at index "
+                    f"{int(bad.sum())} of {uu.size} samples are not finite or beyond |u| <= "
+                    f"{self._u_limit:.3g}, |y| <= {self._y_limit:.3g} (first at index "
                     f"{where}); pass nonfinite='drop' in the settings to skip such samples"
                 )
         start = 0

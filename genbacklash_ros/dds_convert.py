@@ -95,8 +95,18 @@ def _status(m: DiagnosticStatus) -> Any:
 def to_dds(msg: Message) -> Any:
     """The cyclonedds wire object for one of our messages (same field names and values).
 
-    Raises :class:`~genbacklash_ros.messages.MessageError` for a type without a wire type.
+    Raises :class:`~genbacklash_ros.messages.MessageError` for a type without a wire type or
+    a field it cannot convert (e.g. a data value that is not a number).
     """
+    try:
+        return _to_dds(msg)
+    except MessageError:
+        raise
+    except (AttributeError, TypeError, ValueError, OverflowError) as err:
+        raise MessageError(f"cannot convert a {type(msg).__name__} to DDS: {err}") from err
+
+
+def _to_dds(msg: Message) -> Any:
     if isinstance(msg, Float64):
         return Float64_(float(msg.data))
     if isinstance(msg, Float64MultiArray):
@@ -194,5 +204,5 @@ def from_dds(obj: object) -> Message:
         return convert(obj)
     except MessageError:
         raise
-    except (AttributeError, TypeError, ValueError) as err:
+    except (AttributeError, TypeError, ValueError, OverflowError) as err:
         raise MessageError(f"cannot convert a {type(obj).__name__}: {err}") from err

@@ -135,7 +135,11 @@ class Time:
     @classmethod
     def from_ns(cls, ns: int) -> Time:
         """The time ``ns`` nanoseconds after the epoch (floor division: ``nanosec >= 0``)."""
-        sec, nanosec = divmod(int(ns), NS_PER_S)
+        if type(ns) is not int:  # fast path: a Python int
+            if isinstance(ns, bool) or not isinstance(ns, numbers.Integral):
+                raise MessageError(f"a time in nanoseconds must be a whole number, got {ns!r}")
+            ns = int(ns)
+        sec, nanosec = divmod(ns, NS_PER_S)
         return cls(sec, nanosec)
 
     def to_ns(self) -> int:
@@ -172,6 +176,14 @@ class MultiArrayDimension:
     size: int = 0
     stride: int = 0
 
+    def __post_init__(self) -> None:
+        for name in ("size", "stride"):
+            value = getattr(self, name)
+            if not (type(value) is int and 0 <= value <= _UINT32_MAX):  # fast path
+                object.__setattr__(
+                    self, name, _whole(f"MultiArrayDimension.{name}", value, 0, _UINT32_MAX)
+                )
+
 
 @dataclass(frozen=True, slots=True)
 class MultiArrayLayout:
@@ -184,6 +196,9 @@ class MultiArrayLayout:
 
     def __post_init__(self) -> None:
         _tuple(self, "dim")
+        offset = self.data_offset
+        if not (type(offset) is int and 0 <= offset <= _UINT32_MAX):  # fast path
+            object.__setattr__(self, "data_offset", _whole("data_offset", offset, 0, _UINT32_MAX))
 
 
 @dataclass(frozen=True, slots=True)
@@ -290,6 +305,9 @@ Reading: TypeAlias = tuple[int | None, float]
 # --------------------------------------------------------------------------- reading
 
 
+_NOT_NUMBERS = (str, bytes, bytearray, dict)  # sized and indexable, but no number sequences
+
+
 def _finite(value: object, what: str) -> float:
     """``value`` as a finite float, or a :class:`MessageError` naming ``what``."""
     if type(value) is float:
@@ -298,7 +316,10 @@ def _finite(value: object, what: str) -> float:
         raise MessageError(f"{what} is not finite ({value})")
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise MessageError(f"{what} is not a number, got {value!r}")
-    number = float(value)
+    try:
+        number = float(value)
+    except OverflowError as err:  # an integer beyond the float range
+        raise MessageError(f"{what} is not finite (too large for a float)") from err
     if not math.isfinite(number):
         raise MessageError(f"{what} is not finite ({number})")
     return number
@@ -314,7 +335,11 @@ def _all_finite(values: Sequence[object], what: str) -> None:
             return
     except (TypeError, ValueError, OverflowError):
         pass  # not numbers, or an overflow of finite values: look at each
-    for k, value in enumerate(values):
+    try:
+        items = list(values)
+    except TypeError as err:
+        raise MessageError(f"{what} must be a sequence of numbers, got {values!r}") from err
+    for k, value in enumerate(items):
         _finite(value, f"{what}[{k}]")
 
 
@@ -322,7 +347,7 @@ def _stamp(msg: object, kind: str) -> int:
     try:
         stamp = msg.header.stamp  # type: ignore[attr-defined]
         return int(stamp.sec) * NS_PER_S + int(stamp.nanosec)
-    except (AttributeError, TypeError, ValueError) as err:
+    except (AttributeError, TypeError, ValueError, OverflowError) as err:
         raise MessageError(f"expected a {kind} with a header stamp, got {_kind(msg)}") from err
 
 
@@ -340,15 +365,37 @@ def _field(msg: object, name: str, expected: str) -> object:
 def _joint_index(msg: object, joint: str) -> int:
     """Index of ``joint`` in a JointState's names (0 for ``joint == ''``)."""
     names = _field(msg, "name", "JointState")
+    if not isinstance(joint, str):
+        raise MessageError(f"the joint name must be a string, got {joint!r}")
     if not joint:
         return 0
     try:
-        return int(list(names).index(joint))  # type: ignore[call-overload]
-    except (ValueError, TypeError) as err:
-        shown = list(names)[:8]  # type: ignore[call-overload]
-        more = ", ..." if len(names) > 8 else ""  # type: ignore[arg-type]
-        listed = ", ".join(repr(n) for n in shown) + more
+        listed_names: list[object] = list(names)  # type: ignore[call-overload]
+    except TypeError as err:
+        raise MessageError("JointState name must be a sequence") from err
+    try:
+        return listed_names.index(joint)
+    except ValueError as err:
+        more = ", ..." if len(listed_names) > 8 else ""
+        listed = ", ".join(repr(n) for n in listed_names[:8]) + more
         raise MessageError(f"joint {joint!r} is not in the JointState names [{listed}]") from err
+
+
+def _index(index: object) -> int:
+    """``command_index`` as an int, or a :class:`MessageError`."""
+    if type(index) is int:  # fast path
+        return index
+    if isinstance(index, bool) or not isinstance(index, numbers.Integral):
+        raise MessageError(f"command_index must be a whole number, got {index!r}")
+    return int(index)
+
+
+def _check_index(index: int, size: int) -> None:
+    if not 0 <= index < size:
+        values = "value" if size == 1 else "values"
+        raise MessageError(
+            f"command_index {index} is out of range: the Float64MultiArray holds {size} {values}"
+        )
 
 
 def _joint_position(msg: object, joint: str, *, whole: bool) -> tuple[int, float]:
@@ -361,6 +408,10 @@ def _joint_position(msg: object, joint: str, *, whole: bool) -> tuple[int, float
         n_names, n_pos = len(names), len(position)  # type: ignore[arg-type]
     except TypeError as err:
         raise MessageError("JointState name and position must be sequences") from err
+    if isinstance(position, _NOT_NUMBERS):
+        raise MessageError(
+            f"JointState position must be a sequence of numbers, not {_kind(position)}"
+        )
     if n_pos == 0:
         raise MessageError("JointState has no positions")
     if n_names and n_names != n_pos:
@@ -368,7 +419,11 @@ def _joint_position(msg: object, joint: str, *, whole: bool) -> tuple[int, float
     if index >= n_pos:
         raise MessageError(f"JointState has {n_pos} positions; joint index {index} is beyond")
     label = f"position of joint {joint!r}" if joint else "position[0]"
-    value = _finite(position[index], label)  # type: ignore[index]
+    try:
+        raw = position[index]  # type: ignore[index]
+    except (TypeError, KeyError, IndexError) as err:
+        raise MessageError("JointState position must be a sequence") from err
+    value = _finite(raw, label)
     if whole:
         for name in ("position", "velocity", "effort"):
             _all_finite(_field(msg, name, "JointState"), f"JointState {name}")  # type: ignore[arg-type]
@@ -395,18 +450,23 @@ def command_from_multi_array(msg: object, index: int) -> Reading:
     genbacklash_ros.messages.MessageError: command_index 3 is out of range: ... holds 1 value
     """
     data = _field(msg, "data", "Float64MultiArray")
+    if isinstance(data, _NOT_NUMBERS):
+        raise MessageError(
+            f"expected a Float64MultiArray, got {_kind(msg)} with {_kind(data)} data"
+        )
     try:
         size = len(data)  # type: ignore[arg-type]
     except TypeError as err:
         raise MessageError(f"expected a Float64MultiArray, got {_kind(msg)}") from err
     if size == 0:
         raise MessageError("the Float64MultiArray is empty")
-    if not 0 <= index < size:
-        values = "value" if size == 1 else "values"
-        raise MessageError(
-            f"command_index {index} is out of range: the Float64MultiArray holds {size} {values}"
-        )
-    value = _finite(data[index], f"Float64MultiArray data[{index}]")  # type: ignore[index]
+    index = _index(index)
+    _check_index(index, size)
+    try:
+        raw = data[index]  # type: ignore[index]
+    except (TypeError, KeyError, IndexError) as err:
+        raise MessageError("Float64MultiArray data must be a sequence") from err
+    value = _finite(raw, f"Float64MultiArray data[{index}]")
     _all_finite(data, "Float64MultiArray data")  # type: ignore[arg-type]
     return None, value
 
@@ -486,13 +546,20 @@ def compensated_command(
         if not isinstance(msg, Float64MultiArray):
             raise MessageError(f"expected a Float64MultiArray, got {_kind(msg)}")
         data = list(msg.data)
+        index = _index(index)
+        _check_index(index, len(data))
         data[index] = number
         return Float64MultiArray(msg.layout, tuple(data))
     if command_type == "joint_state":
         if not isinstance(msg, JointState):
             raise MessageError(f"expected a JointState, got {_kind(msg)}")
         position = list(msg.position)
-        position[_joint_index(msg, joint)] = number
+        k = _joint_index(msg, joint)
+        if k >= len(position):
+            raise MessageError(
+                f"JointState has {len(position)} positions; joint index {k} is beyond"
+            )
+        position[k] = number
         return JointState(msg.header, msg.name, tuple(position), msg.velocity, msg.effort)
     raise MessageError(f"command_type must be one of {', '.join(COMMAND_TYPES)}")
 
@@ -512,6 +579,8 @@ def estimate_message(estimate: Estimate) -> Float64MultiArray:
     >>> msg.data[3], msg.layout.dim[0].size
     (0.7, 8)
     """
+    if not isinstance(estimate, Estimate):
+        raise MessageError(f"expected an Estimate, got {_kind(estimate)}")
     if not estimate.available:
         raise MessageError("the estimate holds no parameters yet (warming up)")
     names = estimate.names
@@ -548,6 +617,11 @@ def diagnostic_array(
     >>> status.level, [kv.key for kv in status.values][:5], status.values[5].value
     (1, ['state', 'confidence', 'residual', 'excitation', 'samples'], 'n/a')
     """
+    if not isinstance(estimate, Estimate):
+        raise MessageError(f"expected an Estimate, got {_kind(estimate)}")
+    for label, text in (("message", message), ("name", name), ("hardware_id", hardware_id)):
+        if not isinstance(text, str):
+            raise MessageError(f"the diagnostic {label} must be a string, got {text!r}")
     values = [
         KeyValue("state", estimate.state.value),
         KeyValue("confidence", _text(estimate.confidence)),
@@ -558,7 +632,14 @@ def diagnostic_array(
     params = estimate.parameters.tolist()
     values += [KeyValue(n, _text(v)) for n, v in zip(estimate.names, params, strict=True)]
     values.append(KeyValue("reason", estimate.reason))
-    values += [KeyValue(k, v) for k, v in extra]
+    try:
+        pairs = [(k, v) for k, v in extra]
+    except (TypeError, ValueError) as err:
+        raise MessageError(f"extra must be (key, value) pairs, got {extra!r}") from err
+    for k, v in pairs:
+        if not (isinstance(k, str) and isinstance(v, str)):
+            raise MessageError(f"extra keys and values must be strings, got {(k, v)!r}")
+    values += [KeyValue(k, v) for k, v in pairs]
     status = DiagnosticStatus(level, name, message, hardware_id, tuple(values))
     return DiagnosticArray(Header(Time.from_ns(stamp_ns)), (status,))
 

@@ -58,7 +58,8 @@ def _floats(values: tuple[float, ...]) -> np.ndarray[Any, np.dtype[np.float64]]:
 def to_rosbags(msg: Message, typestore: Typestore | None = None) -> Any:
     """The rosbags object of ``typestore`` (default Jazzy) for one of our messages.
 
-    Serialise it with ``typestore.serialize_cdr(obj, msg.ros_type)``.
+    Serialise it with ``typestore.serialize_cdr(obj, msg.ros_type)``. Raises
+    :class:`~genbacklash_ros.messages.MessageError` for a message (or field) it cannot convert.
     """
     store = jazzy_typestore() if typestore is None else typestore
     types = store.types
@@ -99,7 +100,12 @@ def to_rosbags(msg: Message, typestore: Typestore | None = None) -> Any:
             return cls(header=convert(m.header), status=[convert(s) for s in m.status])
         raise MessageError(f"no rosbags conversion for {type(m).__name__}")
 
-    return convert(msg)
+    try:
+        return convert(msg)
+    except MessageError:
+        raise
+    except (AttributeError, KeyError, TypeError, ValueError, OverflowError) as err:
+        raise MessageError(f"cannot convert a {type(msg).__name__} to rosbags: {err}") from err
 
 
 def _floats_back(values: Any) -> tuple[float, ...]:
@@ -177,7 +183,7 @@ def from_rosbags(obj: object) -> Message:
         raise MessageError(f"no conversion from message type {msgtype or type(obj).__name__!r}")
     try:
         return convert(obj)
-    except (AttributeError, TypeError, ValueError, IndexError) as err:
+    except (AttributeError, TypeError, ValueError, IndexError, OverflowError) as err:
         if isinstance(err, MessageError):
             raise
         raise MessageError(f"cannot convert a {msgtype}: {err}") from err
