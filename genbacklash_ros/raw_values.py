@@ -223,7 +223,7 @@ class RawValueReader:
             seen = self._serialize(probe)
             if len(seen) != len(raw):
                 return None
-            if stamp_at < 0 and hasattr(obj, "header"):
+            if hasattr(obj, "header"):
                 found = seen.find(struct.pack("<iI", _STAMP_SEC, _STAMP_NSEC))
                 if found < 0:
                     return None
