@@ -25,6 +25,8 @@ BENCHMARKS = (
     "replay",
     "dds_latency",
     "soak",
+    "faults",
+    "restart",
 )
 
 
