@@ -1,13 +1,17 @@
 """A publisher process for the DDS node tests: plays the paper's Example 1 over DDS.
 
-Run as ``python tests/ros/dds_player.py --domain-id N [--rate HZ] [--seconds S]``. It waits
-until the node's readers match, then at ``rate`` Hz writes a ``std_msgs/Float64MultiArray``
-command ``[u_k, k, t_k]`` on ``rt/command`` (default QoS; ``k`` the sequence number, ``t_k``
-the write time on the system-wide monotonic clock, for latency) and then a
+Run as ``python tests/ros/dds_player.py --domain-id N [--rate HZ] [--seconds S] [--clock
+monotonic|wall]``. It waits until the node's readers match, then at ``rate`` Hz writes a
+``std_msgs/Float64MultiArray`` command ``[u_k, k, t_k]`` on ``rt/command`` (default QoS; ``k``
+the sequence number, ``t_k`` the write time in ns on the system-wide monotonic clock, for
+latency, or with ``--clock wall`` on the wall clock, i.e. the node's data time of the command)
+and then a
 ``sensor_msgs/JointState`` encoder reading ``y_k`` (joint ``j``, header stamp taken after the
 command was written) on ``rt/encoder`` (sensor-data QoS). ``u`` is Example 1's uniform random
-input, ``y`` its noisy backlash output. At the end it prints one JSON line: sent count,
-achieved rate, and the inputs (so the test can check every compensated command).
+input, ``y`` its noisy backlash output. It keeps writing whether or not a node is listening
+once one has matched (a node may be killed and restarted meanwhile). At the end it prints one
+JSON line: sent count, achieved rate, and the inputs (so the test can check every compensated
+command).
 """
 
 from __future__ import annotations
@@ -41,7 +45,9 @@ def main() -> int:
     parser.add_argument("--seconds", type=float, default=8.0)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--match-timeout", type=float, default=30.0)
+    parser.add_argument("--clock", choices=("monotonic", "wall"), default="monotonic")
     args = parser.parse_args()
+    clock_ns = time.monotonic_ns if args.clock == "monotonic" else time.time_ns
 
     n = int(args.rate * args.seconds)
     data = paper_example(1).generate(args.seed, n_samples=n)
@@ -60,7 +66,8 @@ def main() -> int:
         print(json.dumps({"error": "the node's readers did not match"}))
         return 1
     time.sleep(0.3)  # let the remote readers finish matching both ways
-    layout = MultiArrayLayout_([MultiArrayDimension_("u,seq,t_mono_ns", 3, 3)], 0)
+    label = "u,seq,t_mono_ns" if args.clock == "monotonic" else "u,seq,t_ns"
+    layout = MultiArrayLayout_([MultiArrayDimension_(label, 3, 3)], 0)
     period = 1.0 / args.rate
     start = time.monotonic()
     late = 0
@@ -72,7 +79,7 @@ def main() -> int:
         elif delay < -period:
             late += 1
         u, y = float(data.u[k]), float(data.y[k])
-        command.write(Float64MultiArray_(layout, [u, float(k), float(time.monotonic_ns())]))
+        command.write(Float64MultiArray_(layout, [u, float(k), float(clock_ns())]))
         sec, nanosec = divmod(time.time_ns(), 1_000_000_000)
         encoder.write(JointState_(Header_(Time_(sec, nanosec), ""), ["j"], [y], [], []))
     elapsed = time.monotonic() - start

@@ -384,8 +384,8 @@ def restart(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Restart]:
     second: subprocess.Popen[bytes] | None = None
     player = subprocess.Popen(
         [
-            *(sys.executable, str(HERE / "restart_player.py"), "--domain-id", str(DOMAIN)),
-            *("--rate", str(RATE_HZ), "--seconds", str(PLAYER_SECONDS)),
+            *(sys.executable, str(HERE / "dds_player.py"), "--domain-id", str(DOMAIN)),
+            *("--rate", str(RATE_HZ), "--seconds", str(PLAYER_SECONDS), "--clock", "wall"),
         ],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
