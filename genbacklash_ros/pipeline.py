@@ -47,58 +47,12 @@ The estimate is checkpointed every ``checkpoint_period`` of data time when
 
 Faults
 ------
-Nothing raises and no non-finite number is published, whatever arrives. On top of that the
-pipeline watches for signs that the measurements (or their times) cannot be trusted. Each
-such sign starts a *fault*: while any fault is active the compensated command is the command
-itself (pass-through, still within ``u_min``/``u_max`` and ``max_rate``), and the next
-``/diagnostics`` report is WARN (ERROR for a silent or stuck encoder) and says why. A fault
-clears ``FAULT_HOLD_NS`` (0.5 s) of data time after its last sign; the estimate never needs
-to be reset, so compensation resumes at once with the current estimate.
-
-* **Rejected messages** -- invalid (non-finite values, empty or mismatched JointState arrays,
-  a joint that is not there, a wrong type), duplicate or out-of-order messages, and
-  identifier errors: dropped and counted as before; each also starts a fault.
-* **Encoder silent** -- a command is received more than ``max(SILENCE_MIN_NS,
-  SILENCE_PERIODS * period)`` (0.1 s at 1 kHz; 1 s while the period is unknown) after the last
-  accepted encoder reading was (receive times: an offset between the streams' stamps does not
-  count), or an encoder reading comes that long after the previous one (ERROR, with the number
-  and the reason of the encoder messages rejected meanwhile).
-* **Clock jumped forward** -- an encoder gap with no command inside it either: both streams
-  jumped (reported instead of the silence, WARN). Samples on both sides are kept: the
-  command held across the gap is what the drivetrain held.
-* **Clock jumped back** -- ``REANCHOR_COUNT`` (3) consecutive messages of one stream, rising
-  among themselves but each more than ``REANCHOR_BACK_NS`` (0.1 s) before the stream's last
-  time: the pending samples are fed, both streams restart from the new time (the last
-  command is held into it) and so do the periodic outputs, instead of dropping every message
-  until the clock catches up. Smaller steps back are dropped as out of order until it does.
-* **Encoder losing messages** -- over windows of at least ``LOSS_WINDOW_NS`` (0.25 s) and 50
-  readings, the encoder's period is learnt while its intervals are regular (90 % within 25 %
-  of their median); in an irregular window more than ``MAX_LOSS`` (20 %) of the readings the
-  learnt period predicts are missing (gaps longer than the silence limit excluded).
-* **Encoder spikes** -- once the estimate of a general backlash has converged (it stays
-  trusted while it converges again or lacks excitation, until the identifier restarts or
-  diverges), each sample is predicted one step ahead from the previous accepted reading and
-  its command (the clamp of eq. 20); a reading more than ``SPIKE_SIGMAS`` (8) residual
-  scales from its prediction is not fed to the identifier (``encoder_spike`` drops), the
-  prediction standing in for it in the next prediction. The scale is a running average
-  (weight 0.2 per batch) of the batches' upper quartile of the absolute prediction errors /
-  1.15 (a normal sigma, robust to a quarter of outliers; at least 1e-3 of the readings'
-  magnitude). When more than ``SPIKE_MAX_SHARE`` (20 %) of a batch would be rejected the
-  model, not the encoder, is taken to be off and the batch is fed whole.
-* **Encoder stuck** -- with a trusted estimate of a general backlash (as for spikes), the
-  reading has not changed for ``STUCK_NS`` (50 ms) although the model says the held
-  command moves the load by more than ``STUCK_SIGMAS`` (5) residual scales (ERROR). Equal
-  readings wait (up to ``STILL_HOLD_NS``, 1 s) before they are fed, and those of a stuck
-  encoder are not fed at all (``encoder_stuck`` drops) until the reading changes.
-* **Command saturated** -- every command for ``SATURATION_NS`` (0.2 s) at or beyond
-  ``u_min``/``u_max`` (only with finite limits): the inverse cannot be applied there.
-
-After a gap in the fed samples (silence, lost readings, a stuck encoder), no regression row
-may span it: with a trusted estimate of a general backlash, samples are held back
-(``encoder_after_gap`` drops) until one is predicted from the last sample before the gap
-(the load was pushed onto a branch, which fixes its position whatever happened in the gap),
-``RESYNC_NS`` (0.5 s) at most. Spike, stuck and gap checks need a model of the backlash
-itself: for a cascade only the other checks run.
+Nothing raises and no non-finite number is published, whatever arrives. On top of that,
+signs that the measurements (or their times) cannot be trusted -- rejected messages, a
+silent, lossy, spiking or stuck encoder, a clock that jumps, a saturated command -- start a
+*fault*: while one is active the compensated command is the command itself and
+``/diagnostics`` says why. :class:`~genbacklash_ros.health.StreamHealth` detects them; the
+rules and their thresholds (re-exported here) are in :mod:`genbacklash_ros.health`.
 
 Examples
 --------
@@ -133,12 +87,31 @@ from genbacklash_core import (
     Estimate,
     EstimatorState,
     GenBacklashError,
-    GeneralBacklash,
     InverseBacklash,
     OnlineIdentifier,
 )
 
 from .checkpoint import Checkpoint, CheckpointError, save_checkpoint, warm_start
+
+# the fault thresholds live with the rules in health.py; importable from here as before
+from .health import _SCALE_SMOOTHING as _SCALE_SMOOTHING
+from .health import FAULT_HOLD_NS as FAULT_HOLD_NS
+from .health import LOSS_WINDOW_NS as LOSS_WINDOW_NS
+from .health import LOSS_WINDOW_READINGS as LOSS_WINDOW_READINGS
+from .health import MAX_LOSS as MAX_LOSS
+from .health import REANCHOR_BACK_NS as REANCHOR_BACK_NS
+from .health import REANCHOR_COUNT as REANCHOR_COUNT
+from .health import RESYNC_NS as RESYNC_NS
+from .health import SATURATION_NS as SATURATION_NS
+from .health import SILENCE_MIN_NS as SILENCE_MIN_NS
+from .health import SILENCE_PERIODS as SILENCE_PERIODS
+from .health import SILENCE_UNKNOWN_NS as SILENCE_UNKNOWN_NS
+from .health import SPIKE_MAX_SHARE as SPIKE_MAX_SHARE
+from .health import SPIKE_SIGMAS as SPIKE_SIGMAS
+from .health import STILL_HOLD_NS as STILL_HOLD_NS
+from .health import STUCK_NS as STUCK_NS
+from .health import STUCK_SIGMAS as STUCK_SIGMAS
+from .health import StreamHealth
 from .messages import (
     CommandMessage,
     DiagnosticArray,
@@ -175,25 +148,6 @@ DIAGNOSTICS_PERIOD_NS = 1_000_000_000  # /diagnostics at 1 Hz of data time
 BATCH_SAMPLES = 64  # encoder messages per identifier feed
 BATCH_NS = 100_000_000  # data time between identifier feeds at most
 _MAX_COMMANDS = 4096  # command history kept while no encoder data consume it
-
-# faults (see the module notes): pass-through while one is active
-FAULT_HOLD_NS = 500_000_000  # a fault clears this long after its last sign
-SILENCE_MIN_NS = 100_000_000  # encoder silent: no reading for max(this, SILENCE_PERIODS periods)
-SILENCE_PERIODS = 20
-SILENCE_UNKNOWN_NS = 1_000_000_000  # ... or this while the encoder period is not known yet
-LOSS_WINDOW_NS = 250_000_000  # encoder rate checked over windows this long (and 50 readings)
-LOSS_WINDOW_READINGS = 50
-MAX_LOSS = 0.2  # share of the expected readings missing that is a fault
-REANCHOR_COUNT = 3  # consecutive far-back messages of a stream that mean a clock jump back
-REANCHOR_BACK_NS = 100_000_000  # ... each this far before the stream's last time
-SPIKE_SIGMAS = 8.0  # a reading this many residual scales from its prediction is a spike
-SPIKE_MAX_SHARE = 0.2  # more of a batch than this: the model is off, not the encoder
-RESYNC_NS = 500_000_000  # after a gap, samples wait this long at most for a consistent one
-STUCK_NS = 50_000_000  # an unchanged reading this long, while the model says it moves ...
-STUCK_SIGMAS = 5.0  # ... by more than this many residual scales, is a stuck encoder
-STILL_HOLD_NS = 1_000_000_000  # equal readings wait this long at most before being fed
-SATURATION_NS = 200_000_000  # commands at or beyond a limit this long: saturated
-_SCALE_SMOOTHING = 0.2  # weight of a new batch in the residual scale
 
 _DROP_KEYS = (
     "command_invalid",
@@ -333,7 +287,12 @@ class BacklashPipeline:
         self._checkpoint_errors = 0
         self._last_checkpoint_ns: int | None = None
         self._params = params
-        self._reset_health()
+        self._health = StreamHealth(
+            estimate=lambda: self.estimate,
+            drop=self._drop,
+            note=self._note,
+            discard=self._discard_after,
+        )
         self._configure(params)
         self._start(params)
 
@@ -398,7 +357,7 @@ class BacklashPipeline:
         self._configure(params)
         if old.restart_needed(params):
             self._start(params)
-            self._reset_health()
+            self._health.reset()
             return
         comp = self._comp
         if comp is not None and old.compensator_options() != params.compensator_options():
@@ -506,13 +465,13 @@ class BacklashPipeline:
             stamp = header_ns if self._use_header and header_ns else int(receive_ns)
             last = self._last_cmd_ns
             if last is not None and stamp <= last:
-                if not self._jumped_back(self._cmd_back, "command", stamp, last):
+                back = self._health.jumped_back("command", stamp, last)
+                if back is None:
                     key = "command_duplicate" if stamp == last else "command_out_of_order"
                     self._drop(key, _order_text("command", stamp, last))
                     return None
-            elif self._cmd_back:
-                self._cmd_back.clear()
-            self._check_command(stamp, value, int(receive_ns))
+                self._reanchor("command", stamp, last, back)
+            self._health.check_command(stamp, value, int(receive_ns), self._options)
             sent = self._compensate(value, stamp)
         except MessageError as err:
             self._drop("command_invalid", f"command: {err}")
@@ -549,18 +508,16 @@ class BacklashPipeline:
         stamp = header_ns if self._use_header and header_ns else int(receive_ns)
         last = self._last_enc_ns
         if last is not None and stamp <= last:
-            if not self._jumped_back(self._enc_back, "encoder", stamp, last):
+            back = self._health.jumped_back("encoder", stamp, last)
+            if back is None:
                 key = "encoder_duplicate" if stamp == last else "encoder_out_of_order"
                 self._drop(key, _order_text("encoder", stamp, last))
                 return []
+            self._reanchor("encoder", stamp, last, back)
             last = None  # re-anchored: this reading starts the new time line
-        elif self._enc_back:
-            self._enc_back.clear()
-        if last is not None:
-            self._watch_rate(stamp, last)
-        self._enc_rejects = 0
-        self._last_enc_rx: int | None = int(receive_ns)
-        stuck = self._watch_stuck(stamp, last, value)
+        stuck = self._health.check_reading(
+            stamp, last, value, self._last_y, int(receive_ns), self._cmd_t, self._cmd_u
+        )
         self._last_enc_ns = stamp
         self._last_y = value
         if not stuck:
@@ -614,14 +571,10 @@ class BacklashPipeline:
             parts.insert(0, "using the checkpoint's estimate until the identifier converges")
         elif self.using_checkpoint:
             parts.insert(0, "continuing from the checkpoint's estimate")
-        passing = self._passing_through(stamp_ns)
-        if passing:
-            level = max(level, *(lvl for lvl, _ in self._faults.values()))
-            names = ", ".join(key.replace("_", " ") for key in self._faults)
-            parts.append(f"compensation passes the command through ({names})")
-        for lvl, text in self._fault_texts.values():
-            level = max(level, lvl)
-            parts.append(text)
+        health = self._health.report(stamp_ns)
+        passing = health.passing
+        level = max(level, health.level)
+        parts.extend(health.parts)
         loud = {k: n for k, n in self._period_drops.items() if k not in _QUIET_DROPS}
         if loud:
             level = max(level, DiagnosticStatus.WARN)
@@ -643,7 +596,7 @@ class BacklashPipeline:
             ("identifier_state", own.state.value),
             ("identifier_confidence", format(own.confidence, ".3g")),
             ("compensation_weight", format(0.0 if passing else self._weight(est), ".3g")),
-            ("faults", ",".join(self._faults) or "none"),
+            ("faults", ",".join(health.active) or "none"),
             ("commands", str(self._commands)),
             ("encoder_messages", str(self._encoders)),
             ("compensated_commands", str(self._compensated)),
@@ -659,7 +612,6 @@ class BacklashPipeline:
         self._period_drops = {}
         self._period_reasons = {}
         self._period_problems = []
-        self._fault_texts.clear()
         hardware = self._params.joint
         message = diagnostic_array(
             stamp_ns,
@@ -691,7 +643,8 @@ class BacklashPipeline:
         comp = self._comp
         if comp is None:
             return self._limit(value)
-        confidence = 0.0 if self._faults and self._passing_through(stamp) else est.confidence
+        health = self._health
+        confidence = 0.0 if health.faults and health.passing_through(stamp) else est.confidence
         sent = comp.step(value, confidence)
         return sent if math.isfinite(sent) else self._limit(value)
 
@@ -754,10 +707,8 @@ class BacklashPipeline:
         horizon = self._horizon(final)
         if horizon is None or not self._enc_t:
             return
-        still = self._still_since
-        if still is not None and not final and self._now is not None:
-            if self._now - still < STILL_HOLD_NS:  # equal readings wait: the encoder may be stuck
-                horizon = min(horizon, still)
+        if not final and self._now is not None:  # equal readings wait: the encoder may be stuck
+            horizon = self._health.feed_horizon(horizon, self._now)
         if self._grid_ns:
             times, ys = self._grid_samples(horizon)
         else:
@@ -784,7 +735,7 @@ class BacklashPipeline:
         keep = int(k[-1])  # the command holding at the last sample, and later ones
         if keep:
             del self._cmd_t[:keep], self._cmd_u[:keep]
-        us, ys = self._reject_spikes(times, us, ys)
+        us, ys = self._health.screen(times, us, ys, self.estimate)
         if us.size == 0:
             return
         try:
@@ -891,322 +842,7 @@ class BacklashPipeline:
         self._checkpoints += 1
         self._last_checkpoint_ns = now
 
-    # ------------------------------------------------------------------ faults
-
-    def _reset_health(self) -> None:
-        """Forget the faults and what detects them (construction, restart)."""
-        self._faults: dict[str, tuple[int, int]] = {}  # key -> (level, pass through until)
-        self._fault_texts: dict[str, tuple[int, str]] = {}  # since the last report
-        self._enc_rejects = 0  # encoder messages rejected since the last accepted one
-        self._last_enc_rx = None  # receive time of the last accepted reading
-        self._enc_reject_reason = ""
-        self._cmd_back: list[int] = []  # times of consecutive far-back messages
-        self._enc_back: list[int] = []
-        self._enc_period: float | None = None  # learnt while the encoder is regular
-        self._silence = SILENCE_UNKNOWN_NS
-        self._gaps: list[int] = []  # encoder intervals of the current rate window
-        self._gaps_from: int | None = None
-        self._still_since: int | None = None  # time of the first of equal readings
-        self._stuck = False
-        self._stuck_why = ""
-        self._sat_since: int | None = None  # time of the first of saturated commands
-        self._fed_t: int | None = None  # the last sample fed (spike prediction)
-        self._fed_y: float | None = None
-        self._scale: float | None = None  # robust scale of the one-step prediction errors
-        self._resync_since: int | None = None  # time of the first sample after a gap
-        self._converged = False  # the estimate has converged since the identifier started
-
-    def _fault(self, key: str, level: int, text: str, at: int | None = None) -> None:
-        """Start (or prolong) fault ``key``: pass-through until ``FAULT_HOLD_NS`` after ``at``
-        (default: the data clock); ``text`` goes into the next report."""
-        start = self._now if at is None else at
-        until = (0 if start is None else start) + FAULT_HOLD_NS
-        old = self._faults.get(key)
-        if old is not None:
-            level, until = max(level, old[0]), max(until, old[1])
-        self._faults[key] = (level, until)
-        if text:
-            self._fault_texts[key] = (level, text)
-            self._last_problem = text
-
-    def _clear_fault(self, key: str) -> None:
-        self._faults.pop(key, None)
-        self._fault_texts.pop(key, None)
-
-    def _passing_through(self, now: int) -> bool:
-        """True while a fault is active at data time ``now`` (forgets those that cleared)."""
-        faults = self._faults
-        for key in [k for k, (_, until) in faults.items() if until <= now]:
-            del faults[key]
-        return bool(faults)
-
-    def _check_command(self, stamp: int, value: float, receive_ns: int) -> None:
-        """Encoder silence (on the receive clock: immune to an offset between the streams'
-        stamps) and command saturation, seen from an accepted command."""
-        last_rx = self._last_enc_rx
-        if last_rx is not None and receive_ns - last_rx > self._silence:
-            silent = receive_ns - last_rx
-            self._fault("encoder_silent", DiagnosticStatus.ERROR, self._silent_text(silent), stamp)
-        opts = self._options
-        if value >= opts.u_max or value <= opts.u_min:
-            since = self._sat_since
-            if since is None:
-                self._sat_since = stamp
-            elif stamp - since >= SATURATION_NS:
-                name, limit = (
-                    ("u_max", opts.u_max) if value >= opts.u_max else ("u_min", opts.u_min)
-                )
-                self._fault(
-                    "command_saturated",
-                    DiagnosticStatus.WARN,
-                    f"command saturated at limit {name} = {limit:g} for "
-                    f"{(stamp - since) / 1e9:.3f} s (last command {value:.6g})",
-                    stamp,
-                )
-        elif self._sat_since is not None:
-            self._sat_since = None
-
-    def _silent_text(self, silent_ns: int) -> str:
-        text = f"encoder silent for {silent_ns / 1e9:.3f} s"
-        if self._enc_rejects:
-            text += (
-                f" ({self._enc_rejects} encoder messages rejected meanwhile, last: "
-                f"{self._enc_reject_reason})"
-            )
-        return text
-
-    def _watch_rate(self, stamp: int, last: int) -> None:
-        """Encoder gaps (silence, clock jump forward) and message loss, per reading."""
-        gap = stamp - last
-        if gap > self._silence:
-            self._encoder_gap(stamp, last)
-        else:
-            self._gaps.append(gap)
-        start = self._gaps_from
-        if start is None:
-            self._gaps_from = last
-        elif stamp - start >= LOSS_WINDOW_NS and len(self._gaps) >= LOSS_WINDOW_READINGS:
-            self._check_rate(stamp)
-
-    def _encoder_gap(self, stamp: int, last: int) -> None:
-        """An encoder gap longer than the silence limit: lost readings or a clock jump."""
-        gap = stamp - last
-        margin = min(self._silence, gap // 4)
-        first = bisect.bisect_right(self._cmd_t, last + margin)
-        inside = bisect.bisect_left(self._cmd_t, stamp - margin) > first
-        if self._cmd_t and not inside:  # neither stream has anything in the gap
-            self._clear_fault("encoder_silent")
-            self._fault(
-                "clock_jump_forward",
-                DiagnosticStatus.WARN,
-                f"clock jumped forward {gap / 1e9:.3f} s (no command nor encoder reading in "
-                "between)",
-                stamp,
-            )
-        else:
-            self._fault("encoder_silent", DiagnosticStatus.ERROR, self._silent_text(gap), stamp)
-
-    def _check_rate(self, stamp: int) -> None:
-        """Close a rate window: learn the period when regular, else look for lost readings."""
-        gaps = np.array(self._gaps, dtype=np.float64)
-        self._gaps = []
-        self._gaps_from = stamp
-        median = float(np.median(gaps))
-        if np.mean(np.abs(gaps - median) <= 0.25 * median) >= 0.9:
-            self._enc_period = median
-            self._silence = max(SILENCE_MIN_NS, round(SILENCE_PERIODS * median))
-            return
-        period = self._enc_period
-        if period is None:
-            return
-        span = float(gaps.sum())
-        loss = 1.0 - gaps.size * period / span
-        if loss > MAX_LOSS:
-            self._fault(
-                "encoder_loss",
-                DiagnosticStatus.WARN,
-                f"encoder lost {loss:.0%} of its readings over {span / 1e9:.2f} s (one expected "
-                f"every {period / 1e6:.3g} ms)",
-                stamp,
-            )
-
-    def _watch_stuck(self, stamp: int, last: int | None, value: float) -> bool:
-        """True when the reading at ``stamp`` belongs to a stuck encoder (not to be fed)."""
-        if last is None or value != self._last_y:
-            self._still_since, self._stuck = None, False
-            return False
-        since = self._still_since
-        if since is None:
-            self._still_since = last
-            return False
-        if stamp - since < STUCK_NS:
-            return False
-        if not self._stuck:
-            why = self._stuck_reason(value)
-            if not why:
-                return False
-            self._stuck, self._stuck_why = True, why
-            cut = bisect.bisect_right(self._enc_t, since)  # keep the first equal reading
-            held = len(self._enc_t) - cut
-            if held:
-                del self._enc_t[cut:], self._enc_y[cut:]
-                self._drop("encoder_stuck", "encoder reading unchanged", held)
-        self._drop("encoder_stuck", "encoder reading unchanged")
-        self._fault(
-            "encoder_stuck",
-            DiagnosticStatus.ERROR,
-            f"encoder stuck at {value:.6g} for {(stamp - since) / 1e9:.3f} s{self._stuck_why}",
-            stamp,
-        )
-        return True
-
-    def _trusted(self, est: Estimate) -> bool:
-        """Whether ``est`` may judge the readings (spikes, stuck, gaps): the identifier has
-        converged since it last (re)started, and a residual scale is known."""
-        state = est.state
-        if state is EstimatorState.CONVERGED:
-            self._converged = True
-        elif state in (EstimatorState.WARMING_UP, EstimatorState.DIVERGED):
-            self._converged = False
-        return self._converged and self._scale is not None
-
-    def _stuck_reason(self, value: float) -> str:
-        """Why an unchanged reading ``value`` is stuck ("" when the model allows it)."""
-        est = self.estimate
-        model = est.model
-        scale = self._scale
-        trusted = self._trusted(est)
-        if (
-            not trusted
-            or scale is None
-            or not isinstance(model, GeneralBacklash)
-            or not self._cmd_u
-        ):
-            return ""
-        u = self._cmd_u[-1]
-        with np.errstate(all="ignore"):
-            left, right = float(model.left([u])[0]), float(model.right([u])[0])
-        move = max(min(left, right) - value, value - max(left, right))
-        if not (math.isfinite(move) and move > max(STUCK_SIGMAS * scale, 1e-3 * abs(value))):
-            return ""
-        return f" although the model moves the load by {move:.3g} at the command {u:.6g}"
-
-    def _reject_spikes(
-        self, times: np.ndarray, us: np.ndarray, ys: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """The samples without spikes and without rows spanning a gap (see the module
-        notes); tracks the scale of the one-step prediction errors."""
-        t_prev, y_prev = self._fed_t, self._fed_y
-        self._fed_t, self._fed_y = int(times[-1]), float(ys[-1])
-        est = self.estimate
-        model = est.model
-        if not isinstance(model, GeneralBacklash):
-            return us, ys
-        with np.errstate(all="ignore"):
-            left, right = model.left(us), model.right(us)
-            low, high = np.minimum(left, right), np.maximum(left, right)
-        # a gap before a sample (or no sample before it): not predicted from the one before
-        fresh = np.diff(times, prepend=times[0] if t_prev is None else t_prev) > self._silence
-        if t_prev is None or y_prev is None:
-            fresh[0] = True
-        scale = self._scale
-        trusted = self._trusted(est)
-        limit = SPIKE_SIGMAS * scale if trusted and scale is not None else math.inf
-        resync = self._resync_since
-        if resync is None and y_prev is not None and not fresh.any():
-            # the usual case at once: each reading predicted from the one before it
-            previous = np.concatenate(([y_prev], ys[:-1]))
-            with np.errstate(all="ignore"):
-                errs = np.abs(ys - np.minimum(np.maximum(previous, low), high))
-            if not np.any(errs > limit):
-                self._track_scale(errs, ys)
-                return us, ys
-        errors: list[float] = []
-        bad: list[int] = []  # spikes
-        held: list[int] = []  # after a gap, until a sample follows from the one before it
-        worst = (0.0, 0.0, 0.0)
-        x = y_prev
-        for i, (t, y, lo, hi, new) in enumerate(
-            zip(
-                times.tolist(),
-                ys.tolist(),
-                low.tolist(),
-                high.tolist(),
-                fresh.tolist(),
-                strict=True,
-            )
-        ):
-            if x is None or (new and not trusted):
-                x = y
-                continue
-            if new:
-                resync = t
-            predicted = min(max(x, lo), hi)  # the clamp of eq. (20)
-            error = y - predicted
-            if resync is not None:
-                if abs(error) <= limit or t - resync >= RESYNC_NS:
-                    resync, x = None, y  # consistent with the sample before the gap
-                else:
-                    held.append(i)
-            elif abs(error) > limit:
-                bad.append(i)
-                x = predicted  # the prediction stands in for the spike
-                if abs(error) > abs(worst[1]):
-                    worst = (y, error, predicted)
-            else:
-                errors.append(abs(error))
-                x = y
-        self._resync_since = resync
-        self._track_scale(np.array(errors), ys)
-        if len(bad) > SPIKE_MAX_SHARE * ys.size:
-            bad = []  # the model is off rather than the encoder: feed them
-        elif bad:
-            y, error, predicted = worst
-            self._drop(
-                "encoder_spike",
-                f"encoder reading {y:.6g} is {error:+.3g} from the model's prediction "
-                f"{predicted:.6g} (limit {limit:.3g})",
-                len(bad),
-            )
-        if held:
-            self._drop("encoder_after_gap", "sample after a gap not yet consistent", len(held))
-        if not bad and not held:
-            return us, ys
-        if x is not None:
-            self._fed_y = x
-        keep = np.ones(ys.size, dtype=bool)
-        keep[bad] = False
-        keep[held] = False
-        return us[keep], ys[keep]
-
-    def _track_scale(self, errors: np.ndarray, ys: np.ndarray) -> None:
-        """Blend a batch's absolute prediction errors into the residual scale (their upper
-        quartile / 1.15, a normal sigma; at least 1e-3 of the readings' magnitude)."""
-        errors = errors[np.isfinite(errors)]  # an overflowing branch gives NaN or inf
-        if errors.size == 0:
-            return
-        k = (errors.size - 1) * 3 // 4
-        floor = 1e-3 * float(np.max(np.abs(ys)))
-        batch = max(float(np.partition(errors, k)[k]) / 1.15, floor, 1e-300)
-        if batch < math.inf:
-            scale = self._scale
-            self._scale = batch if scale is None else scale + _SCALE_SMOOTHING * (batch - scale)
-
-    def _jumped_back(self, run: list[int], stream: str, stamp: int, last: int) -> bool:
-        """Whether a message of ``stream`` at ``stamp``, not after ``last``, completes a run
-        that shows its clock jumped back; re-anchors then (see the module notes)."""
-        if last - stamp < REANCHOR_BACK_NS:
-            run.clear()
-            return False
-        if run and stamp <= run[-1]:
-            run.clear()
-        run.append(stamp)
-        if len(run) < REANCHOR_COUNT:
-            return False
-        # the first of the run came about one message interval after the last accepted one
-        back = last - run[0] + (stamp - run[0]) // (len(run) - 1)
-        self._reanchor(stream, stamp, last, back)
-        return True
+    # ------------------------------------------------------------------ faults (see health.py)
 
     def _reanchor(self, stream: str, stamp: int, last: int, back: int) -> None:
         """Restart alignment and the data clock at ``stamp`` after a clock jump back (by
@@ -1222,20 +858,17 @@ class BacklashPipeline:
             self._cmd_t, self._cmd_u = [], []
             self._last_cmd_ns = None
         self._last_enc_ns = None
-        self._cmd_back.clear()
-        self._enc_back.clear()
         self._now = None  # the next accepted message restarts the schedule
-        self._faults = {k: (lvl, stamp + FAULT_HOLD_NS) for k, (lvl, _) in self._faults.items()}
-        self._gaps, self._gaps_from = [], None
-        self._still_since, self._stuck, self._sat_since = None, False, None
-        self._fed_t = None
-        self._fault(
-            "clock_jump_back",
-            DiagnosticStatus.WARN,
-            f"clock jumped back {back / 1e9:.3f} s ({stream} time {stamp} ns after {last} ns): "
-            "alignment re-anchored",
-            stamp,
-        )
+        self._health.reanchored(stream, stamp, last, back)
+
+    def _discard_after(self, since: int) -> int:
+        """Drop the pending encoder readings after ``since`` (a stuck encoder's, the first
+        equal reading kept); how many there were."""
+        cut = bisect.bisect_right(self._enc_t, since)
+        held = len(self._enc_t) - cut
+        if held:
+            del self._enc_t[cut:], self._enc_y[cut:]
+        return held
 
     # ------------------------------------------------------------------ problems
 
@@ -1244,11 +877,15 @@ class BacklashPipeline:
         self._period_drops[key] = self._period_drops.get(key, 0) + count
         self._period_reasons[key] = reason
         if key in _ENCODER_REJECTS:
-            self._enc_rejects += count
-            self._enc_reject_reason = reason
+            self._health.encoder_rejected(count, reason)
         if key not in _QUIET_DROPS:
             self._last_problem = reason
-            self._fault(key, DiagnosticStatus.WARN, "")  # the drop report says why
+            # the drop report says why
+            self._health.fault(key, DiagnosticStatus.WARN, "", self._now)
+
+    def _note(self, text: str) -> None:
+        """``text`` is the latest problem (a fault's reason)."""
+        self._last_problem = text
 
     def _problem(self, text: str) -> None:
         if text not in self._period_problems:
