@@ -177,3 +177,15 @@ def test_colcon_build_installs_the_node(tmp_path: Path) -> None:
         assert ran.returncode == 2, ran.stderr
         assert "rclpy cannot be imported" in ran.stderr
         assert "Traceback" not in ran.stderr
+
+
+def test_package_xml_passes_catkin_pkg_validation() -> None:
+    """The manifest as colcon, rosdep and bloom read it (catkin_pkg, installed with colcon-ros)."""
+    package = pytest.importorskip(
+        "catkin_pkg.package", reason="catkin_pkg comes with colcon-ros (pip install -e '.[dev]')"
+    )
+    manifest = package.parse_package(str(ROOT / "package.xml"))
+    manifest.validate()  # raises InvalidPackage with the reason
+    assert manifest.package_format == 3
+    assert manifest.get_build_type() == "ament_python"
+    assert "rclpy" in {dep.name for dep in manifest.exec_depends}
