@@ -6,6 +6,11 @@ their own loop. See ``genbacklash_ros`` for IO, the node and the command line.
 
 from __future__ import annotations
 
+import sys
+
+if sys.version_info < (3, 10):  # noqa: UP036 - not declared in the metadata (colcon)
+    raise ImportError(f"genbacklash needs Python 3.10 or newer; this is {sys.version.split()[0]}")
+
 from .backlash import GeneralBacklash
 from .cascade import Cascade
 from .data import check_excitation, count_reversals, prepare_series

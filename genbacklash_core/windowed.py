@@ -1084,7 +1084,7 @@ class WindowedIdentifier:
         after :meth:`seed`, until ``min_samples`` new samples arrived, the seed stands.
         """
         if len(self._ring) >= (1 if self._seed is None else self.min_samples):
-            self._fit()
+            self._fit(early=True)
         return self._publish()
 
     # ---- internals
@@ -1103,12 +1103,17 @@ class WindowedIdentifier:
         self._last_fit_at = self._samples
         self._next_fit = self._samples + k
 
-    def _fit(self) -> None:
+    def _fit(self, early: bool = False) -> None:
         u, y = self._ring.window()
         if self._needs_cold:
             self._cold_start(u, y)
         else:
-            self._warm_fit(u, y)
+            recent = self._samples - self._last_fit_at
+            if early:  # refit(): judge the excitation on as many samples as the scheduled fit
+                # would have, not on the few since the last fit (a record ending at rest
+                # would otherwise freeze a converged estimate as `no_excitation`)
+                recent = max(recent, min(self._next_fit - self._last_fit_at, len(self._ring)))
+            self._warm_fit(u, y, recent)
         self._schedule()
         self._rebuild()
 
@@ -1153,7 +1158,7 @@ class WindowedIdentifier:
             self._state = EstimatorState.DIVERGED
             self._reason = f"diverged; {self._reason}"
 
-    def _warm_fit(self, u: FloatArray, y: FloatArray) -> None:
+    def _warm_fit(self, u: FloatArray, y: FloatArray, recent: int) -> None:
         assert self._p is not None
         s = self.settings
         weight = self._seed_weight()
@@ -1169,7 +1174,7 @@ class WindowedIdentifier:
             tol=s.tol,
             settle=s.settle,
             deadband=self._deadband(u),
-            recent=self._samples - self._last_fit_at,
+            recent=recent,
             min_excitation=s.min_excitation,
             prior=prior,
         )

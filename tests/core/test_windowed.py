@@ -425,3 +425,22 @@ def test_refit_right_after_a_seed_keeps_the_seed() -> None:
     est = ident.refit()
     assert est.state is EstimatorState.CONVERGED and est.samples == saved.samples + 100
     assert np.all(np.abs(est.parameters - saved.parameters) <= 3.0 * saved.std())
+
+
+@pytest.mark.parametrize("resting", [1, 3, 10])
+def test_refit_at_the_end_of_a_record_at_rest_keeps_a_converged_estimate(resting: int) -> None:
+    """A record that ends a few samples after a scheduled fit, with the input at rest: the
+    final refit() judges the excitation over a scheduled fit's span, not over those few
+    samples (which would freeze the estimate as no_excitation)."""
+    data = paper_example(1).generate(seed=3, n_samples=3000)
+    ident = WindowedIdentifier(degree=3)
+    ident.update_many(data.u[:2000], data.y[:2000])
+    params = ident.estimate.parameters
+    end = 2000
+    while np.array_equal(ident.estimate.parameters, params):  # up to the next scheduled fit
+        ident.update(data.u[end], data.y[end])
+        end += 1
+    assert ident.estimate.state is EstimatorState.CONVERGED
+    ident.update_many(np.full(resting, data.u[end - 1]), np.full(resting, data.y[end - 1]))
+    final = ident.refit()
+    assert final.state is EstimatorState.CONVERGED, final.reason

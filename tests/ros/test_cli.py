@@ -11,7 +11,14 @@ import numpy as np
 import pytest
 
 from genbacklash_core import paper_example
-from genbacklash_ros.cli import EXIT_BAD_INPUT, EXIT_NOT_CONVERGED, EXIT_OK, build_parser, main
+from genbacklash_ros.cli import (
+    EXIT_BAD_INPUT,
+    EXIT_BROKEN_PIPE,
+    EXIT_NOT_CONVERGED,
+    EXIT_OK,
+    build_parser,
+    main,
+)
 from genbacklash_ros.csvio import Series, read_series_csv, write_series_csv
 
 
@@ -143,3 +150,18 @@ def test_demo_runs_as_a_console_script(tmp_path: Path) -> None:
     for name in ("characteristic.png", "history.png", "result.json", "data.csv"):
         assert (out / name).exists()
     assert json.loads((out / "result.json").read_text())["model"] == "cascade"
+
+
+def test_closed_stdout_ends_quietly(tmp_path: Path) -> None:
+    """`genbacklash identify DATA | head -1`: the reader leaves early; no traceback."""
+    data = _simulate(tmp_path, 1)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "genbacklash_ros.cli", "identify", str(data)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    assert proc.stdout is not None and proc.stderr is not None
+    proc.stdout.close()  # as `head` does once it has its line, before the table is printed
+    stderr = proc.stderr.read().decode()
+    assert proc.wait(timeout=120) == EXIT_BROKEN_PIPE
+    assert stderr == ""
