@@ -135,16 +135,25 @@ def aligned_samples(events: list[Event]) -> tuple[np.ndarray, np.ndarray]:
     return cmd_u[k[k >= 0]], enc_y[k >= 0]
 
 
-def run_identifier_only(samples: tuple[np.ndarray, np.ndarray], method: str) -> float:
+WARMUP_SAMPLES = 5000  # the identifier's warm-up (cold starts) is over well before this
+
+
+def run_identifier_only(samples: tuple[np.ndarray, np.ndarray], method: str) -> tuple[float, float]:
     """The node's online identifier (default settings) alone on aligned samples, fed in the
-    pipeline's batches: the estimation's own floor, with no IO, alignment or compensation."""
+    pipeline's batches: the estimation's own floor, with no IO, alignment or compensation.
+    Seconds for the whole record and for the samples after the first ``WARMUP_SAMPLES``
+    (the steady state, without the warm-up's cold starts)."""
     u, y = samples
     params = NodeParameters(command_type="float64_multi_array", method=method)
     started = time.perf_counter()
+    warmed = started
     identifier = warm_start(params).identifier
     for start in range(0, u.size, BATCH_SAMPLES):
+        if start == WARMUP_SAMPLES // BATCH_SAMPLES * BATCH_SAMPLES:
+            warmed = time.perf_counter()
         identifier.update_many(u[start : start + BATCH_SAMPLES], y[start : start + BATCH_SAMPLES])
-    return time.perf_counter() - started
+    ended = time.perf_counter()
+    return ended - started, ended - warmed
 
 
 def main() -> None:
@@ -163,7 +172,9 @@ def main() -> None:
             "floor": [],
             "pipe": [],
             "windowed": [],
+            "windowed_steady": [],
             "recursive": [],
+            "recursive_steady": [],
         }
         n_enc = n_out = 0
         for k in range(REPEATS):  # round-robin: load bursts hit all alike
@@ -173,12 +184,18 @@ def main() -> None:
             rows["decode"].append(run_decode_all(bag, root / "decode"))
             rows["floor"].append(run_io_floor(bag, root / "floor", n_out))
             rows["pipe"].append(run_pipeline_only(events))
-            rows["windowed"].append(run_identifier_only(samples, "windowed"))
-            rows["recursive"].append(run_identifier_only(samples, "recursive"))
+            for method in ("windowed", "recursive"):
+                whole, steady = run_identifier_only(samples, method)
+                rows[method].append(whole)
+                rows[f"{method}_steady"].append(steady)
         with BagReader(bag) as reader:
             n_cmd = reader.topics[COMMAND_TOPIC].count
     best = {key: min(values) for key, values in rows.items()}
     rate = {key: n_enc / value for key, value in best.items()}
+    n_steady = samples[0].size - WARMUP_SAMPLES // BATCH_SAMPLES * BATCH_SAMPLES
+    for method in ("windowed", "recursive"):
+        rate[f"{method}_steady"] = n_steady / best[f"{method}_steady"]
+    warmup = {m: best[m] - best[f"{m}_steady"] for m in ("windowed", "recursive")}
     table = md_table(
         ["path", "best of 3 (s)", "encoder msgs/s", "ours / it (time)"],
         [
@@ -210,6 +227,15 @@ def main() -> None:
                 ]
                 for method in ("windowed", "recursive")
             ),
+            *(
+                [
+                    f"{method} identifier alone, after the first {WARMUP_SAMPLES:,} samples",
+                    f"{best[f'{method}_steady']:.3f}",
+                    f"{rate[f'{method}_steady']:,.0f}",
+                    "",
+                ]
+                for method in ("windowed", "recursive")
+            ),
         ],
     )
     verdict = "met" if rate["ours"] >= 100_000 else "NOT met"
@@ -217,15 +243,14 @@ def main() -> None:
         name
         for key, name in (
             ("floor", "the rosbags IO alone"),
-            ("windowed", "the default (windowed) estimation alone"),
+            ("windowed", "the default (windowed) estimation with its warm-up"),
         )
         if rate[key] < 100_000
     ]
     floors = (
         f"On this machine {' and '.join(slow)} already {'take' if len(slow) > 1 else 'takes'} "
-        "more than the 10 us per "
-        "encoder message the target allows, so it cannot be met by tuning the replay: it "
-        "needs compiled MCAP IO and a cheaper (compiled, or less frequent) estimator."
+        "more than the 10 us per encoder message the target allows, so no tuning of the "
+        "replay itself can meet it."
         if slow
         else "Each stage alone fits in the 10 us per encoder message the target allows."
     )
@@ -249,7 +274,11 @@ runs at {rate["floor"]:,.0f} encoder messages/s on this bag; the pipeline alone 
 identifier included) at {rate["pipe"]:,.0f}/s. The online identifier by itself - the core's
 numpy estimation at its default settings, fed the aligned samples in the pipeline's
 64-sample batches, nothing else - takes {rate["windowed"]:,.0f} samples/s (windowed, the
-default method) and {rate["recursive"]:,.0f}/s (recursive). {floors}
+default method) and {rate["recursive"]:,.0f}/s (recursive) over the record. Of that, the
+warm-up costs {warmup["windowed"]:.2f} s (windowed: its cold starts, the paper's batch
+iteration with output-error refinement on the first few hundred samples, each 0.1-0.3 s)
+and {warmup["recursive"]:.2f} s (recursive); after it the identifiers run at
+{rate["windowed_steady"]:,.0f} and {rate["recursive_steady"]:,.0f} samples/s. {floors}
 """
     write_section("replay", text)
     print(text)
