@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 from _common import command_line, machine_description, md_table, parse_args, write_section
 
-from genbacklash_ros.bagio import BagReader, BagWriter
+from genbacklash_ros.bagio import BagReader, BagWriter, align
 from genbacklash_ros.checkpoint import warm_start
 from genbacklash_ros.messages import read_command, read_encoder
 from genbacklash_ros.parameters import NodeParameters
@@ -126,13 +126,16 @@ def run_pipeline_only(events: list[Event]) -> float:
 
 def aligned_samples(events: list[Event]) -> tuple[np.ndarray, np.ndarray]:
     """``(u, y)``: each encoder reading with the command holding at its time (the pipeline's
-    zero-order hold, without its fault checks)."""
-    cmd_t = np.array([e[3] for e in events if e[0]], dtype=np.int64)
-    cmd_u = np.array([e[2] for e in events if e[0]])
-    enc_t = np.array([e[3] for e in events if not e[0]], dtype=np.int64)
-    enc_y = np.array([e[2] for e in events if not e[0]])
-    k = np.searchsorted(cmd_t, enc_t, side="right") - 1
-    return cmd_u[k[k >= 0]], enc_y[k >= 0]
+    zero-order hold, :func:`~genbacklash_ros.bagio.align`, without its fault checks)."""
+    commands = [e for e in events if e[0]]
+    readings = [e for e in events if not e[0]]
+    series = align(
+        np.array([e[3] for e in commands], dtype=np.int64),
+        np.array([e[2] for e in commands]),
+        np.array([e[3] for e in readings], dtype=np.int64),
+        np.array([e[2] for e in readings]),
+    )
+    return series.u, series.y
 
 
 WARMUP_SAMPLES = 5000  # the identifier's warm-up (cold starts) is over well before this
