@@ -15,10 +15,9 @@ import random
 import signal
 import subprocess
 import sys
-import threading
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -27,23 +26,19 @@ import pytest
 
 pytest.importorskip("cyclonedds", reason="cyclonedds is not installed (pip install .[dds])")
 
-from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState, WaitSet
-from cyclonedds.domain import DomainParticipant
 from cyclonedds.pub import DataWriter
-from cyclonedds.qos import Policy, Qos
-from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
-from cyclonedds.util import duration
 
 from genbacklash_core import paper_example, simulate_backlash
 from genbacklash_ros.checkpoint import load_checkpoint
 from genbacklash_ros.dds_node import DEFAULT_QOS
 from genbacklash_ros.dds_types import (
-    DiagnosticArray_,
     Float64MultiArray_,
     MultiArrayDimension_,
     MultiArrayLayout_,
 )
+
+from ._dds import Received, Subscriber, diagnostic_values, start_node, wait_for
 
 HERE = Path(__file__).parent
 TRUTH = paper_example(1).model
@@ -51,66 +46,6 @@ RATE_HZ = 500.0
 SECONDS = 8.0
 # one domain per test session (ROS_DOMAIN_ID range), so parallel runs do not cross-talk
 DOMAIN = 1 + (os.getpid() * 7919 + random.randrange(1000)) % 200
-
-_RELIABLE_ALL = Qos(
-    Policy.History.KeepAll,
-    Policy.Reliability.Reliable(duration(seconds=1)),
-    Policy.Durability.Volatile,
-)
-
-
-@dataclass
-class Received:
-    """What the subscriber saw: (monotonic receive ns, message) per topic."""
-
-    compensated: list[tuple[int, Any]] = field(default_factory=list)
-    estimates: list[tuple[int, Any]] = field(default_factory=list)
-    diagnostics: list[tuple[int, Any]] = field(default_factory=list)
-
-
-class Subscriber:
-    """Readers on the node's outputs (KEEP_ALL, RELIABLE), taken on a thread."""
-
-    def __init__(self, domain: int) -> None:
-        self.got = Received()
-        self._stop = threading.Event()
-        dp = DomainParticipant(domain)
-        self.dp = dp
-        self._readers = {
-            "compensated": DataReader(
-                dp, Topic(dp, "rt/compensated_command", Float64MultiArray_), qos=_RELIABLE_ALL
-            ),
-            "estimates": DataReader(
-                dp,
-                Topic(dp, "rt/backlash_identifier/estimate", Float64MultiArray_),
-                qos=_RELIABLE_ALL,
-            ),
-            "diagnostics": DataReader(
-                dp, Topic(dp, "rt/diagnostics", DiagnosticArray_), qos=_RELIABLE_ALL
-            ),
-        }
-        self._waitset = WaitSet(dp)
-        mask = SampleState.NotRead | ViewState.Any | InstanceState.Any
-        self._conditions = {}
-        for key, reader in self._readers.items():
-            cond = ReadCondition(reader, mask)
-            self._conditions[key] = cond
-            self._waitset.attach(cond)
-        self._thread = threading.Thread(target=self._run, daemon=True)
-        self._thread.start()
-
-    def _run(self) -> None:
-        while not self._stop.is_set():
-            self._waitset.wait(duration(milliseconds=50))
-            now = time.monotonic_ns()
-            for key, reader in self._readers.items():
-                for sample in reader.take(1000, condition=self._conditions[key]):
-                    if sample.sample_info.valid_data:
-                        getattr(self.got, key).append((now, sample))
-
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join(5)
 
 
 def _write_params(path: Path, checkpoint: Path) -> Path:
@@ -127,12 +62,6 @@ def _write_params(path: Path, checkpoint: Path) -> Path:
     return path
 
 
-def _start_node(params: Path, log: Path) -> subprocess.Popen[bytes]:
-    cmd = [sys.executable, "-m", "genbacklash_ros.node_cli", "--transport", "dds"]
-    cmd += ["--params-file", str(params), "--domain-id", str(DOMAIN)]
-    return subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=log.open("wb"))
-
-
 def _stop_node(node: subprocess.Popen[bytes], log: Path) -> int:
     node.send_signal(signal.SIGINT)
     try:
@@ -140,19 +69,6 @@ def _stop_node(node: subprocess.Popen[bytes], log: Path) -> int:
     except subprocess.TimeoutExpired:
         node.kill()
         pytest.fail(f"the node did not exit within 30 s of SIGINT:\n{log.read_text()}")
-
-
-def _wait_for(predicate: Any, timeout: float) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.05)
-    return bool(predicate())
-
-
-def _values(diag: Any) -> dict[str, str]:
-    return {kv.key: kv.value for kv in diag.status[0].values}
 
 
 @dataclass
@@ -176,7 +92,7 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Run]:
     log = tmp / "node.log"
     started = time.monotonic()
     sub = Subscriber(DOMAIN)
-    node = _start_node(params, log)
+    node = start_node(params, log, DOMAIN)
     try:
         player = subprocess.run(
             [
@@ -190,9 +106,9 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Run]:
         assert player.returncode == 0, player.stdout.decode() + player.stderr.decode()
         summary = json.loads(player.stdout.decode().strip().splitlines()[-1])
         # the node keeps up: wait until (almost) every command came back
-        _wait_for(lambda: len(sub.got.compensated) >= summary["sent"], 10)
+        wait_for(lambda: len(sub.got.compensated) >= summary["sent"], 10)
         returncode = _stop_node(node, log)
-        _wait_for(lambda: False, 1.0)  # the final estimate and diagnostics
+        wait_for(lambda: False, 1.0)  # the final estimate and diagnostics
     finally:
         if node.poll() is None:
             node.kill()
@@ -262,7 +178,7 @@ def test_diagnostics_arrive(run: Run) -> None:
     diags = [s for _, s in run.got.diagnostics]
     assert len(diags) >= 3
     assert all(d.status[0].name == "backlash_identifier" for d in diags)
-    values = _values(diags[-1])
+    values = diagnostic_values(diags[-1])
     assert values["state"] in ("converged", "converging")
     assert int(values["compensated_commands"]) >= 0.95 * run.summary["sent"]
 
@@ -284,11 +200,11 @@ def test_restarts_from_the_checkpoint(run: Run) -> None:
     saved = load_checkpoint(run.checkpoint)
     log = run.tmp / "node2.log"
     sub = Subscriber(DOMAIN)
-    node = _start_node(run.params, log)
+    node = start_node(run.params, log, DOMAIN)
     try:
-        assert _wait_for(lambda: len(sub.got.diagnostics) >= 1, 20), log.read_text()
+        assert wait_for(lambda: len(sub.got.diagnostics) >= 1, 20), log.read_text()
         diag = sub.got.diagnostics[-1][1]
-        values = _values(diag)
+        values = diagnostic_values(diag)
         assert diag.status[0].level == 3  # STALE: no data yet
         assert values["estimate_source"] == "checkpoint"
         assert "warm start from checkpoint" in values["warm_start"]
@@ -297,13 +213,13 @@ def test_restarts_from_the_checkpoint(run: Run) -> None:
         # a command: compensated with the checkpoint's model at once
         dp = sub.dp
         writer = DataWriter(dp, Topic(dp, "rt/command", Float64MultiArray_), qos=DEFAULT_QOS)
-        _wait_for(lambda: writer.get_publication_matched_status().current_count >= 1, 10)
+        wait_for(lambda: writer.get_publication_matched_status().current_count >= 1, 10)
         time.sleep(0.3)
         layout = MultiArrayLayout_([MultiArrayDimension_("u", 3, 3)], 0)
         for k, u in enumerate((0.5, 1.0, 1.5)):
             writer.write(Float64MultiArray_(layout, [u, float(k), 0.0]))
             time.sleep(0.01)
-        assert _wait_for(lambda: len(sub.got.compensated) >= 3, 10), log.read_text()
+        assert wait_for(lambda: len(sub.got.compensated) >= 3, 10), log.read_text()
         sent = [s.data[0] for _, s in sub.got.compensated]
         assert sent != [0.5, 1.0, 1.5], "the commands passed through uncompensated"
         assert _stop_node(node, log) == 0, log.read_text()

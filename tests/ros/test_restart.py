@@ -24,10 +24,9 @@ import random
 import signal
 import subprocess
 import sys
-import threading
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -51,6 +50,8 @@ from genbacklash_ros.messages import (
 )
 from genbacklash_ros.parameters import NodeParameters
 from genbacklash_ros.pipeline import BacklashPipeline, Output
+
+from ._dds import Received, Subscriber, diagnostic_values, start_node, wait_for
 
 HERE = Path(__file__).parent
 TRUTH = paper_example(1).model
@@ -249,93 +250,6 @@ PLAYER_SECONDS = 20.0
 DOMAIN = 1 + (os.getpid() * 7919 + 97 + random.randrange(1000)) % 200
 
 
-@dataclass
-class Seen:
-    """(monotonic receive ns, message) per output topic."""
-
-    compensated: list[tuple[int, Any]] = field(default_factory=list)
-    estimates: list[tuple[int, Any]] = field(default_factory=list)
-    diagnostics: list[tuple[int, Any]] = field(default_factory=list)
-
-
-class Subscriber:
-    """KEEP_ALL RELIABLE readers on the node's outputs, taken on a thread."""
-
-    def __init__(self, domain: int) -> None:
-        from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState, WaitSet
-        from cyclonedds.domain import DomainParticipant
-        from cyclonedds.qos import Policy, Qos
-        from cyclonedds.sub import DataReader
-        from cyclonedds.topic import Topic
-        from cyclonedds.util import duration
-
-        from genbacklash_ros.dds_types import DiagnosticArray_, Float64MultiArray_
-
-        reliable_all = Qos(
-            Policy.History.KeepAll,
-            Policy.Reliability.Reliable(duration(seconds=1)),
-            Policy.Durability.Volatile,
-        )
-        self._wait = duration(milliseconds=50)
-        self.got = Seen()
-        self._stop = threading.Event()
-        dp = DomainParticipant(domain)
-        self._readers = {
-            "compensated": DataReader(
-                dp, Topic(dp, "rt/compensated_command", Float64MultiArray_), qos=reliable_all
-            ),
-            "estimates": DataReader(
-                dp,
-                Topic(dp, "rt/backlash_identifier/estimate", Float64MultiArray_),
-                qos=reliable_all,
-            ),
-            "diagnostics": DataReader(
-                dp, Topic(dp, "rt/diagnostics", DiagnosticArray_), qos=reliable_all
-            ),
-        }
-        self._waitset = WaitSet(dp)
-        mask = SampleState.NotRead | ViewState.Any | InstanceState.Any
-        self._conditions = {}
-        for key, reader in self._readers.items():
-            condition = ReadCondition(reader, mask)
-            self._conditions[key] = condition
-            self._waitset.attach(condition)
-        self._thread = threading.Thread(target=self._run, daemon=True)
-        self._thread.start()
-
-    def _run(self) -> None:
-        while not self._stop.is_set():
-            self._waitset.wait(self._wait)
-            now = time.monotonic_ns()
-            for key, reader in self._readers.items():
-                for sample in reader.take(1000, condition=self._conditions[key]):
-                    if sample.sample_info.valid_data:
-                        getattr(self.got, key).append((now, sample))
-
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join(5)
-
-
-def _start_node(params: Path, log: Path) -> subprocess.Popen[bytes]:
-    cmd = [sys.executable, "-m", "genbacklash_ros.node_cli", "--transport", "dds"]
-    cmd += ["--params-file", str(params), "--domain-id", str(DOMAIN)]
-    return subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=log.open("wb"))
-
-
-def _wait_for(predicate: Any, timeout: float) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.02)
-    return bool(predicate())
-
-
-def _values(diag: Any) -> dict[str, str]:
-    return {kv.key: kv.value for kv in diag.status[0].values}
-
-
 def _stamp_ns(diag: Any) -> int:
     stamp = diag.header.stamp
     return int(stamp.sec) * S + int(stamp.nanosec)
@@ -351,7 +265,7 @@ def _checkpoint_ready(path: Path) -> Checkpoint | None:
 
 @dataclass
 class Restart:
-    got: Seen
+    got: Received
     summary: dict[str, Any]
     saved: Checkpoint  # the checkpoint file right after the kill
     kill_mono_ns: int  # when the first node was killed (monotonic)
@@ -380,7 +294,7 @@ def restart(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Restart]:
     logs = tmp / "node1.log", tmp / "node2.log"
     mono_to_wall = time.time_ns() - time.monotonic_ns()
     sub = Subscriber(DOMAIN)
-    first = _start_node(params, logs[0])
+    first = start_node(params, logs[0], DOMAIN)
     second: subprocess.Popen[bytes] | None = None
     player = subprocess.Popen(
         [
@@ -392,10 +306,10 @@ def restart(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Restart]:
     )
     try:
         # run until a converged estimate is checkpointed, and one more period on top
-        assert _wait_for(lambda: _checkpoint_ready(checkpoint) is not None, 30), logs[0].read_text()
+        assert wait_for(lambda: _checkpoint_ready(checkpoint) is not None, 30), logs[0].read_text()
         ready = _checkpoint_ready(checkpoint)
         assert ready is not None
-        assert _wait_for(lambda: load_checkpoint(checkpoint).time_ns > ready.time_ns, 10)
+        assert wait_for(lambda: load_checkpoint(checkpoint).time_ns > ready.time_ns, 10)
         time.sleep(0.6 * PERIOD_S)  # between two checkpoints
         killed_at_ns = time.time_ns()
         os.kill(first.pid, signal.SIGKILL)
@@ -403,7 +317,7 @@ def restart(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Restart]:
         kill_mono_ns = time.monotonic_ns()
         assert first.returncode == -signal.SIGKILL
         saved = load_checkpoint(checkpoint)  # parses: never half-written
-        second = _start_node(params, logs[1])
+        second = start_node(params, logs[1], DOMAIN)
         out, err = player.communicate(timeout=90)
         assert player.returncode == 0, out.decode() + err.decode()
         summary = json.loads(out.decode().strip().splitlines()[-1])
@@ -457,7 +371,7 @@ def test_the_killed_node_left_a_valid_checkpoint(restart: Restart) -> None:
 def test_the_restarted_node_says_it_warm_started(restart: Restart) -> None:
     diags = _after_kill(restart, restart.got.diagnostics)
     assert diags, restart.second_log
-    values = _values(diags[0])
+    values = diagnostic_values(diags[0])
     assert "warm start from checkpoint" in values["warm_start"]
     assert "the identifier continues from its estimate" in values["warm_start"]
     assert values["estimate_source"] == "checkpoint"
@@ -494,12 +408,12 @@ def test_back_in_the_pre_kill_state_within_one_checkpoint_period(restart: Restar
     """Data time from the restarted node's first command to its first report of the state
     it had before the kill (and a converged estimate close to the truth)."""
     before = [d for d in _before_kill(restart, restart.got.diagnostics) if d.status[0].level != 3]
-    pre_kill_state = _values(before[-1])["state"]
+    pre_kill_state = diagnostic_values(before[-1])["state"]
     # the restarted node's first command (its data time: the player's write time)
     commands = _after_kill(restart, restart.got.compensated)
     first_data_ns = min(int(c.data[2]) for c in commands)
     reports = [d for d in _after_kill(restart, restart.got.diagnostics) if d.status[0].level != 3]
-    back = next(d for d in reports if _values(d)["state"] == pre_kill_state)
+    back = next(d for d in reports if diagnostic_values(d)["state"] == pre_kill_state)
     resumed_s = (_stamp_ns(back) - first_data_ns) / S
     estimates = [(t, m) for t, m in restart.got.estimates if t > restart.kill_mono_ns]
     error = np.max(np.abs(np.array(estimates[0][1].data) - TRUTH.parameters()))
