@@ -329,8 +329,14 @@ class OnlineIdentifier(Protocol):
         """Take one sample of input ``u`` and measured output ``y``."""
         ...
 
-    def update_many(self, u: ArrayLike, y: ArrayLike) -> Estimate:
-        """Take a series of samples; the same as :meth:`update` on each, vectorised."""
+    def update_many(self, u: ArrayLike, y: ArrayLike, breaks: ArrayLike | None = None) -> Estimate:
+        """Take a series of samples; the same as :meth:`update` on each, vectorised.
+
+        ``breaks[k]`` True: sample ``k`` does not follow the sample before it on the
+        encoder's clock (a lost reading, a gap; :mod:`genbacklash_core.samples`), so no
+        regression row pairs it with that sample. ``breaks[0]`` refers to the last sample
+        of the previous call. Default: every sample follows its predecessor.
+        """
         ...
 
     def reset(self) -> None:
@@ -398,6 +404,23 @@ def confidence_of(state: EstimatorState, rel_std: float, converged_std: float) -
     if state is EstimatorState.CONVERGING:
         value = min(value, 0.5)
     return value
+
+
+def aged_confidence(confidence: float, age: float, half_life: float) -> float:
+    """A confidence that fades with the age of the information behind it.
+
+    ``confidence * 0.5 ** (age / half_life)``: an estimate that no new data confirm (a joint
+    at rest, or moving one way only) is trusted less and less, smoothly, never dropped at
+    once. ``age`` and ``half_life`` in one unit (samples).
+
+    >>> aged_confidence(0.8, 0.0, 1000.0), aged_confidence(0.8, 1000.0, 1000.0)
+    (0.8, 0.4)
+    """
+    if not age > 0.0:
+        return confidence
+    if not half_life > 0.0:
+        return 0.0
+    return float(confidence * 0.5 ** (age / half_life))
 
 
 def check_setting(name: str, value: object, low: float, high: float, *, whole: bool) -> None:

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from ._typing import ArrayLike, FloatArray
+from ._typing import ArrayLike, BoolArray, FloatArray
 from .backlash import GeneralBacklash
 from .cascade import Cascade
 from .data import (
@@ -34,6 +34,7 @@ from .data import (
 from .errors import GenBacklashError, NonFiniteInputError
 from .play import play_operator
 from .refine import RefinementResult, refine_parameters, simulate_parameters
+from .samples import as_breaks, breaks_to_rows
 from .simulate import play_bounds
 from .structure import Structure
 
@@ -198,6 +199,38 @@ def _solve_least_squares(phi: FloatArray, target: FloatArray) -> FloatArray | No
     return np.asarray(theta_scaled / scale, dtype=np.float64)
 
 
+def _solve_damped(phi: FloatArray, target: FloatArray, theta_prev: FloatArray) -> FloatArray | None:
+    """Least squares with a small pull towards ``theta_prev``, for a singular regression.
+
+    Minimises ``||phi theta - target||^2 + lam ||D (theta - theta_prev)||^2`` with ``D`` the
+    column norms (so the pull is scale-free) and ``lam`` a millionth of the largest of them:
+    directions the data determine move to their least-squares values, the others (a branch
+    not engaged under the current switching estimate, polynomial columns that collapse on
+    held inputs) keep their previous values instead of ending the iteration.
+    """
+    gram = phi.T @ phi
+    rhs = phi.T @ target
+    if not (np.all(np.isfinite(gram)) and np.all(np.isfinite(rhs))):
+        return None
+    if not np.all(np.isfinite(theta_prev)):
+        return None
+    diag = np.diag(gram).copy()
+    top = float(np.max(diag)) if diag.size else 0.0
+    if not top > 0.0:
+        return None
+    weight = np.maximum(diag, 1e-6 * top)  # never-engaged columns still get a pull
+    lam = 1e-6
+    scale = np.sqrt(weight)
+    scaled = gram / np.outer(scale, scale) + lam * np.eye(diag.size)
+    scaled_rhs = rhs / scale + lam * theta_prev * scale
+    try:
+        theta_scaled = np.linalg.solve(scaled, scaled_rhs)
+    except np.linalg.LinAlgError:
+        return None
+    theta = theta_scaled / scale
+    return np.asarray(theta, dtype=np.float64) if np.all(np.isfinite(theta)) else None
+
+
 def _backlash_columns(
     structure: Structure, p: FloatArray, u: FloatArray, f1: FloatArray, f2: FloatArray
 ) -> FloatArray:
@@ -231,21 +264,39 @@ def _switching(
 
 
 def _backlash_regression(
-    structure: Structure, p: FloatArray, u: FloatArray, x: FloatArray
+    structure: Structure,
+    p: FloatArray,
+    u: FloatArray,
+    x: FloatArray,
+    breaks: BoolArray | None = None,
 ) -> tuple[FloatArray, FloatArray]:
-    """Regressors and target of eqs. (24)/(29) for a measured backlash output ``x``."""
+    """Regressors and target of eqs. (24)/(29) for a measured backlash output ``x``.
+
+    Row ``t`` pairs ``x(t)`` with ``x(t-1)``: it is formed only when sample ``t`` follows
+    sample ``t-1`` on the encoder's clock (``breaks``, :mod:`genbacklash_core.samples`).
+    """
     u_t, x_prev, x_t = u[1:], x[:-1], x[1:]
     f1, f2 = _switching(structure, p, u_t, x_prev)
     engaged = (f1 + f2) > 0.0  # rows with neither branch engaged carry no information
+    if breaks is not None:
+        engaged &= ~breaks[1:]  # eq. (24) needs x(t-1): never across a lost reading
     phi = _backlash_columns(structure, p, u_t[engaged], f1[engaged], f2[engaged])
     target = x_t[engaged] - x_prev[engaged] * (1.0 - f1[engaged]) * (1.0 - f2[engaged])  # eq. (29)
     return phi, target
 
 
 def _cascade_regression(
-    structure: Structure, p: FloatArray, u: FloatArray, y: FloatArray
+    structure: Structure,
+    p: FloatArray,
+    u: FloatArray,
+    y: FloatArray,
+    breaks: BoolArray | None = None,
 ) -> tuple[FloatArray, FloatArray]:
-    """Regressors (eq. 32) and target (eq. 37) with the internal ``x`` estimated by eq. (36)."""
+    """Regressors (eq. 32) and target (eq. 37) with the internal ``x`` estimated by eq. (36).
+
+    With ``breaks``, rows whose measured lags ``y(t-1) .. y(t-p)`` reach across a lost
+    reading are left out; the internal ``x`` runs on through (the held input is known).
+    """
     left, right = structure.branches(p, u)
     x = play_operator(*play_bounds(left, right), 0.0)  # eq. (36), from rest
     x_prev = np.concatenate([[0.0], x[:-1]])
@@ -266,7 +317,24 @@ def _cascade_regression(
         phi[:, col] = -y[t0 - j : u.size - j]  # -y(t-j), eq. (32)
         col += 1
     hold = x_lagged[t0 : u.size] * (1.0 - f1[prev]) * (1.0 - f2[prev])  # x(t-2)[1-f1][1-f2]
-    return phi, y[t0:] - hold  # eq. (37)
+    target = y[t0:] - hold  # eq. (37)
+    if breaks is not None and nb > 0:
+        ok = breaks_to_rows(breaks, nb)[t0 - nb :]  # y(t-1) .. y(t-nb) all consecutive
+        return phi[ok], target[ok]
+    return phi, target
+
+
+def _theta_of(structure: Structure, p: FloatArray) -> FloatArray:
+    """The separated vector of eqs. (23)/(33) from natural parameters (inverse of eq. 34)."""
+    n = structure.degree
+    theta = np.array(p, dtype=np.float64)
+    theta[0] = p[0]
+    theta[1] = p[0] * p[n]  # m_L1 c_L, eq. (23)
+    theta[2 : n + 1] = p[1:n]
+    theta[n + 1] = p[n + 1]
+    theta[n + 2] = p[n + 1] * p[2 * n + 1]  # m_R1 c_R, eq. (23)
+    theta[n + 3 : 2 * n + 2] = p[n + 2 : 2 * n + 1]
+    return theta
 
 
 @dataclass
@@ -281,6 +349,7 @@ class _IterationOutcome:
     converged: bool
     reason: str
     period: int = 1  # length of the limit cycle the iteration settled in (1: a fixed point)
+    damped: int = 0  # iterations whose regression was singular and took a damped step
 
 
 # Far-off iterates overflow float64: their non-finite parameters and regressors are caught by
@@ -294,8 +363,15 @@ def _iterate(
     max_iterations: int,
     tol: float,
     callback: IterationCallback | None,
+    breaks: BoolArray | None = None,
 ) -> _IterationOutcome:
-    """The paper's iteration, steps (a)-(c) of §3b / §4b, from ``p_start``."""
+    """The paper's iteration, steps (a)-(c) of §3b / §4b, from ``p_start``.
+
+    For a backlash alone a singular regression (a branch not engaged under the current
+    switching estimate, or polynomial columns that collapse on held inputs) takes a damped
+    step that keeps the undetermined directions where they were (:func:`_solve_damped`);
+    only when even that fails does the iteration stop. A cascade stops there.
+    """
     regression = _cascade_regression if structure.cascade else _backlash_regression
     u_range = (float(u.min()), float(u.max()))
     p = p_start.copy()
@@ -303,8 +379,13 @@ def _iterate(
     change = float("nan")
     for iteration in range(1, max_iterations + 1):
         out.iterations = iteration
-        phi, target = regression(structure, p, u, y)  # step (b): internal variables
+        phi, target = regression(structure, p, u, y, breaks)  # step (b): internal variables
         theta = _solve_least_squares(phi, target) if target.size >= phi.shape[1] else None
+        if theta is None and target.size > 0 and not structure.cascade:
+            # (a cascade's singular regression means a structure that does not fit, e.g. a
+            # dead time it lacks: GUIDE §2; it ends there with that reason)
+            theta = _solve_damped(phi, target, _theta_of(structure, p))
+            out.damped += 1
         if theta is None:  # step (a) impossible
             out.reason = (
                 f"iteration {iteration}: the regression became singular (a branch is never "
@@ -375,6 +456,7 @@ def _candidate(
     tol: float,
     refine: bool,
     callback: IterationCallback | None,
+    breaks: BoolArray | None = None,
 ) -> _Candidate:
     """Iterate from one start (warm-started on a prefix for long records), then refine."""
     history: list[FloatArray] = []
@@ -390,11 +472,12 @@ def _candidate(
             max_iterations,
             tol,
             callback,
+            None if breaks is None else breaks[:_WARM_START_SAMPLES],
         )
         if head.converged:
             p = head.p
             history = head.history[:-1]
-    outcome = _iterate(structure, u, y, p, max_iterations, tol, callback)
+    outcome = _iterate(structure, u, y, p, max_iterations, tol, callback, breaks)
     prefix_iterations = len(history)
     history += outcome.history
     reason = outcome.reason
@@ -421,7 +504,7 @@ def _candidate(
         for start_p in starts:
             if structure.problem(start_p, u_range) is not None:
                 continue
-            trial = refine_parameters(structure, start_p, u, y, x0)
+            trial = refine_parameters(structure, start_p, u, y, x0, breaks=breaks)
             if best is None or trial[4] < best[4]:
                 best = trial
         if best is None:
@@ -442,7 +525,7 @@ def _candidate(
                 # The failure may come from a structure that does not fit (a missing delay,
                 # say). With the right structure the refined estimate sits near a fixed point
                 # of the paper's iteration, so restarted there the iteration settles.
-                check = _iterate(structure, u, y, q, max_iterations, tol, None)
+                check = _iterate(structure, u, y, q, max_iterations, tol, None, breaks)
                 converged = check.converged
                 reason += (
                     "; restarted from the refined estimate, the iteration settled"
@@ -454,7 +537,10 @@ def _candidate(
         spread = float(np.sum((y - np.mean(y)) ** 2))
         fit = float(np.sqrt(refinement.cost_end / spread)) if spread > 0 else float("inf")
     else:
-        fit = nrmse(y, simulate_parameters(structure, p_final, u, x0)[1])
+        anchors = None if breaks is None else breaks.copy()
+        if anchors is not None:
+            anchors[0] = False
+        fit = nrmse(y, simulate_parameters(structure, p_final, u, x0, anchors, y)[1])
     if converged and not fit < _USELESS_FIT:
         converged = False
         reason += (
@@ -474,6 +560,7 @@ def _run(
     tol: float,
     refine: bool,
     callback: IterationCallback | None,
+    breaks: BoolArray | None = None,
 ) -> IdentificationResult:
     p = structure.start() if start is None else np.asarray(start, dtype=np.float64).copy()
     if p.shape != (structure.n_parameters,):
@@ -509,6 +596,7 @@ def _run(
             tol=tol,
             refine=refine,
             callback=callback,
+            breaks=breaks,
         )
 
     best = attempt(p)
@@ -536,6 +624,23 @@ def _run(
     )
 
 
+def _prepare(
+    u: ArrayLike, y: ArrayLike, nonfinite: NonFinitePolicy, breaks: ArrayLike | None
+) -> tuple[FloatArray, FloatArray, BoolArray | None]:
+    """:func:`prepare_series` plus the sample rule: a dropped non-finite sample breaks the
+    chain of consecutive samples just as a lost reading does."""
+    uu, yy = prepare_series(u, y, nonfinite)
+    if breaks is None:
+        return uu, yy, None
+    raw_u = np.asarray(u, dtype=np.float64)
+    b = as_breaks(breaks, raw_u.size)
+    if uu.size == raw_u.size:
+        return uu, yy, b
+    keep = np.isfinite(raw_u) & np.isfinite(np.asarray(y, dtype=np.float64))
+    after_drop = np.concatenate([[True], ~keep[:-1]])  # the sample before was dropped
+    return uu, yy, (b | after_drop)[keep]
+
+
 def _sign_option(sign: float | None, u: FloatArray, y: FloatArray, max_lag: int) -> float:
     if sign is None:
         return _detect_sign(u, y, max_lag)
@@ -556,6 +661,7 @@ def identify_backlash(
     tol: float = 1e-4,
     nonfinite: NonFinitePolicy = "raise",
     callback: IterationCallback | None = None,
+    breaks: ArrayLike | None = None,
 ) -> IdentificationResult:
     """Identify a general backlash from input ``u`` and measured output ``x`` (eqs. 22-29).
 
@@ -577,6 +683,10 @@ def identify_backlash(
         Policy for NaN/inf samples.
     callback : callable, optional
         Called as ``callback(iteration, parameters)`` after each iteration.
+    breaks : array_like of bool, shape (N,), optional
+        The sample rule (:func:`~genbacklash_core.samples.sample_breaks`): True where a
+        sample does not follow the one before on the encoder's clock (a lost reading, a
+        gap). Rows of eq. (24) are never formed across a break. Default: all consecutive.
 
     Returns
     -------
@@ -600,7 +710,7 @@ def identify_backlash(
     degree = as_order("degree", degree)
     if degree < 1:
         raise GenBacklashError(f"degree must be >= 1, got {degree}")
-    uu, xx = prepare_series(u, x, nonfinite)
+    uu, xx, bb = _prepare(u, x, nonfinite, breaks)
     structure = Structure(degree, 0, 0, 1.0)
     check_excitation(uu, xx, structure.n_parameters)
     check_scale(uu, xx, degree)
@@ -622,6 +732,7 @@ def identify_backlash(
         tol=tol,
         refine=refine,
         callback=callback,
+        breaks=bb,
     )
 
 
@@ -639,6 +750,7 @@ def identify_cascade(
     tol: float = 1e-4,
     nonfinite: NonFinitePolicy = "raise",
     callback: IterationCallback | None = None,
+    breaks: ArrayLike | None = None,
 ) -> IdentificationResult:
     """Identify a general backlash followed by linear dynamics (eqs. 31-37).
 
@@ -650,8 +762,9 @@ def identify_cascade(
         Polynomial degree of each branch.
     na, nb : int
         ``r >= 1`` input terms (``a_1 = 1`` included) and ``p >= 0`` output terms of eq. (30).
-    sign, start, refine, max_iterations, tol, nonfinite, callback
-        As in :func:`identify_backlash`; the linear block starts at zero.
+    sign, start, refine, max_iterations, tol, nonfinite, callback, breaks
+        As in :func:`identify_backlash`; the linear block starts at zero. Rows whose
+        measured lags reach across a break are left out.
 
     Examples
     --------
@@ -669,7 +782,7 @@ def identify_cascade(
         raise GenBacklashError(f"degree must be >= 1, got {degree}")
     if na < 1 or nb < 0:
         raise GenBacklashError(f"need na >= 1 and nb >= 0, got na={na}, nb={nb}")
-    uu, yy = prepare_series(u, y, nonfinite)
+    uu, yy, bb = _prepare(u, y, nonfinite, breaks)
     structure = Structure(degree, na, nb, 1.0)
     check_excitation(uu, yy, structure.n_parameters)
     check_scale(uu, yy, degree)
@@ -693,4 +806,5 @@ def identify_cascade(
         tol=tol,
         refine=refine,
         callback=callback,
+        breaks=bb,
     )

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import signal
 
-from ._typing import FloatArray
+from ._typing import BoolArray, FloatArray
 from .backlash import GeneralBacklash
 from .cascade import Cascade
 from .data import as_order, as_real, check_scale, prepare_series
@@ -72,14 +72,26 @@ def _shift(v: FloatArray, k: int) -> FloatArray:
 
 
 def simulate_parameters(
-    structure: Structure, p: FloatArray, u: FloatArray, x0: float
+    structure: Structure,
+    p: FloatArray,
+    u: FloatArray,
+    x0: float,
+    anchors: BoolArray | None = None,
+    y: FloatArray | None = None,
 ) -> tuple[FloatArray, FloatArray]:
     """Free-run simulation ``(x, y)`` of the model with parameter vector ``p``.
 
-    For a backlash alone ``y`` is ``x``; a linear block starts from rest.
+    For a backlash alone ``y`` is ``x``; a linear block starts from rest. ``anchors`` (a
+    backlash alone, with the measured ``y``) restarts the simulation at the measured output
+    where the chain of consecutive samples breaks (a lost reading: the inputs in between
+    are unknown), as ``x0`` starts it at the first sample.
     """
     left, right = structure.branches(p, u)
-    x = play_operator(*play_bounds(left, right), x0)  # eqs. (20), (36)
+    lo, hi = play_bounds(left, right)
+    if anchors is not None and y is not None and not structure.cascade and anchors.any():
+        lo, hi = lo.copy(), hi.copy()
+        lo[anchors] = hi[anchors] = y[anchors]  # the clamp pins x(t) to the reading there
+    x = play_operator(lo, hi, x0)  # eqs. (20), (36)
     if not structure.cascade:
         return x, x
     a, b = structure.linear_part(p)
@@ -88,16 +100,28 @@ def simulate_parameters(
 
 
 def _backlash_sensitivity(
-    structure: Structure, p: FloatArray, u: FloatArray, x: FloatArray, x0: float
+    structure: Structure,
+    p: FloatArray,
+    u: FloatArray,
+    x: FloatArray,
+    x0: float,
+    anchors: BoolArray | None = None,
 ) -> FloatArray:
-    """``dx/dp`` for the backlash parameters, shape (N, 2n+2), column-major."""
+    """``dx/dp`` for the backlash parameters, shape (N, 2n+2), column-major.
+
+    At ``anchors`` the simulation is pinned to the measurement: no sensitivity there, nor
+    after it until a branch engages again.
+    """
     n = structure.degree
     m_left, c_left, m_right, c_right = structure.split(p)
     left, right = structure.branches(p, u)
     x_prev = np.concatenate([[x0], x[:-1]])
     f1 = (left - x_prev) * structure.sign <= 0.0  # eq. (18): left branch engaged
     f2 = ((x_prev - right) * structure.sign <= 0.0) & ~f1  # eq. (19)
-    last = np.where(f1 | f2, np.arange(u.size), -1)
+    pinned = np.zeros(u.size, dtype=bool) if anchors is None else anchors
+    f1 &= ~pinned
+    f2 &= ~pinned
+    last = np.where(f1 | f2 | pinned, np.arange(u.size), -1)
     np.maximum.accumulate(last, out=last)  # index of the last engagement at or before t
     never = last < 0  # before the first engagement the output is x0: no sensitivity
     source = np.where(never, 0, last)
@@ -128,10 +152,16 @@ def _backlash_sensitivity(
 
 
 def _jacobian(
-    structure: Structure, p: FloatArray, u: FloatArray, x: FloatArray, y: FloatArray, x0: float
+    structure: Structure,
+    p: FloatArray,
+    u: FloatArray,
+    x: FloatArray,
+    y: FloatArray,
+    x0: float,
+    anchors: BoolArray | None = None,
 ) -> FloatArray:
     """``dy/dp`` of the free-run simulation, shape (N, P), column-major."""
-    jx = _backlash_sensitivity(structure, p, u, x, x0)
+    jx = _backlash_sensitivity(structure, p, u, x, x0, anchors)
     if not structure.cascade:
         return jx
     a, b = structure.linear_part(p)
@@ -164,8 +194,13 @@ def refine_parameters(
     *,
     max_iterations: int = 50,
     tol: float = 1e-10,
+    breaks: BoolArray | None = None,
 ) -> tuple[FloatArray, int, bool, float, float, str]:
     """Levenberg-Marquardt on the simulation error from ``p_start`` (flat-vector form).
+
+    ``breaks`` (the sample rule, :mod:`genbacklash_core.samples`): for a backlash alone the
+    simulation restarts at the reading after each break, since the inputs of the lost
+    readings are unknown; a cascade simulates on through.
 
     Returns ``(p, accepted_steps, converged, cost_start, cost_end, reason)``.
     """
@@ -173,7 +208,15 @@ def refine_parameters(
     u_range = (float(u.min()), float(u.max()))
     if (problem := structure.problem(p, u_range)) is not None:
         raise GenBacklashError(f"cannot refine from an invalid model: {problem}")
-    x, yhat = simulate_parameters(structure, p, u, x0)
+    anchors = None
+    if breaks is not None and not structure.cascade and breaks[1:].any():
+        anchors = breaks.copy()
+        anchors[0] = False  # the first sample starts from x0
+
+    def simulate(q: FloatArray) -> tuple[FloatArray, FloatArray]:
+        return simulate_parameters(structure, q, u, x0, anchors, y)
+
+    x, yhat = simulate(p)
     residual = y - yhat
     cost = float(residual @ residual)
     cost_start = cost
@@ -182,7 +225,7 @@ def refine_parameters(
     damping = 1e-3
     accepted = 0
     for _ in range(max_iterations):
-        jac = _jacobian(structure, p, u, x, yhat, x0)
+        jac = _jacobian(structure, p, u, x, yhat, x0, anchors)
         gram = jac.T @ jac
         grad = jac.T @ residual
         if not (np.all(np.isfinite(gram)) and np.all(np.isfinite(grad))):
@@ -197,7 +240,7 @@ def refine_parameters(
             step = np.linalg.lstsq(system, rhs, rcond=None)[0] / scale
             candidate = p + step
             if structure.problem(candidate, u_range) is None:
-                x_new, y_new = simulate_parameters(structure, candidate, u, x0)
+                x_new, y_new = simulate(candidate)
                 res_new = y - y_new
                 cost_new = float(res_new @ res_new)
                 if cost_new < cost:

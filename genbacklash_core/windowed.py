@@ -33,6 +33,7 @@ from .errors import GenBacklashError, NonFiniteInputError
 from .estimate import (
     Estimate,
     EstimatorState,
+    aged_confidence,
     as_sample,
     as_series,
     check_setting,
@@ -45,8 +46,10 @@ from .identify import (
     identify_backlash,
     identify_cascade,
 )
+from .memory import BranchCoverage, RowMemory
 from .play import play_operator
 from .refine import refine_parameters
+from .samples import as_breaks, breaks_to_rows
 from .simulate import play_bounds
 from .structure import Structure
 
@@ -63,8 +66,20 @@ class WindowedSettings:
     Attributes
     ----------
     window : int
-        ``W``, the most recent samples a fit uses (>= 20). Larger: more accurate
-        (std ~ 1/sqrt(W)); smaller: tracks drift with less lag (~ W/2 samples).
+        ``W``, how much the fits remember (>= 20). For a backlash alone: regression rows
+        (pairs of consecutive readings whose input moved), filed by branch and input region
+        (:class:`~genbacklash_core.memory.RowMemory`): old rows are forgotten only where
+        new ones cover the same region, and dwells, held commands and lost readings add
+        nothing. For the cascade: the most recent ``W`` samples. Larger: more accurate
+        (std ~ 1/sqrt(W)); smaller: tracks drift with less lag (~ W/2 rows).
+    bins : int
+        Input regions per branch of the row memory (backlash alone).
+    idle_samples : int
+        Samples without a new informative row after which the estimate is reported as held
+        (state ``no_excitation``, the estimate unchanged).
+    confidence_half_life : float
+        Samples over which the confidence of a held estimate halves (600000: ten minutes at
+        1 kHz): an estimate no new data confirm is trusted less and less, never dropped.
     refit_every : int
         Smallest number of new samples between two fits (>= 1).
     refit_fraction : float
@@ -140,6 +155,9 @@ class WindowedSettings:
     """
 
     window: int = 1500
+    bins: int = 16
+    idle_samples: int = 1000
+    confidence_half_life: float = 600_000.0
     refit_every: int = 25
     refit_fraction: float = 0.15
     iterations: int = 3
@@ -159,6 +177,9 @@ class WindowedSettings:
 
     def __post_init__(self) -> None:
         check_setting("window", self.window, 20, math.inf, whole=True)
+        check_setting("bins", self.bins, 1, 1000, whole=True)
+        check_setting("idle_samples", self.idle_samples, 1, math.inf, whole=True)
+        check_setting("confidence_half_life", self.confidence_half_life, 1.0, math.inf, whole=False)
         check_setting("refit_every", self.refit_every, 1, self.window, whole=True)
         check_setting("refit_fraction", self.refit_fraction, 0.0, 1.0, whole=False)
         check_setting("iterations", self.iterations, 1, 1000, whole=True)
@@ -196,24 +217,31 @@ class SampleRing:
         self.size = size
         self.u = np.zeros(2 * size)
         self.y = np.zeros(2 * size)
+        self.b = np.ones(2 * size, dtype=bool)  # the sample rule: a break before the sample
         self.count = 0
 
-    def push(self, u: float, y: float) -> None:
+    def push(self, u: float, y: float, brk: bool = False) -> None:
         k = self.count % self.size
         self.u[k] = self.u[k + self.size] = u
         self.y[k] = self.y[k + self.size] = y
+        self.b[k] = self.b[k + self.size] = brk or self.count == 0
         self.count += 1
 
-    def extend(self, u: FloatArray, y: FloatArray) -> None:
+    def extend(self, u: FloatArray, y: FloatArray, breaks: BoolArray | None = None) -> None:
         n = u.size
+        b = np.zeros(n, dtype=bool) if breaks is None else breaks.copy()
+        if self.count == 0 and n:
+            b[0] = True
         if n > self.size:  # only the last `size` samples survive
             self.count += n - self.size
-            u, y, n = u[-self.size :], y[-self.size :], self.size
+            u, y, b, n = u[-self.size :], y[-self.size :], b[-self.size :], self.size
         k = (self.count + np.arange(n)) % self.size
         self.u[k] = u
         self.u[k + self.size] = u
         self.y[k] = y
         self.y[k + self.size] = y
+        self.b[k] = b
+        self.b[k + self.size] = b
         self.count += n
 
     def __len__(self) -> int:
@@ -225,6 +253,16 @@ class SampleRing:
         n = held if last is None else min(last, held)
         end = held if self.count <= self.size else self.count % self.size + self.size
         return self.u[end - n : end], self.y[end - n : end]
+
+    def breaks(self, last: int | None = None) -> BoolArray:
+        """The sample rule's breaks of :meth:`window` (the oldest sample always breaks)."""
+        held = len(self)
+        n = held if last is None else min(last, held)
+        end = held if self.count <= self.size else self.count % self.size + self.size
+        out = self.b[end - n : end].copy()
+        if n:
+            out[0] = True
+        return out
 
 
 # --------------------------------------------------------------------------- the regression
@@ -354,13 +392,21 @@ class _Rows:
 
 
 def _backlash_rows(
-    structure: Structure, p: FloatArray, u: FloatArray, y: FloatArray, deadband: float
+    structure: Structure,
+    p: FloatArray,
+    u: FloatArray,
+    y: FloatArray,
+    deadband: float,
+    breaks: BoolArray | None = None,
 ) -> _Rows:
-    """Rows of eq. (24) for the measured backlash output ``y`` (the informative ones)."""
+    """Rows of eq. (24) for the measured backlash output ``y`` (the informative ones); never
+    across a break of the sample rule (:mod:`genbacklash_core.samples`)."""
     u_t = u[1:]
     f1, f2 = _switching(structure, p, u_t, y[:-1])  # eqs. (27)-(28), x(t-1) measured
     moving = np.abs(np.diff(u)) > deadband
     informative = ((f1 + f2) > 0.0) & moving  # other rows carry no information (eq. 29)
+    if breaks is not None:
+        informative &= ~breaks[1:]  # x(t-1) must be the reading just before x(t)
     phi = _backlash_columns(structure, p, u_t[informative], f1[informative], f2[informative])
     return _Rows(phi, y[1:][informative], informative)  # target x(t): the hold term vanishes
 
@@ -381,6 +427,7 @@ def _merge_index(lo: FloatArray, hi: FloatArray, x_low: FloatArray) -> int:
 
 
 _MAX_SETTLING = 1000  # cap of the linear block's settling horizon, in samples
+_OUTLIER_SIGMAS = 10.0  # rows this far off the accepted model are forgotten (memory mode)
 
 
 def settling_samples(structure: Structure, p: FloatArray) -> int:
@@ -415,6 +462,7 @@ def _cascade_rows(
     y: FloatArray,
     deadband: float,
     settling: int | None = None,
+    breaks: BoolArray | None = None,
 ) -> _Rows:
     """Rows of eq. (35) with the internal ``x`` of eq. (36), for a window taken mid-stream.
 
@@ -445,6 +493,9 @@ def _cascade_rows(
     horizon = settling_samples(structure, p) if settling is None else settling
     live = ((f1 + f2) > 0.0) | (resting <= horizon)
     informative = moving & live  # such rows inform the linear part too (eq. 35)
+    if breaks is not None:  # the measured lags y(t-1) .. y(t-nb) must be consecutive
+        lags = max(nb, 1)
+        informative &= breaks_to_rows(breaks, lags)[t0 - lags :]
     use = informative
     m = int(np.count_nonzero(use))
     n_bl = structure.n_backlash
@@ -469,14 +520,16 @@ def window_rows(
     y: FloatArray,
     deadband: float,
     settling: int | None = None,
+    breaks: BoolArray | None = None,
 ) -> _Rows:
     """The regression of eq. (24) or (35) over a window, at parameters ``p``.
 
     ``settling`` (cascade only) is the linear block's settling horizon; default from ``p``.
+    ``breaks``: the sample rule; no row reaches across a break.
     """
     if structure.cascade:
-        return _cascade_rows(structure, p, u, y, deadband, settling)
-    return _backlash_rows(structure, p, u, y, deadband)
+        return _cascade_rows(structure, p, u, y, deadband, settling, breaks)
+    return _backlash_rows(structure, p, u, y, deadband, breaks)
 
 
 @dataclass
@@ -683,6 +736,7 @@ def fit_window(
     recent: int | None = None,
     min_excitation: float = 0.0,
     prior: SeedPrior | None = None,
+    breaks: BoolArray | None = None,
 ) -> WindowFit | FitFailure:
     """Up to ``iterations`` warm-started iterations of the paper's method on one window.
 
@@ -706,7 +760,7 @@ def fit_window(
     first: _Rows | None = None
     settling = settling_samples(structure, p) if structure.cascade else None
     for k in range(iterations):
-        rows = window_rows(structure, p, u, y, deadband, settling)
+        rows = window_rows(structure, p, u, y, deadband, settling, breaks)
         if k == 0:
             first = rows
             flags = rows.informative if recent is None else rows.informative[-recent:]
@@ -785,11 +839,15 @@ def fit_window(
 
 
 def cold_fit(
-    structure: Structure, sign_known: bool, u: FloatArray, y: FloatArray
+    structure: Structure,
+    sign_known: bool,
+    u: FloatArray,
+    y: FloatArray,
+    breaks: BoolArray | None = None,
 ) -> tuple[Structure, FloatArray] | str:
     """The batch iteration (with its restarts) from the paper's start; or why it failed.
 
-    Detects the branch sense when it is not known yet.
+    Detects the branch sense when it is not known yet. ``breaks``: the sample rule.
     """
     sign = structure.sign if sign_known else None
     try:
@@ -799,10 +857,19 @@ def cold_fit(
             # refined estimate counts only when the iteration restarted there settles.
             if structure.cascade:
                 result = identify_cascade(
-                    u, y, structure.degree, structure.na, structure.nb, sign=sign, refine=refine
+                    u,
+                    y,
+                    structure.degree,
+                    structure.na,
+                    structure.nb,
+                    sign=sign,
+                    refine=refine,
+                    breaks=breaks,
                 )
             else:
-                result = identify_backlash(u, y, structure.degree, sign=sign, refine=refine)
+                result = identify_backlash(
+                    u, y, structure.degree, sign=sign, refine=refine, breaks=breaks
+                )
             if result.converged:
                 break
     except GenBacklashError as err:
@@ -814,7 +881,13 @@ def cold_fit(
 
 
 def _refine_window(
-    structure: Structure, p: FloatArray, u: FloatArray, y: FloatArray, fit: WindowFit, steps: int
+    structure: Structure,
+    p: FloatArray,
+    u: FloatArray,
+    y: FloatArray,
+    fit: WindowFit,
+    steps: int,
+    breaks: BoolArray | None = None,
 ) -> FloatArray | None:
     """A few output-error steps on the window from ``p``; None when they cannot run.
 
@@ -840,8 +913,9 @@ def _refine_window(
         u_fit, y_fit, x0 = u[start:], y[start:] - free, float(rows.x[start - 1])
     else:
         u_fit, y_fit, x0 = u, y, float(y[0])
+    brk = None if structure.cascade else breaks
     try:
-        q = refine_parameters(structure, p, u_fit, y_fit, x0, max_iterations=steps)[0]
+        q = refine_parameters(structure, p, u_fit, y_fit, x0, max_iterations=steps, breaks=brk)[0]
     except GenBacklashError:
         return None
     return q
@@ -927,7 +1001,14 @@ class WindowedIdentifier:
 
     def reset(self) -> None:
         """Forget all samples and the estimate."""
-        self._ring = SampleRing(self.settings.window)
+        s = self.settings
+        self._ring = SampleRing(s.window)
+        # a backlash alone remembers rows by branch and input region; a cascade, samples
+        self._memory = None if self._template.cascade else RowMemory(s.window, s.bins)
+        self._last: tuple[float, float] | None = None  # the latest sample (memory mode)
+        self._break_next = False  # a dropped sample ended the previous call
+        self._rows = 0  # rows taken (memory mode)
+        self._idle = 0  # samples since the last informative row
         self._structure = self._template
         self._sign_known_now = self._sign_known
         self._p: FloatArray | None = None  # equation-error estimate (warm start)
@@ -939,6 +1020,7 @@ class WindowedIdentifier:
         self._reason = "warming up"
         self._samples = 0
         self._last_fit_at = 0
+        self._last_fit_rows = 0
         self._next_fit = self.min_samples
         self._failures = 0
         self._restarted = True
@@ -948,7 +1030,22 @@ class WindowedIdentifier:
         self._span_ref = 0.0  # widest input span of an accepted fit
         self._seed: SeedPrior | None = None  # a saved estimate the window still leans on
         self._seed_samples = 0  # samples of the window the seed stands for
+        self._seed_rows = 0  # rows taken when the seed was planted (memory mode)
         self._estimate = Estimate.empty(self._structure)
+
+    @property
+    def coverage(self) -> BranchCoverage | None:
+        """Rows per branch and input region in the memory (a backlash alone; None for the
+        cascade, which remembers samples)."""
+        return None if self._memory is None else self._memory.coverage()
+
+    def _held(self) -> int:
+        """How much the memory holds: rows (backlash alone) or samples (cascade)."""
+        return len(self._ring) if self._memory is None else len(self._memory)
+
+    def _progress(self) -> int:
+        """The counter fits are scheduled on: rows taken (backlash alone) or samples."""
+        return self._samples if self._memory is None else self._rows
 
     def seed(self, estimate: Estimate) -> Estimate:
         """Continue from a saved ``estimate`` (e.g. a checkpoint's) instead of a cold start.
@@ -1018,7 +1115,8 @@ class WindowedIdentifier:
         self._needs_cold = False
         self._restarted = False  # the next fit continues from the seed (steadiness test)
         self._samples = self._last_fit_at = estimate.samples
-        self._next_fit = self._samples + self.min_samples
+        self._last_fit_rows = self._seed_rows = self._rows
+        self._next_fit = self._progress() + self.min_samples
         self._rebuild()
         return self._estimate
 
@@ -1032,33 +1130,47 @@ class WindowedIdentifier:
         """Share of the seed's samples still counted (those new samples did not replace)."""
         if self._seed is None:
             return 0.0
-        kept = min(self._seed_samples, self.settings.window - len(self._ring))
+        if self._memory is not None:  # the rows taken since the seed replace it
+            kept = self._seed_samples - (self._rows - self._seed_rows)
+        else:
+            kept = min(self._seed_samples, self.settings.window - self._held())
         return max(kept, 0) / self._seed_samples
 
-    def update(self, u: float, y: float) -> Estimate:
-        """Take one sample; refit when due. Returns the current estimate."""
+    def update(self, u: float, y: float, *, follows: bool = True) -> Estimate:
+        """Take one sample; refit when due. Returns the current estimate.
+
+        ``follows=False``: the sample does not follow the previous one on the encoder's
+        clock (a lost reading in between): no regression row pairs the two.
+        """
         uf, yf = as_sample(u, y)
         if not (abs(uf) <= self._u_limit and abs(yf) <= self._y_limit):  # NaN fails too
             if self.settings.nonfinite == "drop":
+                self._break_next = True
                 return self._estimate
             raise NonFiniteInputError(
                 f"sample {self._samples} is not finite (u={uf!r}, y={yf!r}) or beyond "
                 f"|u| <= {self._u_limit:.3g}, |y| <= {self._y_limit:.3g}; pass "
                 "nonfinite='drop' in the settings to skip such samples"
             )
-        self._ring.push(uf, yf)
-        self._samples += 1
-        if self._samples >= self._next_fit:
-            self._fit()
-        return self._publish()
+        return self._take(np.array([uf]), np.array([yf]), np.array([not follows]))
 
-    def update_many(self, u: ArrayLike, y: ArrayLike) -> Estimate:
-        """Take a series of samples; identical to :meth:`update` on each, vectorised."""
+    def update_many(self, u: ArrayLike, y: ArrayLike, breaks: ArrayLike | None = None) -> Estimate:
+        """Take a series of samples; identical to :meth:`update` on each, vectorised.
+
+        ``breaks[k]`` True: sample ``k`` does not follow sample ``k-1`` (``breaks[0]``: the
+        previous call's last sample) on the encoder's clock; see
+        :mod:`genbacklash_core.samples`. Default: every sample follows its predecessor.
+        """
         uu, yy = as_series(u, y)
+        bb = np.zeros(uu.size, dtype=bool) if breaks is None else as_breaks(breaks, uu.size)
         bad = ~((np.abs(uu) <= self._u_limit) & (np.abs(yy) <= self._y_limit))  # NaN too
         if bad.any():
             if self.settings.nonfinite == "drop":
+                after = np.concatenate([[False], bad[:-1]])  # a dropped sample breaks the chain
+                bb = (bb | after)[~bad]
                 uu, yy = uu[~bad], yy[~bad]
+                if bad[-1]:
+                    self._break_next = True
             else:
                 where = int(np.argmax(bad))
                 raise NonFiniteInputError(
@@ -1066,14 +1178,59 @@ class WindowedIdentifier:
                     f"{self._u_limit:.3g}, |y| <= {self._y_limit:.3g} (first at index "
                     f"{where}); pass nonfinite='drop' in the settings to skip such samples"
                 )
+        return self._take(uu, yy, bb)
+
+    def _take(self, uu: FloatArray, yy: FloatArray, bb: BoolArray) -> Estimate:
+        """Feed validated samples, fitting whenever the schedule says (see update_many)."""
+        if uu.size == 0:
+            return self._publish()
+        if self._break_next:
+            bb = bb.copy()
+            bb[0] = True
+            self._break_next = False
+        if self._memory is None:
+            start = 0
+            while start < uu.size:
+                take = min(uu.size - start, self._next_fit - self._samples)
+                part = slice(start, start + take)
+                self._ring.extend(uu[part], yy[part], bb[part])
+                self._samples += take
+                start += take
+                if self._samples >= self._next_fit:
+                    self._fit()
+            return self._publish()
+        # memory mode: rows are pairs of consecutive samples whose input moved
+        if self._last is None:
+            prev_u, prev_y, link = uu[0], yy[0], False
+        else:
+            prev_u, prev_y = self._last
+            link = not bool(bb[0])
+        u_prev = np.concatenate([[prev_u], uu[:-1]])
+        y_prev = np.concatenate([[prev_y], yy[:-1]])
+        follows = ~bb
+        follows[0] = link
+        row = follows & (uu != u_prev)  # a held command or a dwell adds no row
         start = 0
         while start < uu.size:
-            take = min(uu.size - start, self._next_fit - self._samples)
-            self._ring.extend(uu[start : start + take], yy[start : start + take])
-            self._samples += take
-            start += take
-            if self._samples >= self._next_fit:
+            need = self._next_fit - self._rows
+            counts = np.cumsum(row[start:])
+            hit = int(np.searchsorted(counts, max(need, 1)))
+            stop = uu.size if hit >= counts.size else start + hit + 1
+            part = slice(start, stop)
+            self._ring.extend(uu[part], yy[part], bb[part])  # the refinement's recent series
+            taken = row[part]
+            if taken.any():
+                m = self._memory
+                m.add(u_prev[part][taken], uu[part][taken], y_prev[part][taken], yy[part][taken])
+                self._rows += int(np.count_nonzero(taken))
+                self._idle = stop - 1 - (start + int(np.flatnonzero(taken)[-1]))
+            else:
+                self._idle += stop - start
+            self._samples += stop - start
+            start = stop
+            if self._rows >= self._next_fit:
                 self._fit()
+        self._last = (float(uu[-1]), float(yy[-1]))
         return self._publish()
 
     def refit(self) -> Estimate:
@@ -1083,37 +1240,121 @@ class WindowedIdentifier:
         estimate may be up to ``K`` samples old. The schedule restarts from here. Right
         after :meth:`seed`, until ``min_samples`` new samples arrived, the seed stands.
         """
-        if len(self._ring) >= (1 if self._seed is None else self.min_samples):
+        if self._held() >= (1 if self._seed is None else self.min_samples):
             self._fit(early=True)
         return self._publish()
 
     # ---- internals
 
+    def _published_state(self) -> tuple[EstimatorState, str, float]:
+        """State, reason and confidence as published: a fitted estimate that no new
+        information has confirmed for ``idle_samples`` is held (``no_excitation``), its
+        confidence fading with the age of its information."""
+        state, reason = self._state, self._reason
+        if self._reported is None or self._covariance is None:
+            return state, reason, 0.0
+        s = self.settings
+        rel = relative_std(self._reported, self._covariance)
+        confidence = confidence_of(state, rel, s.converged_std)
+        if self._memory is None or state not in (
+            EstimatorState.CONVERGED,
+            EstimatorState.CONVERGING,
+            EstimatorState.NO_EXCITATION,
+        ):
+            return state, reason, confidence
+        if self._idle >= s.idle_samples:
+            state = EstimatorState.NO_EXCITATION
+            reason = (
+                f"estimate held: no information for {self._idle} samples (the input rests "
+                f"or repeats); {self._reason}"
+            )
+        return state, reason, aged_confidence(confidence, float(self._idle), s.confidence_half_life)
+
+    def excitation_advice(self) -> str:
+        """What the data have not shown yet, and what motion would show it ("" when the
+        memory covers both branches over the input range seen). A backlash alone only."""
+        memory = self._memory
+        if memory is None:
+            return ""
+        if self._samples > 1 and self._rows == 0:
+            return (
+                "the input is constant (or every sample was lost): move the joint back and "
+                "forth over its working range"
+            )
+        cover = memory.coverage()
+        missing = []
+        for branch, move in (("left", "down"), ("right", "up")):
+            if cover.share(branch) == 0.0:
+                missing.append(f"the {branch} branch is not covered yet: move the joint {move}")
+            else:
+                holes = cover.empty_regions(branch)
+                if holes and cover.share(branch) < 0.75:
+                    where = ", ".join(f"[{lo:.3g}, {hi:.3g}]" for lo, hi in holes[:3])
+                    missing.append(
+                        f"the {branch} branch has no data over {where}: move {move} there"
+                    )
+        if not missing and self._p is None:
+            need = self.min_samples - len(memory)
+            if need > 0:
+                missing.append(
+                    f"{need} more moves between readings needed before the first fit (moves "
+                    "that reverse direction across the gap teach the most)"
+                )
+        return "; ".join(missing)
+
     def _publish(self) -> Estimate:
-        if self._estimate.samples != self._samples:
-            self._estimate = self._estimate.with_samples(self._samples)
+        est = self._estimate
+        if self._memory is not None and self._reported is None:
+            advice = self.excitation_advice()
+            reason = self._reason if not advice else f"{self._reason}: {advice}"
+            if reason != est.reason:
+                self._estimate = est = Estimate.empty(
+                    self._structure, self._samples, self._excitation, self._state, reason
+                )
+        if self._memory is not None and self._reported is not None:
+            state, _, confidence = self._published_state()
+            if state is not est.state or abs(confidence - est.confidence) > 1e-3 * max(
+                est.confidence, 1e-12
+            ):
+                self._rebuild()
+                est = self._estimate
+        if est.samples != self._samples:
+            self._estimate = est.with_samples(self._samples)
         return self._estimate
 
     def _schedule(self) -> None:
         s = self.settings
-        k = max(s.refit_every, math.ceil(s.refit_fraction * len(self._ring)))
+        k = max(s.refit_every, math.ceil(s.refit_fraction * self._held()))
         if self._needs_cold and self._cold_failures:  # back off while cold starts fail,
             # but retry at least every W/8 samples: slow references excite the system slowly
             k = min(s.refit_every * 2 ** min(self._cold_failures, 10), max(s.window // 8, 1))
         self._last_fit_at = self._samples
-        self._next_fit = self._samples + k
+        self._last_fit_rows = self._rows
+        self._next_fit = self._progress() + k
+
+    def _data(self) -> tuple[FloatArray, FloatArray, BoolArray]:
+        """What a fit takes: the memory's rows as pairs, or the window of samples."""
+        if self._memory is not None:
+            return self._memory.series()
+        u, y = self._ring.window()
+        return u, y, self._ring.breaks()
 
     def _fit(self, early: bool = False) -> None:
-        u, y = self._ring.window()
+        u, y, b = self._data()
         if self._needs_cold:
-            self._cold_start(u, y)
+            self._cold_start(u, y, b)
         else:
-            recent = self._samples - self._last_fit_at
+            recent = self._progress() - (
+                self._last_fit_at if self._memory is None else self._last_fit_rows
+            )
             if early:  # refit(): judge the excitation on as many samples as the scheduled fit
                 # would have, not on the few since the last fit (a record ending at rest
                 # would otherwise freeze a converged estimate as `no_excitation`)
-                recent = max(recent, min(self._next_fit - self._last_fit_at, len(self._ring)))
-            self._warm_fit(u, y, recent)
+                span = self._next_fit - (
+                    self._last_fit_at if self._memory is None else self._last_fit_rows
+                )
+                recent = max(recent, min(span, self._held()))
+            self._warm_fit(u, y, b, recent)
         self._schedule()
         self._rebuild()
 
@@ -1123,9 +1364,9 @@ class WindowedIdentifier:
             self._span_ref, float(np.ptp(u)) * self._needs_cold
         )
 
-    def _cold_start(self, u: FloatArray, y: FloatArray) -> None:
+    def _cold_start(self, u: FloatArray, y: FloatArray, b: BoolArray) -> None:
         self._seed = None  # a restart after divergence: the seed is discredited
-        found = cold_fit(self._structure, self._sign_known_now, u, y)
+        found = cold_fit(self._structure, self._sign_known_now, u, y, b)
         if isinstance(found, str):
             self._cold_failed(found)
             return
@@ -1140,6 +1381,7 @@ class WindowedIdentifier:
             tol=self.settings.tol,
             settle=self.settings.settle,
             deadband=self._deadband(u),
+            breaks=b,
         )
         if isinstance(outcome, FitFailure):
             self._cold_failed(outcome.reason)
@@ -1148,7 +1390,7 @@ class WindowedIdentifier:
         self._needs_cold = False
         self._cold_failures = 0
         self._failures = 0
-        self._accept(outcome, u, y)
+        self._accept(outcome, u, y, b)
         self._reason = "cold start: " + self._reason
 
     def _cold_failed(self, why: str) -> None:
@@ -1158,13 +1400,16 @@ class WindowedIdentifier:
             self._state = EstimatorState.DIVERGED
             self._reason = f"diverged; {self._reason}"
 
-    def _warm_fit(self, u: FloatArray, y: FloatArray, recent: int) -> None:
+    def _warm_fit(self, u: FloatArray, y: FloatArray, b: BoolArray, recent: int) -> None:
         assert self._p is not None
         s = self.settings
         weight = self._seed_weight()
         if weight <= 0.0:
             self._seed = None
         prior = None if self._seed is None else self._seed.scaled(weight)
+        memory = self._memory is not None
+        if memory and recent <= 0:  # nothing new since the last fit: the estimate holds
+            return
         outcome = fit_window(
             self._structure,
             u,
@@ -1174,10 +1419,14 @@ class WindowedIdentifier:
             tol=s.tol,
             settle=s.settle,
             deadband=self._deadband(u),
-            recent=recent,
-            min_excitation=s.min_excitation,
+            recent=None if memory else recent,
+            min_excitation=0.0 if memory else s.min_excitation,
             prior=prior,
+            breaks=b,
         )
+        if memory:  # the share of the samples since the last fit that added a row
+            share = recent / max(self._samples - self._last_fit_at, 1)
+            outcome.excitation = min(share, 1.0)
         floor = conditioning_floor(
             self._structure, self._conditioning_ref, s.min_conditioning, s.min_linear_conditioning
         )
@@ -1191,7 +1440,7 @@ class WindowedIdentifier:
                 outcome = FitFailure(poor, outcome.excitation, True)
         if isinstance(outcome, WindowFit):
             self._failures = 0
-            self._accept(outcome, u, y, conditioning)
+            self._accept(outcome, u, y, b, conditioning)
             return
         self._excitation = outcome.excitation
         if outcome.no_information:
@@ -1201,13 +1450,34 @@ class WindowedIdentifier:
         self._failures += 1
         self._reason = f"fit rejected ({self._failures} in a row): {outcome.reason}"
         if self._failures >= s.max_failures:
+            # the data stay (in memory mode: what the data taught, by region); a fresh start
+            # from the paper's start over all of them
             self._state = EstimatorState.DIVERGED
             self._reason = f"diverged: {outcome.reason}; restarting from the paper's start"
             self._needs_cold = True
-            self._cold_start(u, y)
+            self._cold_start(u, y, b)
+
+    def _purge_outliers(self, p: FloatArray, residual: float) -> None:
+        """Forget the rows the accepted model cannot have produced: one-step prediction
+        errors beyond ``_OUTLIER_SIGMAS`` robust standard deviations (a burst of garbage
+        readings would otherwise stay for good in the regions rarely visited)."""
+        assert self._memory is not None
+        u0, u1, y0, y1 = self._memory.rows()
+        if u1.size < 4 * self._structure.n_parameters:
+            return
+        left, right = self._structure.branches(p, u1)
+        lo, hi = play_bounds(left, right)
+        error = y1 - np.minimum(np.maximum(y0, lo), hi)  # eq. (20): one step from x(t-1)
+        scale = 1.4826 * float(np.median(np.abs(error)))
+        limit = _OUTLIER_SIGMAS * max(scale, residual, 1e-12)
+        if self._memory.discard(np.abs(error) > limit):
+            self._next_fit = min(self._next_fit, self._rows + self.settings.refit_every)
 
     def _recent_conditioning(self, rows: _Rows) -> FloatArray:
-        """Block conditioning of the rows from the latest ``excitation_window`` samples."""
+        """Block conditioning of the rows from the latest ``excitation_window`` samples; in
+        memory mode of all the rows (the memory keeps every region it has seen)."""
+        if self._memory is not None:
+            return block_conditioning(self._structure, rows.phi.T @ rows.phi)
         recent = int(np.count_nonzero(rows.informative[-self.settings.excitation_window :]))
         phi = rows.phi[rows.phi.shape[0] - recent :]  # rows follow the informative samples
         return block_conditioning(self._structure, phi.T @ phi)
@@ -1217,6 +1487,7 @@ class WindowedIdentifier:
         fit: WindowFit,
         u: FloatArray,
         y: FloatArray,
+        b: BoolArray,
         conditioning: FloatArray | None = None,
     ) -> None:
         s = self.settings
@@ -1231,9 +1502,21 @@ class WindowedIdentifier:
             start = fit.p if self._restarted or previous is None else previous
             if self._structure.problem(start, (float(u.min()), float(u.max()))) is not None:
                 start = fit.p
-            refined = _refine_window(self._structure, start, u, y, fit, s.refine_iterations)
+            if self._memory is not None:  # refine on the recent series: the free-run
+                # simulation error needs samples in order, not rows filed by region
+                ru, ry = self._ring.window()
+                rb = self._ring.breaks()
+                refined = None
+                if ru.size > 4 * self._structure.n_parameters:
+                    refined = _refine_window(
+                        self._structure, start, ru, ry, fit, s.refine_iterations, rb
+                    )
+            else:
+                refined = _refine_window(self._structure, start, u, y, fit, s.refine_iterations, b)
             if refined is not None:
                 reported = refined
+        if self._memory is not None:
+            self._purge_outliers(fit.p, fit.residual)
         previous = None if self._restarted else self._reported
         self._restarted = False
         self._reported = reported
@@ -1263,7 +1546,7 @@ class WindowedIdentifier:
                 self._structure, self._samples, self._excitation, self._state, self._reason
             )
             return
-        rel = relative_std(self._reported, self._covariance)
+        state, reason, confidence = self._published_state()
         p = self._reported.copy()
         p.flags.writeable = False
         cov = self._covariance.copy()
@@ -1274,8 +1557,8 @@ class WindowedIdentifier:
             cov,
             self._residual,
             min(max(self._excitation, 0.0), 1.0),
-            self._state,
-            confidence_of(self._state, rel, self.settings.converged_std),
+            state,
+            confidence,
             self._samples,
-            self._reason,
+            reason,
         )

@@ -156,7 +156,7 @@ def test_constant_input_from_the_start_stays_warming_up() -> None:
     ident = WindowedIdentifier(3)
     est = ident.update_many(np.full(500, 0.3), np.full(500, 0.1))
     assert est.state is EstimatorState.WARMING_UP
-    assert "input is constant" in est.reason
+    assert "input is constant" in est.reason, est.reason
 
 
 def test_update_and_update_many_agree_exactly() -> None:
@@ -254,7 +254,11 @@ def test_freezes_without_excitation_and_recovers() -> None:
     assert _error(after.parameters, EX1.model.parameters()) < 0.03
 
 
-def test_freezes_when_the_input_sweeps_only_part_of_a_branch() -> None:
+def test_keeps_the_rest_of_a_branch_when_the_input_sweeps_only_part_of_it() -> None:
+    """Memory by input region: 4000 samples sweeping only the upper part of the right
+    branch replace the rows of that region only; the rest of both branches stays, so the
+    fits go on without bending the polynomials to the narrow part (a sample window would
+    have forgotten everything else and had to freeze)."""
     rng = np.random.default_rng(8)
     t = np.arange(4000)
     narrow = 1.2 + 0.3 * np.sin(2 * np.pi * t / 60)  # the upper part of the right branch only
@@ -263,9 +267,10 @@ def test_freezes_when_the_input_sweeps_only_part_of_a_branch() -> None:
     y = x + rng.normal(0.0, float(np.std(x)) / 25.0, u.size)
     ident = WindowedIdentifier(3, settings=WindowedSettings(window=1000))
     trace = track(ident, u, y, every=250)
-    assert trace[-1].state is EstimatorState.NO_EXCITATION
-    assert trace[-1].reason.startswith("estimate frozen")
+    assert trace[-1].state is EstimatorState.CONVERGED, trace[-1].reason
     assert max(_error(e.parameters, EX1.model.parameters()) for e in trace[2:]) < 0.04
+    cover = ident.coverage
+    assert cover is not None and cover.share("left") == 1.0 and cover.share("right") == 1.0
 
 
 # --------------------------------------------------------------------------- divergence
@@ -373,7 +378,9 @@ def test_seed_tracks_a_drift_after_the_restart() -> None:
     for k in range(6000, 12000, 500):
         a = through.update_many(u[k : k + 500], y[k : k + 500])
         b = restarted.update_many(u[k : k + 500], y[k : k + 500])
-        assert b.state is EstimatorState.CONVERGED
+        # while the gap drifts a fit may move more than 3 std: converging, never lost
+        assert b.state in (EstimatorState.CONVERGED, EstimatorState.CONVERGING), b.reason
+        assert b.confidence >= 0.4
         assert abs(b.parameters[n] - a.parameters[n]) < 0.02  # c_left as without a restart
     assert abs(b.parameters[n] - c_left[-1]) < 0.1
 

@@ -1,0 +1,139 @@
+"""The sample rule: which samples are consecutive on the encoder's clock.
+
+The paper's regressions (eqs. 24, 29, 35, 37) pair each output ``x(t)`` with ``x(t-1)`` (and
+the cascade with ``x(t-i)``, ``y(t-j)``). That holds only for readings that really follow each
+other. A lost reading, a gap in the stream, or a stamp moved by jitter must never pair two
+states that are not neighbours on the encoder's clock: the pair would look like a jump of the
+load and bias both gaps small (the missed motion is read as a branch engaged too early).
+
+The rule, shared by the online identifiers, batch ``identify``/``diagnose`` on bags and the
+node: reading ``k`` *follows* reading ``k-1`` when the stamp difference, in units of the
+encoder's nominal period, rounds to exactly one. Jitter of up to half a period keeps a
+neighbour a neighbour; one lost reading (two periods) or any longer gap breaks the chain.
+The nominal period is the median stamp difference unless given.
+
+Identifiers take the rule as a boolean ``breaks`` array: ``breaks[k]`` is True when sample
+``k`` does *not* follow sample ``k-1`` (the first sample of a record always breaks).
+
+Examples
+--------
+>>> import numpy as np
+>>> t = np.array([0, 1_000_000, 2_050_000, 4_000_000, 5_000_000])  # 3 ms lost, jitter
+>>> sample_breaks(t).tolist()
+[True, False, False, True, False]
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ._typing import ArrayLike, BoolArray, FloatArray
+from .errors import GenBacklashError
+
+__all__ = ["as_breaks", "breaks_to_rows", "nominal_period", "sample_breaks", "segment_lengths"]
+
+
+def nominal_period(times_ns: ArrayLike) -> float:
+    """The encoder's nominal period: the median of the positive stamp differences.
+
+    Raises
+    ------
+    GenBacklashError
+        With fewer than two increasing stamps.
+
+    >>> nominal_period([0, 1_000, 2_000, 5_000, 6_000])
+    1000.0
+    """
+    t = np.asarray(times_ns, dtype=np.float64)
+    if t.ndim != 1:
+        raise GenBacklashError(f"times must be one-dimensional, got shape {t.shape}")
+    steps = np.diff(t)
+    steps = steps[steps > 0]
+    if steps.size == 0:
+        raise GenBacklashError("need at least two increasing stamps to tell the encoder period")
+    return float(np.median(steps))
+
+
+def sample_breaks(times_ns: ArrayLike, period_ns: float | None = None) -> BoolArray:
+    """``breaks[k]``: sample ``k`` does not follow sample ``k-1`` on the encoder's clock.
+
+    Parameters
+    ----------
+    times_ns : array_like of int, shape (N,)
+        Stamps of the readings, increasing (integer nanoseconds, or any one unit).
+    period_ns : float, optional
+        The encoder's nominal period in the same unit; default :func:`nominal_period`.
+
+    Returns
+    -------
+    ndarray of bool, shape (N,)
+        True at ``k = 0`` and wherever ``round((t[k] - t[k-1]) / period) != 1``.
+
+    >>> sample_breaks([0, 10, 20, 40, 50], period_ns=10).tolist()
+    [True, False, False, True, False]
+    """
+    t = np.asarray(times_ns, dtype=np.float64)
+    if t.ndim != 1:
+        raise GenBacklashError(f"times must be one-dimensional, got shape {t.shape}")
+    out = np.ones(t.size, dtype=bool)
+    if t.size < 2:
+        return out
+    period = nominal_period(t) if period_ns is None else float(period_ns)
+    if not period > 0.0:
+        raise GenBacklashError(f"the encoder period must be > 0, got {period_ns!r}")
+    steps = np.rint(np.diff(t) / period)
+    out[1:] = steps != 1.0
+    return out
+
+
+def as_breaks(breaks: ArrayLike | None, size: int) -> BoolArray:
+    """Validate a ``breaks`` argument (None: every sample follows its predecessor)."""
+    if breaks is None:
+        out = np.zeros(size, dtype=bool)
+        if size:
+            out[0] = True
+        return out
+    b = np.asarray(breaks)
+    if b.shape != (size,):
+        raise GenBacklashError(f"breaks must have one flag per sample ({size}), got {b.shape}")
+    if b.dtype != np.bool_:
+        if not np.all(np.isin(b, (0, 1))):
+            raise GenBacklashError("breaks must hold booleans (True: a gap before the sample)")
+        b = b.astype(bool)
+    return np.asarray(b, dtype=bool)
+
+
+def breaks_to_rows(breaks: BoolArray, lags: int = 1) -> BoolArray:
+    """Rows ``t = lags .. N-1`` whose last ``lags`` predecessors are all consecutive.
+
+    Row ``t`` of a regression that reaches back ``lags`` samples is valid when none of
+    samples ``t - lags + 1 .. t`` breaks the chain (eqs. 24, 35 pair ``t`` with ``t-1``..).
+
+    >>> breaks_to_rows(np.array([True, False, True, False, False]), lags=1).tolist()
+    [True, False, True, True]
+    >>> breaks_to_rows(np.array([True, False, True, False, False]), lags=2).tolist()
+    [False, False, True]
+    """
+    b = np.asarray(breaks, dtype=bool)
+    n = b.size
+    if n <= lags:
+        return np.zeros(0, dtype=bool)
+    bad = np.zeros(n - lags, dtype=bool)
+    for j in range(lags):  # sample t - j must follow t - j - 1, for j < lags
+        bad |= b[lags - j : n - j]
+    return ~bad
+
+
+def segment_lengths(breaks: BoolArray) -> FloatArray:
+    """Lengths of the runs of consecutive samples (for reports).
+
+    >>> segment_lengths(np.array([True, False, True, False, False])).tolist()
+    [2.0, 3.0]
+    """
+    starts = np.flatnonzero(np.asarray(breaks, dtype=bool))
+    if starts.size == 0:
+        return (
+            np.array([float(np.asarray(breaks).size)]) if np.asarray(breaks).size else np.empty(0)
+        )
+    ends = np.append(starts[1:], np.asarray(breaks).size)
+    return np.asarray(ends - starts, dtype=np.float64)
