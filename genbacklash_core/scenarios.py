@@ -416,7 +416,7 @@ def operation_record(settings: OperationSettings | None = None, seed: int = 0) -
         cmd_t += rng.integers(0, round(cfg.command_jitter * 1e9) + 1, n_cmd)
     total_ns = n_cmd * cmd_period
     enc_period = 1e9 / cfg.encoder_rate
-    n = int(math.floor(total_ns / enc_period))
+    n = math.floor(total_ns / enc_period)
     nominal = np.round(np.arange(n) * enc_period)
     jitter = rng.normal(0.0, cfg.stamp_jitter * 1e9, n) if cfg.stamp_jitter > 0 else 0.0
     clip = enc_period / 3.0

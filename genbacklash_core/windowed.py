@@ -1462,7 +1462,7 @@ class WindowedIdentifier:
         errors beyond ``_OUTLIER_SIGMAS`` robust standard deviations (a burst of garbage
         readings would otherwise stay for good in the regions rarely visited)."""
         assert self._memory is not None
-        u0, u1, y0, y1 = self._memory.rows()
+        _, u1, y0, y1 = self._memory.rows()
         if u1.size < 4 * self._structure.n_parameters:
             return
         left, right = self._structure.branches(p, u1)
