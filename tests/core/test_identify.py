@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
+from numpy.polynomial import Polynomial
 
 from genbacklash_core import (
     Cascade,
@@ -363,3 +365,157 @@ def test_nrmse() -> None:
     assert nrmse(y, np.full(3, 2.0)) == pytest.approx(1.0)
     assert nrmse(np.ones(3), np.ones(3)) == 0.0
     assert nrmse(np.ones(3), np.zeros(3)) == float("inf")
+
+
+# --------------------------------------------------------------------------- crossing branches
+
+# Lines that meet inside the input range: L(u) = R(u) at u = (0.15 + 1.1 * 0.25) / 0.1 = 4.25,
+# and R lies above L beyond it. On [-6, 6] this is no backlash (the condition below eq. 21).
+CROSSING = GeneralBacklash((1.0,), 0.15, (1.1,), 0.25)
+# Curved branches whose difference is L(u) - R(u) = 0.05 (u - 4.5) (u - 5.5): apart at both
+# ends of [-6, 6], crossed only in the band between: c_R solves the constant term
+# 0.05 c_L^2 + c_L + 1.53 c_R = 0.05 * 4.5 * 5.5.
+INTERIOR = GeneralBacklash((1.0, 0.05), 0.3, (1.53, 0.0), (1.2375 - 0.0045 - 0.3) / 1.53)
+CROSS_REASON = re.compile(r"the branches cross on the input range \(u in \[(\S+), (\S+)\]\)")
+CROSS_GRID_STEP = 12.0 / 256  # the check's grid: 257 points across the input range
+
+
+def _crossing_data(
+    model: GeneralBacklash | Cascade, seed: int, n: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Inputs on [-6, 6] and the model's output with 1 % noise (seeded)."""
+    rng = np.random.default_rng(seed)
+    u = rng.uniform(-6.0, 6.0, n)
+    clean = model.simulate(u)
+    return u, clean + rng.normal(0.0, np.std(clean) / 100, n)
+
+
+def _branch_gap(p: np.ndarray, degree: int) -> Polynomial:
+    """``L(u) - R(u)`` of a natural parameter vector, built here from eqs. (11)-(12)."""
+    m_left, c_left = p[:degree], p[degree]
+    m_right, c_right = p[degree + 1 : 2 * degree + 1], p[2 * degree + 1]
+    gap = Polynomial([0.0])
+    for k in range(degree):
+        gap += m_left[k] * Polynomial([c_left, 1.0]) ** (k + 1)
+        gap -= m_right[k] * Polynomial([-c_right, 1.0]) ** (k + 1)
+    return gap
+
+
+def _reported_band(reason: str) -> tuple[float, float]:
+    match = CROSS_REASON.search(reason)
+    assert match is not None, reason
+    return float(match[1]), float(match[2])
+
+
+def test_crossing_models_of_these_tests() -> None:
+    """Pin the premise: ``CROSSING`` crosses at u = 4.25 (closed form), ``INTERIOR`` exactly
+    on [4.5, 5.5] with both ends of [-6, 6] apart; both are still valid on [-2, 2]."""
+    assert CROSSING.crossings(-6.0, 6.0) == pytest.approx((4.25, 6.0), abs=1e-12)
+    assert not CROSSING.branches_separated(-6.0, 6.0)
+    assert CROSSING.branches_separated(-2.0, 2.0)
+    u = np.linspace(-6.0, 6.0, 121)
+    gap = INTERIOR.left(u) - INTERIOR.right(u)
+    np.testing.assert_allclose(gap, 0.05 * (u - 4.5) * (u - 5.5), rtol=0, atol=1e-12)
+    assert INTERIOR.crossings(-6.0, 6.0) == pytest.approx((4.5, 5.5), abs=1e-9)
+    assert not INTERIOR.branches_separated(-6.0, 6.0)
+    assert INTERIOR.branches_separated(-2.0, 2.0)
+
+
+def test_iteration_settling_on_crossing_lines_does_not_converge() -> None:
+    """Pin the crossing check of the iteration (``Structure.problem`` with the input range).
+
+    Data from ``CROSSING`` on [-6, 6]: the paper's iteration settles on lines that cross
+    inside the range. That must end ``converged=False`` with the "cross" reason, whose band
+    starts at the crossing of the last iterate (closed form ``(m_L c_L + m_R c_R) /
+    (m_R - m_L)``, to the check's grid) and runs to the end of the data. The model returned
+    is the last valid iterate, and with the refinement the refined model: both keep their
+    branches apart on the whole range.
+    """
+    u, y = _crossing_data(CROSSING, 0, 600)
+    plain = identify_backlash(u, y, 1, refine=False)
+    assert plain.converged is False
+    assert "the iteration settled on an invalid model: the branches cross" in plain.reason
+    m_left, c_left, m_right, c_right = plain.history.values[-1]
+    assert m_right > m_left  # R overtakes L: crossed from the crossing to the upper end
+    crossing = (m_left * c_left + m_right * c_right) / (m_right - m_left)
+    assert u.min() < crossing < u.max()
+    low, high = _reported_band(plain.reason)
+    assert crossing - 0.01 <= low <= crossing + CROSS_GRID_STEP + 0.01  # printed to 3 digits
+    assert high == pytest.approx(u.max(), abs=0.01)
+    grid = np.linspace(u.min(), u.max(), 1001)
+    for model in (plain.model, plain.equation_error_model):
+        assert isinstance(model, GeneralBacklash)
+        assert np.all(model.left(grid) > model.right(grid))
+
+    refined = identify_backlash(u, y, 1)
+    assert refined.converged is False
+    assert CROSS_REASON.search(refined.reason) is not None
+    assert refined.refinement is not None
+    assert isinstance(refined.model, GeneralBacklash)
+    assert np.all(refined.model.left(grid) > refined.model.right(grid))
+
+
+@pytest.mark.parametrize("seed", [0, 2, 3])
+def test_crossing_between_the_range_ends_is_found(seed: int) -> None:
+    """Pin that the check looks inside the input range, not only at its ends.
+
+    Data from ``INTERIOR``: the iteration settles near it, on branches apart at both ends of
+    the data but crossed between two roots of ``L - R`` (a quadratic, solved here with
+    numpy). The result must not be converged and the reported band must lie between those
+    roots, to the check's grid.
+    """
+    u, y = _crossing_data(INTERIOR, seed, 800)
+    result = identify_backlash(u, y, 2, refine=False)
+    assert result.converged is False
+    assert "the iteration settled on an invalid model: the branches cross" in result.reason
+    gap = _branch_gap(result.history.values[-1], 2)
+    assert gap(u.min()) > 0 and gap(u.max()) > 0  # apart at both ends of the data
+    roots = np.sort(gap.roots())
+    assert np.all(np.isreal(roots)) and u.min() < roots[0].real < roots[1].real < u.max()
+    first, last = roots.real
+    low, high = _reported_band(result.reason)
+    assert first - 0.01 <= low <= first + CROSS_GRID_STEP + 0.01
+    assert last - CROSS_GRID_STEP - 0.01 <= high <= last + 0.01
+
+
+@pytest.mark.parametrize("cascade", [False, True], ids=["backlash", "cascade"])
+def test_start_crossing_on_the_input_range_leaves_nothing_to_refine(cascade: bool) -> None:
+    """Pin the refinement's guard against a start whose branches cross on the data's range.
+
+    Started at the crossing truth itself, every iterate crosses, so no candidate is valid to
+    refine from: ``converged=False``, no refinement, and the reason says why.
+    """
+    truth = Cascade(CROSSING, LinearBlock((1.0, 0.3), (-0.5,))) if cascade else CROSSING
+    u, y = _crossing_data(truth, 1, 1500 if cascade else 600)
+    if cascade:
+        result = identify_cascade(u, y, 1, 2, 1, start=truth)  # type: ignore[arg-type]
+    else:
+        result = identify_backlash(u, y, 1, start=CROSSING)
+    assert result.converged is False
+    assert result.refinement is None
+    assert CROSS_REASON.search(result.reason) is not None
+    assert "no start valid on the input range to refine from (branches cross)" in result.reason
+
+
+def test_cascade_iteration_settling_on_crossing_branches_does_not_converge() -> None:
+    """Pin the crossing check in :func:`identify_cascade`.
+
+    A cascade whose backlash is ``CROSSING``: the iteration settles on lines that cross
+    inside the input range; the result is not converged, the band starts at the last
+    iterate's crossing (closed form), and the model returned keeps its branches apart.
+    """
+    truth = Cascade(CROSSING, LinearBlock((1.0, 0.3), (-0.5,)))
+    u, y = _crossing_data(truth, 0, 1500)
+    result = identify_cascade(u, y, 1, 2, 1, refine=False)
+    assert result.converged is False
+    assert "the iteration settled on an invalid model: the branches cross" in result.reason
+    m_left, c_left, m_right, c_right = result.history.values[-1][:4]
+    assert m_right > m_left
+    crossing = (m_left * c_left + m_right * c_right) / (m_right - m_left)
+    assert u.min() < crossing < u.max()
+    low, high = _reported_band(result.reason)
+    assert crossing - 0.01 <= low <= crossing + CROSS_GRID_STEP + 0.01
+    assert high == pytest.approx(u.max(), abs=0.01)
+    assert isinstance(result.model, Cascade)
+    grid = np.linspace(u.min(), u.max(), 1001)
+    assert np.all(result.model.backlash.left(grid) > result.model.backlash.right(grid))

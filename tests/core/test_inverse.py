@@ -60,6 +60,28 @@ def _walk(seed: int, n: int, low: float, high: float) -> np.ndarray:
     return path
 
 
+def _branch_root(m: tuple[float, ...], y: float, s_low: float, s_high: float) -> float:
+    """The one real ``s`` in ``(s_low, s_high)`` with ``sum_k m_k s^k = y`` (numpy's roots).
+
+    An independent inverse of a branch in its shifted variable (``s = u + c_L`` for ``L``,
+    ``s = u - c_R`` for ``R``, eqs. 11-12); fails unless exactly one root lies there.
+    """
+    roots = np.polynomial.polynomial.polyroots([-y, *m])
+    real = [float(r.real) for r in roots if abs(r.imag) <= 1e-9 and s_low < r.real < s_high]
+    assert len(real) == 1, (m, y, roots)
+    return real[0]
+
+
+def _left_inverse(model: GeneralBacklash, x: float) -> float:
+    """``u`` with ``L(u) = x`` for a branch monotone on the whole line (``z_L`` of eq. 9)."""
+    return _branch_root(model.m_left, x, -math.inf, math.inf) - model.c_left
+
+
+def _right_inverse(model: GeneralBacklash, x: float) -> float:
+    """``u`` with ``R(u) = x`` for a branch monotone on the whole line (``z_R`` of eq. 10)."""
+    return _branch_root(model.m_right, x, -math.inf, math.inf) + model.c_right
+
+
 # --------------------------------------------------------------------------- exact inverse
 
 
@@ -145,6 +167,106 @@ def test_out_of_reach_uses_the_end_of_the_monotone_part() -> None:
     assert u.tolist() == [pytest.approx(0.5 + math.sqrt(3.0) - 1.0), 2.0, 2.0, -1.0]
 
 
+# Branches with two increasing pieces each (B' has two real roots), yet L - R = 2/3 + u^2/2 > 0
+# on the whole line: L(u) = B_L(u + 2) with B_L(s) = s - 3s^2/4 + s^3/6, B_L' = (s-1)(s-2)/2,
+# increasing for s < 1 and s > 2; R(u) = B_R(u - 2) with B_R(s) = -B_L(-s), increasing for
+# s < -2 and s > -1. The zero crossings (anchors) sit at u = -2 (left) and u = +2 (right).
+TWO_PIECES = GeneralBacklash((1.0, -0.75, 1.0 / 6.0), 2.0, (1.0, 0.75, 1.0 / 6.0), 2.0)
+
+
+def test_two_piece_model_is_a_valid_backlash() -> None:
+    """Pin the premise of the piece tests: the branches of ``TWO_PIECES`` never meet and each
+    has a local maximum and minimum (B_L(1) = 5/12, B_L(2) = 1/3), so ``B_L(s) = 3/8`` has
+    three solutions, one on each monotone stretch: ``6 B_L(s) - 9/4 = (s - 3/2)(s^2 - 3s + 3/2)``.
+    """
+    u = np.linspace(-6.0, 6.0, 241)
+    gap = TWO_PIECES.left(u) - TWO_PIECES.right(u)
+    np.testing.assert_allclose(gap, 2.0 / 3.0 + 0.5 * u**2, rtol=0, atol=1e-12)
+    roots = np.polynomial.polynomial.polyroots([-0.375, *TWO_PIECES.m_left])
+    assert np.all(np.abs(roots.imag) < 1e-9)
+    expected = [(3.0 - math.sqrt(3.0)) / 2.0, 1.5, (3.0 + math.sqrt(3.0)) / 2.0]
+    assert sorted(roots.real.tolist()) == pytest.approx(expected, abs=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("x", "z_left", "z_right"),
+    [
+        (-1.0, "root", 1.0),  # R reaches only (-5/12, inf) on s > -1: its end u = -1 + 2
+        (-0.375, "root", "root"),
+        (0.0, "root", "root"),
+        (0.3, "root", "root"),
+        (0.36, "root", "root"),
+        (0.375, "root", "root"),
+        (0.4, "root", "root"),
+        (1.0, -1.0, "root"),  # L reaches only (-inf, 5/12) on s < 1: its end u = 1 - 2
+    ],
+)
+def test_inversion_uses_the_monotone_piece_holding_the_anchor(
+    x: float, z_left: float | str, z_right: float | str
+) -> None:
+    """Pin the piece choice on the whole line: each branch is inverted on its increasing
+    piece that holds its zero crossing ``u = -c_L`` (left: ``s < 1``) or ``u = c_R`` (right:
+    ``s > -1``), never on the other increasing piece (left ``s > 2``, right ``s < -2``), even
+    where that piece also reaches ``x`` (``x = 0.36, 0.375``: three solutions of ``L = x``).
+    The expected ends are numpy's roots restricted to the anchor's piece, or that piece's end
+    where it does not reach ``x``.
+    """
+    if z_left == "root":
+        z_left = _branch_root(TWO_PIECES.m_left, x, -math.inf, 1.0) - TWO_PIECES.c_left
+    if z_right == "root":
+        z_right = _branch_root(TWO_PIECES.m_right, x, -1.0, math.inf) + TWO_PIECES.c_right
+    assert hold_interval(TWO_PIECES, x) == pytest.approx((z_left, z_right), abs=1e-12)
+
+
+def test_compensator_inverts_on_the_anchor_pieces() -> None:
+    """Pin the commands of the compensator on ``TWO_PIECES``: a push up solves ``R(u) = x_d``
+    on ``s > -1``, a push down ``L(u) = x_d`` on ``s < 1`` (known answers from numpy roots),
+    a hold keeps the command; the forward model then reproduces the path.
+    """
+    x_d = [0.2, 0.375, 0.375, 0.36, 0.36, 0.4, 0.0, -0.5]
+    u = compensate(TWO_PIECES, x_d)
+
+    def up(x: float) -> float:
+        return _branch_root(TWO_PIECES.m_right, x, -1.0, math.inf) + TWO_PIECES.c_right
+
+    def down(x: float) -> float:
+        return _branch_root(TWO_PIECES.m_left, x, -math.inf, 1.0) - TWO_PIECES.c_left
+
+    expected = [up(0.2), up(0.375), up(0.375), down(0.36), down(0.36)]
+    expected += [up(0.4), down(0.0), down(-0.5)]
+    np.testing.assert_allclose(u, expected, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(simulate_backlash(TWO_PIECES, u), x_d, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("x", "z_left", "z_right"),
+    [
+        (0.375, "root", 1.5),  # R only reaches [-5/12, -1/3] on its piece: its upper end
+        (0.35, "root", 1.5),
+        (0.0, -1.5, 1.5),  # out of reach of both pieces: L below, R above
+        (-0.35, -1.5, "root"),
+        (-0.4, -1.5, "root"),
+    ],
+)
+def test_anchor_outside_the_range_uses_the_nearest_piece(
+    x: float, z_left: float | str, z_right: float | str
+) -> None:
+    """Pin the piece nearest the anchor when the anchor lies outside the inversion range.
+
+    On ``[-1.5, 1.5]`` the left branch (anchor ``u = -2``) is increasing on ``[-1.5, -1]``
+    (``s`` in ``[0.5, 1]``, distance 0.5) and ``[0, 1.5]`` (distance 2): the first is used.
+    The right branch (anchor ``u = 2``) is increasing on ``[-1.5, 0]`` (distance 2) and
+    ``[1, 1.5]`` (distance 0.5): the second is used. Targets the piece does not reach give
+    its end; the others are numpy's roots on that piece.
+    """
+    options = CompensatorOptions(valid_range=(-1.5, 1.5))
+    if z_left == "root":
+        z_left = _branch_root(TWO_PIECES.m_left, x, 0.5, 1.0) - TWO_PIECES.c_left
+    if z_right == "root":
+        z_right = _branch_root(TWO_PIECES.m_right, x, -1.0, -0.5) + TWO_PIECES.c_right
+    assert hold_interval(TWO_PIECES, x, options) == pytest.approx((z_left, z_right), abs=1e-12)
+
+
 # --------------------------------------------------------------------------- the gap
 
 
@@ -156,6 +278,51 @@ def test_hold_in_gap_keeps_the_command() -> None:
     u = compensate(IDEAL, [0.5, 0.7, 0.7, 0.7, 0.7])
     np.testing.assert_allclose(u, [1.0, 1.2, 1.2, 1.2, 1.2], rtol=0, atol=1e-15)
     assert len(set(u[1:].tolist())) == 1
+
+
+@pytest.mark.parametrize("model", [EXAMPLE1, EXAMPLE2], ids=["increasing", "decreasing"])
+@pytest.mark.parametrize(
+    ("path", "lifted"),
+    [([0.1, 0.25, 0.4], True), ([0.3, 0.7, 0.55, 0.4], False)],
+    ids=["held-after-push-up", "held-after-push-down"],
+)
+def test_set_model_while_holding_moves_the_command_to_the_nearest_edge(
+    model: GeneralBacklash, path: list[float], lifted: bool
+) -> None:
+    """Pin the hold-case correction after :meth:`InverseBacklash.set_model`, both branches.
+
+    The load is held at ``x = 0.4`` with the command on the edge of the old hold interval the
+    last push left it at. A new model with narrower dead zones (``c_L, c_R = 0.5, 0.6``
+    instead of 0.7, 0.8) puts that command outside its hold interval ``[z_L, z_R]`` (eqs.
+    9-10): kept, it would move the load. The next hold sample must send the *nearest* edge
+    of the new interval - ``z_R`` after a push up and ``z_L`` after a push down for
+    increasing branches, the other way round for decreasing ones - so the load stays put.
+    Edges are numpy's roots of the new branches.
+    """
+    narrower = GeneralBacklash(model.m_left, 0.5, model.m_right, 0.6)
+    comp = InverseBacklash(model)
+    for target in path:
+        held = comp.step(target)
+    assert comp.state.x == pytest.approx(0.4, abs=1e-12)
+    # the old inverse: the lifting branch after a push up, the lowering one after a push down
+    old_edge = (
+        _right_inverse(model, 0.4) if lifted == model.increasing else _left_inverse(model, 0.4)
+    )
+    assert held == pytest.approx(old_edge, abs=1e-12)
+
+    z_left, z_right = _left_inverse(narrower, 0.4), _right_inverse(narrower, 0.4)
+    low, high = min(z_left, z_right), max(z_left, z_right)
+    assert not low <= held <= high  # the old command would move the load under the new model
+    nearest = low if abs(held - low) < abs(held - high) else high
+    # after a push up the command sits beyond the lifting edge, after a push down below ...
+    assert nearest == (high if lifted == model.increasing else low)
+    assert nearest == (z_right if lifted == model.increasing else z_left)
+
+    comp.set_model(narrower)
+    sent = [comp.step(0.4) for _ in range(3)]
+    np.testing.assert_allclose(sent, nearest, rtol=0, atol=1e-12)
+    assert comp.state.x == pytest.approx(0.4, abs=1e-12)
+    np.testing.assert_allclose(simulate_backlash(narrower, sent, 0.4), 0.4, rtol=0, atol=1e-12)
 
 
 @pytest.mark.parametrize("model", [IDEAL, IDEAL_DECREASING], ids=["increasing", "decreasing"])
@@ -279,6 +446,36 @@ def test_gating_fades_monotonically() -> None:
         _, state = compensate_step(EXAMPLE1, state, target, options, 1.0)
 
 
+@pytest.mark.parametrize(
+    ("gate_low", "gate_high"), [(0.2, 0.8), (0.0, 1.0), (0.45, 0.55), (0.5, 1.0)]
+)
+@pytest.mark.parametrize("target", [0.4, -0.4], ids=["push-up", "push-down"])
+def test_gating_is_the_linear_fade_between_the_thresholds(
+    gate_low: float, gate_high: float, target: float
+) -> None:
+    """Pin the gating formula at several confidences, not only its monotonicity.
+
+    ``w = clip((c - gate_low) / (gate_high - gate_low), 0, 1)`` and the command
+    ``u = x_d + w (u_inverse - x_d)``, with the exact inverse from numpy's roots (``R`` for a
+    push up from rest at 0, ``L`` for a push down). The state keeps the ungated inverse and the
+    modelled output under the command actually sent.
+    """
+    options = CompensatorOptions(gate_low=gate_low, gate_high=gate_high)
+    span = gate_high - gate_low
+    fractions = np.array([-0.5, 0.0, 0.1, 0.25, 0.5, 0.75, 0.9, 1.0, 1.5])
+    confidences = np.clip(gate_low + fractions * span, 0.0, 1.0)
+    model = backlash_of(EXAMPLE1)
+    state = CompensatorState.initial(model)  # at rest at x = 0
+    exact = _right_inverse(model, target) if target > 0 else _left_inverse(model, target)
+    for confidence in confidences.tolist():
+        w = min(max((confidence - gate_low) / span, 0.0), 1.0)
+        assert options.weight(confidence) == pytest.approx(w, rel=0, abs=1e-15)
+        u, after = compensate_step(model, state, target, options, confidence)
+        assert u == pytest.approx(target + w * (exact - target), rel=0, abs=1e-12)
+        assert after.u_inverse == pytest.approx(exact, rel=0, abs=1e-12)
+        assert after.x == simulate_backlash(model, [u], 0.0)[0]
+
+
 def test_step_gate_when_thresholds_are_equal() -> None:
     options = CompensatorOptions(gate_low=0.5, gate_high=0.5)
     assert [options.weight(c) for c in (0.0, 0.49, 0.5, 1.0)] == [0.0, 0.0, 1.0, 1.0]
@@ -313,6 +510,77 @@ def test_smoothing_restarts_on_a_reversal_mid_ramp() -> None:
     assert np.all(np.isfinite(u))
     assert u[-1] == pytest.approx(1.1)  # R(u) = u - 0.5 = 0.6 after the ramps are done
     assert simulate_backlash(IDEAL, u, 0.4)[-1] == pytest.approx(0.6)
+
+
+def test_reversal_mid_ramp_jumps_from_the_last_smoothed_command() -> None:
+    """Pin the command offset at a reversal during a smoothing ramp (ideal backlash).
+
+    ``L(u) = u + 0.3``, ``R(u) = u - 0.5``, smoothing 4. A push down at sample 1 starts a ramp
+    across the gap; at sample 3, two samples into it, the path turns up again. The new ramp
+    must start from the last smoothed command (0.15, here also the one sent: no gating or
+    limits), not from the inverse -0.3 the old ramp was heading for: the jump is
+    ``D = R^-1(0.2) - 0.15 = 0.7 - 0.15 = 0.55``, delivered in quarters, so the command goes
+    *up* by 0.1375 at once and reaches the exact inverse 0.7 at sample 6. The load holds at
+    0.1 throughout (every command lies in its hold interval ``[-0.2, 0.6]``).
+    """
+    options = CompensatorOptions(smoothing=4)
+    start = CompensatorState(x=0.0, u=0.5, u_inverse=0.5, direction=1)  # pushing up at R = 0
+    x_d = [0.1, 0.0, 0.0, 0.2, 0.2, 0.2, 0.2, 0.3]
+    comp = InverseBacklash(IDEAL, options)
+    comp.state = start
+    u, offsets = [], []
+    for target in x_d:
+        u.append(comp.step(target))
+        offsets.append(comp.state.offset)
+    down_jump = (0.0 - 0.3) - 0.6  # L^-1(0) - last command: -0.9
+    up_jump = (0.2 + 0.5) - (-0.3 - down_jump * 2 / 4)  # R^-1(0.2) - 0.15: 0.55
+    expected = [
+        0.1 + 0.5,  # R^-1(0.1), no reversal
+        -0.3 - down_jump * 3 / 4,  # 0.375
+        -0.3 - down_jump * 2 / 4,  # 0.15
+        0.7 - up_jump * 3 / 4,  # 0.2875: the reversal mid-ramp
+        0.7 - up_jump * 2 / 4,
+        0.7 - up_jump * 1 / 4,
+        0.7,
+        0.3 + 0.5,
+    ]
+    np.testing.assert_allclose(u, expected, rtol=0, atol=1e-12)
+    assert u[3] - u[2] == pytest.approx(0.1375, abs=1e-12)  # up, by a quarter of 0.55
+    # offset = inverse - command: what is left of the jump (negative crossing down, positive up)
+    np.testing.assert_allclose(
+        offsets, [0.0, -0.675, -0.45, 0.4125, 0.275, 0.1375, 0.0, 0.0], rtol=0, atol=1e-12
+    )
+    x = simulate_backlash(IDEAL, u, 0.0)
+    np.testing.assert_allclose(x, [0.1] * 6 + [0.2, 0.3], rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("model", [EXAMPLE1, EXAMPLE2], ids=["increasing", "decreasing"])
+def test_reversal_mid_ramp_on_curved_branches(model: GeneralBacklash) -> None:
+    """Pin the size and sign of the jump at a reversal mid-ramp for curved branches.
+
+    Path up to 0.2, down to 0.15 (a ramp of 4 samples starts), then up to 0.25 one sample
+    later. At that reversal the command moves from the last one sent a quarter of the way to
+    the new exact inverse ``v`` (the lifting branch at 0.25, from numpy's roots: ``R`` for
+    increasing branches, ``L`` for decreasing ones) - upwards for increasing branches,
+    downwards for decreasing ones - then ``v - D (3 - j) / 4`` until it is exact.
+    """
+    lift = _right_inverse if model.increasing else _left_inverse
+    start_u = lift(model, 0.0)
+    options = CompensatorOptions(smoothing=4)
+    comp = InverseBacklash(model, options)
+    comp.state = CompensatorState(x=0.0, u=start_u, u_inverse=start_u, direction=1)
+    x_d = [0.1, 0.2, 0.15, 0.15, 0.25, 0.25, 0.25, 0.25, 0.25]
+    u = [comp.step(target) for target in x_d]
+    x = simulate_backlash(model, u, 0.0)
+    assert x[3] == pytest.approx(0.2, abs=1e-12)  # the load held while the ramp ran
+    r = 4  # the reversal mid-ramp
+    v = lift(model, 0.25)
+    jump = v - u[r - 1]
+    assert np.sign(u[r] - u[r - 1]) == model.sign == np.sign(jump)
+    for j in range(4):
+        assert u[r + j] == pytest.approx(v - jump * (3 - j) / 4, abs=1e-12)
+    np.testing.assert_allclose(x[r : r + 3], 0.2, rtol=0, atol=1e-12)
+    assert x[-1] == pytest.approx(0.25, abs=1e-12)
 
 
 # --------------------------------------------------------------------------- two forms
