@@ -56,6 +56,7 @@ from .messages import (
     read_encoder,
 )
 from .rosbags_types import from_rosbags, jazzy_typestore, to_rosbags
+from .sample_rule import keep_breaks, link_breaks, record_period
 
 __all__ = [
     "COMMAND_MSGTYPES",
@@ -70,6 +71,7 @@ __all__ = [
     "TopicInfo",
     "align",
     "read_aligned",
+    "read_custom_data",
 ]
 
 COMMAND_MSGTYPES: dict[str, CommandType] = {
@@ -329,6 +331,7 @@ class BagReader:
         self._salvage: list[Path] = []
         self._salvage_reason = ""
         self._topics: dict[str, TopicInfo] = {}
+        self._custom_data: object = _UNREAD
 
     # context management
 
@@ -436,6 +439,19 @@ class BagReader:
         """Number of messages on ``topics`` (for progress bars)."""
         return sum(self._topics[t].count for t in topics if t in self._topics)
 
+    @property
+    def custom_data(self) -> dict[str, str] | None:
+        """The bag's ``custom_data`` (rosbag2 metadata: a string -> string map), or None.
+
+        Read from ``metadata.yaml`` of a bag directory, else from the rosbag2 metadata
+        record embedded in the MCAP file (a bare ``.mcap`` keeps it too). Tolerant: a bag
+        without it, or with one that is not a string -> string map, gives None.
+        """
+        if self._custom_data is _UNREAD:
+            self._custom_data = read_custom_data(self.path)
+        value = self._custom_data
+        return dict(value) if isinstance(value, dict) else None
+
     # messages
 
     def messages(self, topics: Sequence[str]) -> Iterator[BagMessage]:
@@ -510,6 +526,101 @@ class BagReader:
         )
 
 
+# --------------------------------------------------------------------------- custom data
+
+_UNREAD = object()
+_OP_METADATA, _OP_METADATA_INDEX = 0x0C, 0x0D
+_FOOTER_SIZE = 1 + 8 + 20  # opcode, length, summary start, summary offset start, CRC
+_MAX_SUMMARY = 64 << 20  # a summary section larger than this is not searched
+
+
+def _string_map(value: object) -> dict[str, str] | None:
+    if not isinstance(value, dict) or not value:
+        return None
+    if not all(isinstance(k, str) and isinstance(v, str) for k, v in value.items()):
+        return None
+    return dict(value)
+
+
+def _custom_data_of(info: object) -> dict[str, str] | None:
+    """``custom_data`` of a ``rosbag2_bagfile_information`` mapping (None if absent/bad)."""
+    return _string_map(info.get("custom_data")) if isinstance(info, dict) else None
+
+
+def _embedded_metadata(path: Path) -> object:
+    """The rosbag2 metadata an MCAP file holds (its ``rosbag2`` metadata record, found
+    through the summary's metadata index), parsed from YAML; None when there is none."""
+    import yaml
+
+    size = path.stat().st_size
+    with path.open("rb") as stream:
+        if size < 2 * len(_MCAP_MAGIC) + _FOOTER_SIZE:
+            return None
+        stream.seek(size - len(_MCAP_MAGIC) - _FOOTER_SIZE)
+        footer = stream.read(_FOOTER_SIZE)
+        if footer[0] != _OP_FOOTER:
+            return None
+        (summary_start,) = struct.unpack_from("<Q", footer, 9)
+        summary_end = size - len(_MCAP_MAGIC) - _FOOTER_SIZE
+        if not 0 < summary_start < summary_end or summary_end - summary_start > _MAX_SUMMARY:
+            return None
+        stream.seek(summary_start)
+        summary = stream.read(summary_end - summary_start)
+        pos = 0
+        while pos + 9 <= len(summary):
+            op = summary[pos]
+            (length,) = struct.unpack_from("<Q", summary, pos + 1)
+            body = summary[pos + 9 : pos + 9 + length]
+            pos += 9 + length
+            if op != _OP_METADATA_INDEX:
+                continue
+            offset, record_length = struct.unpack_from("<QQ", body, 0)
+            name, _ = _string(body, 16)
+            if name != "rosbag2" or record_length > _MAX_SUMMARY:
+                continue
+            stream.seek(offset)
+            record = stream.read(record_length)
+            if len(record) < 9 or record[0] != _OP_METADATA:
+                return None
+            _, at = _string(record, 9)
+            (map_size,) = struct.unpack_from("<I", record, at)
+            at += 4
+            end = at + map_size
+            while at < end:
+                key, at = _string(record, at)
+                value, at = _string(record, at)
+                if key == "serialized_metadata":
+                    return yaml.safe_load(value)
+            return None
+    return None
+
+
+def read_custom_data(path: str | Path) -> dict[str, str] | None:
+    """The ``custom_data`` map of a bag (directory or bare ``.mcap``), or None.
+
+    Looks in ``metadata.yaml`` first, then in the rosbag2 metadata embedded in the MCAP
+    file(s). Never raises for a bag without one or with a damaged one: None.
+    """
+    import yaml
+
+    bag = Path(path)
+    if bag.is_dir():
+        try:
+            document = yaml.safe_load((bag / "metadata.yaml").read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, yaml.YAMLError):
+            document = None
+        if isinstance(document, dict) and "rosbag2_bagfile_information" in document:
+            return _custom_data_of(document["rosbag2_bagfile_information"])
+    for file in _mcap_files(bag):
+        try:
+            found = _custom_data_of(_embedded_metadata(file))
+        except (OSError, struct.error, UnicodeDecodeError, _Truncated, yaml.YAMLError):
+            continue
+        if found is not None:
+            return found
+    return None
+
+
 def _starts_with_magic(path: Path) -> bool:
     try:
         with path.open("rb") as stream:
@@ -555,6 +666,16 @@ class BagWriter:
         self._connections: dict[str, tuple[Any, str]] = {}
         self._open = True
         self.count = 0
+
+    def set_custom_data(self, key: str, value: str) -> None:
+        """Store ``value`` under ``key`` in the bag's ``custom_data`` (rosbag2 metadata:
+        ``metadata.yaml`` and the MCAP file's embedded copy), written when the bag closes.
+        Read back with :attr:`BagReader.custom_data`."""
+        if not self._open:
+            raise BagError(f"{self.path} is closed")
+        if not isinstance(key, str) or not isinstance(value, str):
+            raise BagError(f"custom_data needs string keys and values, got {key!r}: {value!r}")
+        self._writer.set_custom_data(key, value)
 
     def __enter__(self) -> BagWriter:
         return self
@@ -615,17 +736,25 @@ class AlignedSeries:
     """Identification samples: one per encoder message, the command held.
 
     ``t`` (int64 ns), ``u`` (the latest command at or before ``t``), ``y`` (the encoder);
-    ``skipped`` counts encoder samples before the first command.
+    ``skipped`` counts encoder samples before the first command; ``breaks`` (bool) the
+    sample rule: True where a sample does not follow the one before it on the encoder's
+    clock (:mod:`genbacklash_ros.sample_rule`; pass it to the identifiers' ``breaks``).
     """
 
     t: np.ndarray
     u: np.ndarray
     y: np.ndarray
     skipped: int
+    breaks: np.ndarray
 
 
 def align(
-    cmd_t: np.ndarray, cmd_u: np.ndarray, enc_t: np.ndarray, enc_y: np.ndarray
+    cmd_t: np.ndarray,
+    cmd_u: np.ndarray,
+    enc_t: np.ndarray,
+    enc_y: np.ndarray,
+    *,
+    marks: np.ndarray | None = None,
 ) -> AlignedSeries:
     """Zero-order-hold alignment of a command stream to encoder times (batch form).
 
@@ -633,31 +762,45 @@ def align(
     of the sample at encoder time ``t`` is the latest command with time ``<= t``; samples
     before the first command are skipped. Both streams must be sorted by time.
 
+    The breaks follow the pipeline's sample rule too: the encoder's nominal period is the
+    median difference of ``enc_t`` (:func:`~genbacklash_core.samples.nominal_period`), a
+    sample breaks where its stamp is not one period, rounded, after the one before, and
+    where ``marks`` (one per encoder reading) says a reading was taken out before it (a
+    message the adapters rejected); the first sample kept always breaks.
+
     >>> s = align(np.array([10, 20]), np.array([1.0, 2.0]), np.array([5, 10, 15, 25]),
     ...           np.array([0.1, 0.2, 0.3, 0.4]))
     >>> s.u.tolist(), s.y.tolist(), s.skipped
     ([1.0, 1.0, 2.0], [0.2, 0.3, 0.4], 1)
+    >>> s.breaks.tolist()  # 20 ns lost between 15 and 25
+    [True, False, True]
     """
     ct = np.asarray(cmd_t, dtype=np.int64)
     et = np.asarray(enc_t, dtype=np.int64)
     k = np.searchsorted(ct, et, side="right") - 1
     keep = k >= 0
+    breaks, _ = keep_breaks(link_breaks(et, record_period(et), marks=marks), keep)
     return AlignedSeries(
         et[keep],
         np.asarray(cmd_u, dtype=np.float64)[k[keep]],
         np.asarray(enc_y, dtype=np.float64)[keep],
         int(np.count_nonzero(~keep)),
+        breaks,
     )
 
 
 def _increasing(times: list[int], values: list[float]) -> tuple[np.ndarray, np.ndarray]:
     """Drop samples whose time is not after the previous accepted one (as the pipeline)."""
     t = np.asarray(times, dtype=np.int64)
-    v = np.asarray(values, dtype=np.float64)
+    keep = _increasing_mask(t)
+    return t[keep], np.asarray(values, dtype=np.float64)[keep]
+
+
+def _increasing_mask(t: np.ndarray) -> np.ndarray:
+    """Which of the times ``t`` are after every one before them."""
     if t.size < 2:
-        return t, v
-    keep = t > np.maximum.accumulate(np.concatenate(([np.iinfo(np.int64).min], t[:-1])))
-    return t[keep], v[keep]
+        return np.ones(t.size, dtype=bool)
+    return t > np.maximum.accumulate(np.concatenate(([np.iinfo(np.int64).min], t[:-1])))
 
 
 def read_aligned(
@@ -672,7 +815,9 @@ def read_aligned(
 
     Times are header stamps when the message has a non-zero one, else the log time (the
     pipeline's default ``stamp_source = "header"``). Messages the adapters reject (joint
-    missing, index out of range, non-finite values) are skipped.
+    missing, index out of range, non-finite values) are skipped; a rejected encoder message
+    breaks the chain of consecutive samples at the next encoder reading in log order, as in
+    the pipeline (``breaks``, see :func:`align`).
     """
     with BagReader(path) as reader:
         cmd_kind = COMMAND_MSGTYPES[reader.topic(command_topic, COMMAND_MSGTYPES).msgtype]
@@ -681,20 +826,29 @@ def read_aligned(
         cu: list[float] = []
         et: list[int] = []
         ey: list[float] = []
+        em: list[bool] = []  # the reading follows one the adapters rejected (log order)
+        rejected = False
         for item in reader.messages([command_topic, encoder_topic]):
-            try:
-                if item.topic == command_topic:
+            if item.topic == command_topic:
+                try:
                     stamp, value = read_command(
                         item.message, cmd_kind, index=command_index, joint=joint
                     )
+                except MessageError:
+                    pass
+                else:
                     ct.append(stamp or item.log_time_ns)
                     cu.append(value)
-                if item.topic == encoder_topic:
+            if item.topic == encoder_topic:
+                try:
                     stamp, value = read_encoder(item.message, enc_kind, joint=joint)
-                    et.append(stamp or item.log_time_ns)
-                    ey.append(value)
-            except MessageError:
-                continue
+                except MessageError:
+                    rejected = True  # a reading taken out: the next one breaks the chain
+                    continue
+                et.append(stamp or item.log_time_ns)
+                ey.append(value)
+                em.append(rejected)
+                rejected = False
     if not ct:
         raise BagError(f"no readable command on {command_topic!r} in {path}")
     if not et:
@@ -702,8 +856,15 @@ def read_aligned(
     order_c = np.argsort(np.asarray(ct, dtype=np.int64), kind="stable")
     order_e = np.argsort(np.asarray(et, dtype=np.int64), kind="stable")
     c_t, c_u = _increasing([ct[i] for i in order_c], [cu[i] for i in order_c])
-    e_t, e_y = _increasing([et[i] for i in order_e], [ey[i] for i in order_e])
-    series = align(c_t, c_u, e_t, e_y)
+    e_t = np.asarray(et, dtype=np.int64)[order_e]
+    e_y = np.asarray(ey, dtype=np.float64)[order_e]
+    e_m = np.asarray(em, dtype=bool)[order_e]
+    unique = _increasing_mask(e_t)
+    if not unique.all():  # a duplicate's mark passes to the next reading kept
+        seen = np.cumsum(e_m)[unique]
+        e_m = np.diff(seen, prepend=0) > 0
+        e_t, e_y = e_t[unique], e_y[unique]
+    series = align(c_t, c_u, e_t, e_y, marks=e_m)
     if series.t.size == 0:
         raise BagError(f"no encoder reading on {encoder_topic!r} follows the first command")
     return series

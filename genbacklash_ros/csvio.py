@@ -1,4 +1,12 @@
-"""Reading and writing input/output series as CSV with a header (``u,y`` and optional ``t``)."""
+"""Reading and writing input/output series as CSV with a header (``u,y`` and optional ``t``).
+
+A ``t`` column gives the record its sample rule (:mod:`genbacklash_core.samples`): a row
+that is not one nominal period (the median difference of ``t``, rounded) after the row
+before it -- a lost sample, a gap -- breaks the chain of consecutive samples, so that
+``identify`` and ``diagnose`` never form a regression row across it. ``t`` may be in seconds
+or in integer nanoseconds (or any one unit): only differences in units of the median one
+count. Without ``t`` every row follows the one before it.
+"""
 
 from __future__ import annotations
 
@@ -12,6 +20,8 @@ import numpy.typing as npt
 
 from genbacklash_core import GenBacklashError
 
+from .sample_rule import time_breaks
+
 __all__ = ["Series", "read_series_csv", "write_series_csv"]
 
 FloatArray = npt.NDArray[np.float64]
@@ -19,17 +29,23 @@ FloatArray = npt.NDArray[np.float64]
 
 @dataclass(frozen=True, eq=False)
 class Series:
-    """An input/output record: command ``u``, measured output ``y``, optional time ``t`` [s]."""
+    """An input/output record: command ``u``, measured output ``y``, optional time ``t`` [s].
+
+    ``breaks`` (optional, bool): the sample rule, True where a sample does not follow the
+    one before it on the encoder's clock (None: all do); for the identifiers' ``breaks``.
+    """
 
     u: FloatArray
     y: FloatArray
     t: FloatArray | None = None
+    breaks: npt.NDArray[np.bool_] | None = None
 
 
 def read_series_csv(path: str | Path) -> Series:
     """Read a CSV whose header names the columns ``u`` and ``y`` (and optionally ``t``).
 
-    Other columns are ignored. Empty or non-numeric cells become NaN, so the identifiers can
+    With ``t`` the series carries its ``breaks`` (see the module notes). Other columns are
+    ignored. Empty or non-numeric cells become NaN, so the identifiers can
     report where they are (or drop them on request) instead of failing here.
     """
     file = Path(path)
@@ -67,7 +83,8 @@ def read_series_csv(path: str | Path) -> Series:
     if table.shape[0] == 0:
         raise GenBacklashError(f"{file} has a header but no data rows")
     t = table[:, 2].copy() if table.shape[1] == 3 else None
-    return Series(u=table[:, 0].copy(), y=table[:, 1].copy(), t=t)
+    breaks = None if t is None else time_breaks(t)
+    return Series(u=table[:, 0].copy(), y=table[:, 1].copy(), t=t, breaks=breaks)
 
 
 def write_series_csv(path: str | Path, series: Series) -> None:

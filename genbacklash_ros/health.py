@@ -50,8 +50,10 @@ to be reset, so compensation resumes at once with the current estimate.
   magnitude). When more than ``SPIKE_MAX_SHARE`` (20 %) of a batch would be rejected the
   model, not the encoder, is taken to be off and the batch is fed whole.
 * **Encoder stuck** -- with a trusted estimate of a general backlash (as for spikes), the
-  reading has not changed for ``STUCK_NS`` (50 ms) although the model says the held
-  command moves the load by more than ``STUCK_SIGMAS`` (5) residual scales (ERROR). Equal
+  reading has not changed for ``STUCK_NS`` (50 ms) although the model says the command in
+  force ``STUCK_INPUT_NS`` (20 ms) before the reading has moved the load by more than
+  ``STUCK_SIGMAS`` (5) residual scales (ERROR); a reading taken as a move starts, before
+  the drivetrain answered the new command, is not stuck. Equal
   readings wait (up to ``STILL_HOLD_NS``, 1 s) before they are fed, and those of a stuck
   encoder are not fed at all (``encoder_stuck`` drops) until the reading changes.
 * **Command saturated** -- every command for ``SATURATION_NS`` (0.2 s) at or beyond
@@ -118,6 +120,7 @@ __all__ = [
     "SPIKE_MAX_SHARE",
     "SPIKE_SIGMAS",
     "STILL_HOLD_NS",
+    "STUCK_INPUT_NS",
     "STUCK_NS",
     "STUCK_SIGMAS",
     "HealthReport",
@@ -140,6 +143,9 @@ RESYNC_NS = 500_000_000  # after a gap, samples wait this long at most for a con
 STUCK_NS = 50_000_000  # an unchanged reading this long, while the model says it moves ...
 STUCK_SIGMAS = 5.0  # ... by more than this many residual scales, is a stuck encoder
 STILL_HOLD_NS = 1_000_000_000  # equal readings wait this long at most before being fed
+# a still reading is judged by the command in force this long before it: a reading taken as
+# a move starts (the new command just sent, the load not moved yet) is not a stuck encoder
+STUCK_INPUT_NS = 20_000_000
 SATURATION_NS = 200_000_000  # commands at or beyond a limit this long: saturated
 _SCALE_SMOOTHING = 0.2  # weight of a new batch in the residual scale
 
@@ -165,6 +171,13 @@ class HealthReport(NamedTuple):
     level: int
     parts: list[str]
     active: tuple[str, ...]
+
+
+def _held_input(stamp: int, commands: list[int], inputs: list[float]) -> float | None:
+    """The command in force ``STUCK_INPUT_NS`` before ``stamp``: it has had that long to move
+    the load, so a reading short of where it puts the load is stuck (None when not known)."""
+    k = bisect.bisect_right(commands, stamp - STUCK_INPUT_NS) - 1
+    return inputs[k] if k >= 0 else None
 
 
 class StreamHealth:
@@ -393,7 +406,7 @@ class StreamHealth:
         if last is None or value != previous:
             self._still_since, self._stuck = None, False
             return False
-        return self._watch_stuck(stamp, last, value, inputs)
+        return self._watch_stuck(stamp, last, value, _held_input(stamp, commands, inputs))
 
     def jumped_back(self, stream: str, stamp: int, last: int) -> int | None:
         """Whether a message of ``stream`` (``"command"`` or ``"encoder"``) at ``stamp``, not
@@ -442,15 +455,19 @@ class StreamHealth:
 
     def screen(
         self, times: np.ndarray, us: np.ndarray, ys: np.ndarray, est: Estimate
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """The samples (``times``, inputs ``us``, readings ``ys``) without spikes and without
-        rows spanning a gap (see the module notes), judged with ``est``, the estimate in use;
-        tracks the scale of the one-step prediction errors."""
+    ) -> np.ndarray | None:
+        """Which of the samples (``times``, inputs ``us``, readings ``ys``) to feed: not the
+        spikes nor those held back after a gap (see the module notes), judged with ``est``,
+        the estimate in use; tracks the scale of the one-step prediction errors.
+
+        Returns a boolean mask of the samples to keep, or None to keep them all. The
+        pipeline breaks the chain of consecutive samples at the next kept sample after each
+        one taken out (:func:`~genbacklash_ros.sample_rule.keep_breaks`)."""
         t_prev, y_prev = self._fed_t, self._fed_y
         self._fed_t, self._fed_y = int(times[-1]), float(ys[-1])
         model = est.model
         if not isinstance(model, GeneralBacklash):
-            return us, ys
+            return None
         with np.errstate(all="ignore"):
             left, right = model.left(us), model.right(us)
             low, high = np.minimum(left, right), np.maximum(left, right)
@@ -469,7 +486,7 @@ class StreamHealth:
                 errs = np.abs(ys - np.minimum(np.maximum(previous, low), high))
             if not np.any(errs > limit):
                 self._track_scale(errs, ys)
-                return us, ys
+                return None
         errors: list[float] = []
         bad: list[int] = []  # spikes
         held: list[int] = []  # after a gap, until a sample follows from the one before it
@@ -520,13 +537,13 @@ class StreamHealth:
         if held:
             self._drop("encoder_after_gap", "sample after a gap not yet consistent", len(held))
         if not bad and not held:
-            return us, ys
+            return None
         if x is not None:
             self._fed_y = x
         keep = np.ones(ys.size, dtype=bool)
         keep[bad] = False
         keep[held] = False
-        return us[keep], ys[keep]
+        return keep
 
     # ------------------------------------------------------------------ detection
 
@@ -582,7 +599,7 @@ class StreamHealth:
                 stamp,
             )
 
-    def _watch_stuck(self, stamp: int, last: int, value: float, inputs: list[float]) -> bool:
+    def _watch_stuck(self, stamp: int, last: int, value: float, held: float | None) -> bool:
         """True when the reading ``value`` at ``stamp``, equal to the one at ``last``, belongs
         to a stuck encoder (not to be fed)."""
         since = self._still_since
@@ -592,7 +609,7 @@ class StreamHealth:
         if stamp - since < STUCK_NS:
             return False
         if not self._stuck:
-            why = self._stuck_reason(value, inputs)
+            why = self._stuck_reason(value, held)
             if not why:
                 return False
             self._stuck, self._stuck_why = True, why
@@ -618,16 +635,18 @@ class StreamHealth:
             self._converged = False
         return self._converged and self._scale is not None
 
-    def _stuck_reason(self, value: float, inputs: list[float]) -> str:
-        """Why an unchanged reading ``value`` is stuck ("" when the model allows it), the
-        latest command's identifier input being ``inputs[-1]``."""
+    def _stuck_reason(self, value: float, held: float | None) -> str:
+        """Why an unchanged reading ``value`` is stuck ("" when the model allows it), ``held``
+        being the command in force ``STUCK_INPUT_NS`` before the reading."""
         est = self._estimate()
         model = est.model
         scale = self._scale
         trusted = self._trusted(est)
-        if not trusted or scale is None or not isinstance(model, GeneralBacklash) or not inputs:
+        if not trusted or scale is None or not isinstance(model, GeneralBacklash):
             return ""
-        u = inputs[-1]
+        if held is None:
+            return ""
+        u = held
         with np.errstate(all="ignore"):
             left, right = float(model.left([u])[0]), float(model.right([u])[0])
         move = max(min(left, right) - value, value - max(left, right))

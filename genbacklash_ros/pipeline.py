@@ -29,6 +29,25 @@ Alignment (integer nanoseconds throughout)
   one compensator step (tens of microseconds), whatever the identifier costs.
 * **Identifier input.** The raw command, or with ``compensation_in_loop`` the compensated
   command that was sent (what the drivetrain then really gets).
+* **Consecutive samples.** A regression row pairs only samples that are consecutive on the
+  encoder's clock (:mod:`genbacklash_core.samples`; applied by
+  :mod:`genbacklash_ros.sample_rule`, the rule batch ``identify`` and ``diagnose`` on bags
+  use too). Each feed passes ``update_many(u, y, breaks=...)``: sample ``k`` breaks when the
+  stamps of the encoder readings it and the sample before it hold (for the first sample of
+  a feed: the last sample fed before) differ by other than one nominal period, rounded --
+  a lost reading, a gap, a clock that jumped -- or when a sample or reading was taken out in
+  between: a rejected encoder message (invalid, not finite), a stuck encoder's readings,
+  samples before the first command, a spike or a sample held back after a gap
+  (:meth:`~genbacklash_ros.health.StreamHealth.screen`), a batch the identifier refused, a
+  re-anchor after a clock jump back. Duplicate and out-of-order messages are not readings
+  taken out (their stamps are not new). The nominal period is the median of the last
+  :data:`~genbacklash_ros.sample_rule.PERIOD_WINDOW` differences of accepted encoder stamps
+  (jitter of up to half a period on a difference keeps neighbours neighbours); on the fixed
+  grid it is ``sample_period`` and the stamps are those of the readings the grid points
+  hold, so a grid sample breaks when it holds the same reading as the one before (the
+  reading it should hold was lost or is late) or a reading more than a grid period, rounded,
+  after it. An encoder slower than the grid thus breaks every chain: set ``sample_period``
+  to the encoder's period or a multiple of it.
 
 Outputs
 -------
@@ -128,6 +147,7 @@ from .messages import (
     read_encoder,
 )
 from .parameters import NodeParameters
+from .sample_rule import EncoderPeriod, keep_breaks, link_breaks
 
 __all__ = [
     "COMMAND_WAIT_NS",
@@ -327,6 +347,13 @@ class BacklashPipeline:
         self._cmd_u: list[float] = []
         self._enc_t: list[int] = []
         self._enc_y: list[float] = []
+        # the sample rule (see the module notes): pending readings that follow one taken out,
+        # whether the next accepted reading does, the encoder's period, the stamp of the
+        # reading the identifier's last sample holds (None: the next sample breaks)
+        self._enc_mark: list[bool] = []
+        self._mark_next = False
+        self._period = EncoderPeriod()
+        self._fed_last_t: int | None = None
         self._last_cmd_ns: int | None = None
         self._last_enc_ns: int | None = None
         self._next_grid_k: int | None = None
@@ -518,11 +545,17 @@ class BacklashPipeline:
         stuck = self._health.check_reading(
             stamp, last, value, self._last_y, int(receive_ns), self._cmd_t, self._cmd_u
         )
+        if last is not None:
+            self._period.add(stamp - last)
         self._last_enc_ns = stamp
         self._last_y = value
-        if not stuck:
+        if stuck:
+            self._mark_next = True
+        else:
             self._enc_t.append(stamp)
             self._enc_y.append(value)
+            self._enc_mark.append(self._mark_next)
+            self._mark_next = False
         self._encoders += 1
         outputs: list[Output] = []
         if len(self._enc_t) >= self._feed_at_count:
@@ -710,38 +743,53 @@ class BacklashPipeline:
         if not final and self._now is not None:  # equal readings wait: the encoder may be stuck
             horizon = self._health.feed_horizon(horizon, self._now)
         if self._grid_ns:
-            times, ys = self._grid_samples(horizon)
+            times, ys, held, marks = self._grid_samples(horizon)
         else:
             count = bisect.bisect_right(self._enc_t, horizon)
             if count == 0:
                 return
-            times = np.array(self._enc_t[:count], dtype=np.int64)
+            times = held = np.array(self._enc_t[:count], dtype=np.int64)
             ys = np.array(self._enc_y[:count])
-            del self._enc_t[:count], self._enc_y[:count]
+            marks = np.array(self._enc_mark[:count], dtype=bool)
+            del self._enc_t[:count], self._enc_y[:count], self._enc_mark[:count]
             self._feed_at_count = len(self._enc_t) + self._batch
         if times.size == 0:
             return
         if not self._cmd_t:
             self._drop("before_first_command", "samples before the first command", times.size)
+            self._fed_last_t = None
             return
+        # the sample rule before anything is taken out (see the module notes)
+        period = float(self._grid_ns) if self._grid_ns else self._period.value
+        breaks = link_breaks(held, period, previous_ns=self._fed_last_t, marks=marks)
         k = np.searchsorted(np.array(self._cmd_t, dtype=np.int64), times, side="right") - 1
         early = int(np.count_nonzero(k < 0))
         if early:
             self._drop("before_first_command", "samples before the first command", early)
-            k, ys, times = k[early:], ys[early:], times[early:]
+            k, ys, times, held = k[early:], ys[early:], times[early:], held[early:]
+            breaks = breaks[early:]
+            breaks[:1] = True  # the samples before it were taken out
         if k.size == 0:
+            self._fed_last_t = None
             return
         us = np.array(self._cmd_u)[k]
         keep = int(k[-1])  # the command holding at the last sample, and later ones
         if keep:
             del self._cmd_t[:keep], self._cmd_u[:keep]
-        us, ys = self._health.screen(times, us, ys, self.estimate)
+        kept = self._health.screen(times, us, ys, self.estimate)
+        last_t: int | None = int(held[-1])
+        if kept is not None:
+            breaks, tail = keep_breaks(breaks, kept)
+            us, ys, held = us[kept], ys[kept], held[kept]
+            last_t = None if tail or held.size == 0 else int(held[-1])
+        self._fed_last_t = last_t
         if us.size == 0:
             return
         try:
-            self._identifier.update_many(us, ys)
+            self._identifier.update_many(us, ys, breaks=breaks)
         except (GenBacklashError, ArithmeticError, np.linalg.LinAlgError) as err:
             self._drop("identifier_error", f"identifier: {err}", int(us.size))
+            self._fed_last_t = None  # what the identifier kept of the batch is unknown
             return
         self._samples += int(us.size)
         if self._params.compensate:
@@ -749,26 +797,30 @@ class BacklashPipeline:
             if est is not self._comp_estimate:
                 self._refresh_compensator(est, None)
 
-    def _grid_samples(self, horizon: int) -> tuple[np.ndarray, np.ndarray]:
-        """Grid times up to ``horizon`` (and the latest encoder time) with the held encoder."""
+    def _grid_samples(self, horizon: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Grid times up to ``horizon`` (and the latest encoder time) with the held encoder:
+        ``(times, readings, stamps of the readings held, their marks)``."""
         period = self._grid_ns
         enc_t = self._enc_t
         if self._next_grid_k is None:
             self._next_grid_k = -(-enc_t[0] // period)  # first grid point at/after the data
         first = self._next_grid_k
         last = min(horizon, enc_t[-1]) // period
-        empty = np.zeros(0, dtype=np.int64), np.zeros(0)
         if last < first:
-            return empty
+            none = np.zeros(0, dtype=np.int64)
+            return none, np.zeros(0), none, np.zeros(0, dtype=bool)
         times = np.arange(first, last + 1, dtype=np.int64) * period
-        j = np.searchsorted(np.array(enc_t, dtype=np.int64), times, side="right") - 1
+        stamps = np.array(enc_t, dtype=np.int64)
+        j = np.searchsorted(stamps, times, side="right") - 1
         ys = np.array(self._enc_y)[j]
+        marks = np.array(self._enc_mark, dtype=bool)[j]
         self._next_grid_k = last + 1
         keep = int(j[-1])  # the encoder reading holding at the last grid point, and later
         if keep:
-            del self._enc_t[:keep], self._enc_y[:keep]
+            del self._enc_t[:keep], self._enc_y[:keep], self._enc_mark[:keep]
+        self._enc_mark[0] = False  # held already: its mark has broken the chain there
         self._feed_at_count = len(self._enc_t) + self._batch
-        return times, ys
+        return times, ys, stamps[j], marks
 
     def _trim_commands(self) -> None:
         """Bound the command history when no encoder data consume it.
@@ -850,6 +902,9 @@ class BacklashPipeline:
         self._feed(final=True)
         self._enc_t.clear()
         self._enc_y.clear()
+        self._enc_mark.clear()
+        self._mark_next = False
+        self._fed_last_t = None  # a new time line: its first sample breaks
         self._next_grid_k = None
         if self._cmd_u:  # the last command is held into the new time line
             self._cmd_t, self._cmd_u = [stamp - 1], [self._cmd_u[-1]]
@@ -867,12 +922,15 @@ class BacklashPipeline:
         cut = bisect.bisect_right(self._enc_t, since)
         held = len(self._enc_t) - cut
         if held:
-            del self._enc_t[cut:], self._enc_y[cut:]
+            del self._enc_t[cut:], self._enc_y[cut:], self._enc_mark[cut:]
+            self._mark_next = True  # the next reading kept follows those taken out
         return held
 
     # ------------------------------------------------------------------ problems
 
     def _drop(self, key: str, reason: str, count: int = 1) -> None:
+        if key == "encoder_invalid":  # a reading taken out: the next one breaks the chain
+            self._mark_next = True
         self._dropped[key] += count
         self._period_drops[key] = self._period_drops.get(key, 0) + count
         self._period_reasons[key] = reason

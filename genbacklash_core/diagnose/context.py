@@ -12,12 +12,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from genbacklash_core._typing import FloatArray
+from genbacklash_core._typing import BoolArray, FloatArray
 
 from .fit import ModelFit
 from .residuals import ModelErrorModel, ResidualAnalysis, analyse_residuals, model_error_model
 from .settings import DiagnoseSettings
-from .spec import ModelSpec, SimulationOutput
+from .spec import ModelSpec, SimulationOutput, anchors_of
 
 __all__ = ["DEGENERATE_FIT", "SHAPE_MARGIN", "Context", "StepErrorShape", "build_context"]
 
@@ -129,6 +129,11 @@ class Context:
         The residual tests.
     settings : DiagnoseSettings
         Thresholds.
+    breaks : ndarray of bool or None
+        The sample rule on the estimation data (:mod:`genbacklash_core.samples`): every fit
+        and identification of an augmentation takes it (``breaks=context.breaks``); the
+        simulation and Jacobian above restart at the samples after a break
+        (:attr:`anchors`).
     """
 
     u: FloatArray
@@ -141,6 +146,12 @@ class Context:
     jacobian: FloatArray
     analysis: ResidualAnalysis
     settings: DiagnoseSettings
+    breaks: BoolArray | None = None
+
+    @property
+    def anchors(self) -> BoolArray | None:
+        """Where a simulation restarts at the measurement (:func:`~.spec.anchors_of`)."""
+        return anchors_of(self.breaks)
 
     @property
     def degenerate(self) -> bool:
@@ -171,14 +182,22 @@ class Context:
 
 
 def build_context(
-    u: FloatArray, y: FloatArray, fit: ModelFit, settings: DiagnoseSettings
+    u: FloatArray,
+    y: FloatArray,
+    fit: ModelFit,
+    settings: DiagnoseSettings,
+    breaks: BoolArray | None = None,
 ) -> Context:
-    """Simulate the fitted model, take its Jacobian and run the residual tests."""
+    """Simulate the fitted model, take its Jacobian and run the residual tests (``breaks``:
+    the sample rule on ``u, y``, see :class:`Context`)."""
     spec = ModelSpec.of(fit.model)
     theta = spec.vector(fit.model)
     y_start = float(y[0])
-    simulation = spec.simulate(theta, u, y_start)
+    anchors = anchors_of(breaks)
+    simulation = spec.simulate(theta, u, y_start, anchors, y)
     residual = y - simulation.y
-    jacobian = spec.jacobian(theta, u, simulation, y_start)
+    jacobian = spec.jacobian(theta, u, simulation, y_start, anchors)
     analysis = analyse_residuals(u, residual)
-    return Context(u, y, fit, spec, theta, simulation, residual, jacobian, analysis, settings)
+    return Context(
+        u, y, fit, spec, theta, simulation, residual, jacobian, analysis, settings, breaks
+    )

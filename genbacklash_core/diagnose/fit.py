@@ -4,6 +4,11 @@ The same method as :mod:`genbacklash_core.refine` (column-scaled, damped normal 
 steps that leave the valid set or raise the cost are rejected), on the augmented parameter
 vector of :class:`~genbacklash_core.diagnose.spec.ModelSpec`. The fit is judged by the
 Bayesian information criterion ``N ln(SSE/N) + P ln N``.
+
+With ``breaks`` (the sample rule, :mod:`genbacklash_core.samples`) the simulation of a model
+without linear dynamics restarts at the measured output after each break
+(:func:`~genbacklash_core.diagnose.spec.anchors_of`): a lost reading never lets the fit
+carry the state across inputs it did not see.
 """
 
 from __future__ import annotations
@@ -14,12 +19,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from genbacklash_core._typing import FloatArray
+from genbacklash_core._typing import ArrayLike, BoolArray, FloatArray
 from genbacklash_core.errors import GenBacklashError
 from genbacklash_core.identify import nrmse
+from genbacklash_core.samples import as_breaks
 
 from .model import AugmentedModel
-from .spec import ModelSpec
+from .spec import ModelSpec, anchors_of
 
 __all__ = ["ModelFit", "best_fit", "bic", "fit_model"]
 
@@ -91,18 +97,19 @@ def _levenberg_marquardt(
     *,
     max_iterations: int,
     tol: float,
+    anchors: BoolArray | None = None,
 ) -> tuple[FloatArray, float, int, bool, str]:
     y_start = float(y[0])
     u_range = (float(np.min(u)), float(np.max(u)))
     s = spec.coordinate(u)
     s_max = 0.0 if s is None else float(s[-1])
-    out = spec.simulate(theta, u, y_start)
+    out = spec.simulate(theta, u, y_start, anchors, y)
     residual = y - out.y
     cost = float(residual @ residual)
     damping = 1e-3
     accepted = 0
     for _ in range(max_iterations):
-        jac = spec.jacobian(theta, u, out, y_start)
+        jac = spec.jacobian(theta, u, out, y_start, anchors)
         gram = jac.T @ jac
         grad = jac.T @ residual
         scale = np.sqrt(np.diag(gram))
@@ -115,7 +122,7 @@ def _levenberg_marquardt(
             step = np.linalg.lstsq(system, rhs, rcond=None)[0] / scale
             candidate = theta + step
             if spec.problem(candidate, u_range, s_max) is None:
-                out_new = spec.simulate(candidate, u, y_start)
+                out_new = spec.simulate(candidate, u, y_start, anchors, y)
                 res_new = y - out_new.y
                 cost_new = float(res_new @ res_new)
                 if cost_new < cost:
@@ -140,6 +147,7 @@ def fit_model(
     *,
     max_iterations: int = 60,
     tol: float = 1e-9,
+    breaks: ArrayLike | None = None,
 ) -> ModelFit:
     """Fit an augmented model by minimising its free-run simulation error on ``(u, y)``.
 
@@ -152,6 +160,9 @@ def fit_model(
         Input and measured output; the simulation starts from ``y[0]``.
     max_iterations, tol : int, float
         Step limit and relative cost-decrease tolerance.
+    breaks : array_like of bool, optional
+        The sample rule: True where a sample does not follow the one before it (see the
+        module notes). Default: all consecutive.
 
     Returns
     -------
@@ -189,10 +200,11 @@ def fit_model(
     s_max = 0.0 if s is None else float(s[-1])
     if (problem := spec.problem(theta, (float(uu.min()), float(uu.max())), s_max)) is not None:
         raise GenBacklashError(f"cannot fit from an invalid start: {problem}")
+    anchors = anchors_of(None if breaks is None else as_breaks(breaks, uu.size))
     theta, cost, steps, converged, reason = _levenberg_marquardt(
-        spec, theta, uu, yy, max_iterations=max_iterations, tol=tol
+        spec, theta, uu, yy, max_iterations=max_iterations, tol=tol, anchors=anchors
     )
-    y_fit = spec.simulate(theta, uu, float(yy[0])).y
+    y_fit = spec.simulate(theta, uu, float(yy[0]), anchors, yy).y
     return ModelFit(spec.model(theta), cost, uu.size, nrmse(yy, y_fit), steps, converged, reason)
 
 
@@ -202,12 +214,13 @@ def best_fit(
     y: FloatArray,
     *,
     max_iterations: int = 60,
+    breaks: ArrayLike | None = None,
 ) -> ModelFit | None:
     """Fit from every valid start and keep the lowest BIC (None when no start is valid)."""
     best: ModelFit | None = None
     for start in starts:
         try:
-            fit = fit_model(start, u, y, max_iterations=max_iterations)
+            fit = fit_model(start, u, y, max_iterations=max_iterations, breaks=breaks)
         except GenBacklashError:
             continue  # an invalid start (branches crossing on this record, say)
         if best is None or fit.bic < best.bic:

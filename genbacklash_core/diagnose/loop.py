@@ -20,6 +20,13 @@
    pair against the current model: two effects can hide each other (an offset pins a dead-zone
    constant and the lag then fits badly; the offset alone extrapolates poorly). If no pair
    passes either, stop.
+
+Lost readings (``breaks``, the sample rule of :mod:`genbacklash_core.samples`): the
+estimation segment keeps its part of the breaks, and every fit there takes them -- the
+paper's identification forms no row across a break, the output-error fits restart the
+simulation of a backlash at the reading after one (:mod:`.fit`), the residual the detectors
+read is that simulation's. The validation gap simulates on through the whole record (a free
+run, as the contract says), lost readings included.
 """
 
 from __future__ import annotations
@@ -31,12 +38,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
-from genbacklash_core._typing import ArrayLike, FloatArray
+from genbacklash_core._typing import ArrayLike, BoolArray, FloatArray
 from genbacklash_core.backlash import GeneralBacklash
 from genbacklash_core.cascade import Cascade
-from genbacklash_core.data import NonFinitePolicy, check_excitation, prepare_series
+from genbacklash_core.data import NonFinitePolicy, check_excitation
 from genbacklash_core.errors import GenBacklashError
-from genbacklash_core.identify import _detect_sign, identify_backlash, identify_cascade
+from genbacklash_core.identify import _detect_sign, _prepare, identify_backlash, identify_cascade
 from genbacklash_core.structure import as_order
 
 from .context import Context, build_context
@@ -97,21 +104,23 @@ def _plain_start(u: FloatArray, y: FloatArray, degree: int, sign: float) -> Augm
     return AugmentedModel(GeneralBacklash(m, c, m, c))
 
 
-def _start_fit(start: Start, u: FloatArray, y: FloatArray) -> ModelFit:
+def _start_fit(
+    start: Start, u: FloatArray, y: FloatArray, breaks: BoolArray | None = None
+) -> ModelFit:
     if start is None:
         start = StartStructure()
     if isinstance(start, StartStructure):
         if start.na:
-            result = identify_cascade(u, y, start.degree, start.na, start.nb)
-            return fit_model(AugmentedModel(result.model), u, y)
+            result = identify_cascade(u, y, start.degree, start.na, start.nb, breaks=breaks)
+            return fit_model(AugmentedModel(result.model), u, y, breaks=breaks)
         # The branch sense from the input-output covariance over a few lags: with a lag or a
         # dead time the output follows the input late, and lag 0 alone can get it wrong.
         sign = _detect_sign(u, y, _SIGN_LAGS)
         # The paper's iteration can settle on a degenerate model when the data hold effects
         # the start lacks (a long dead time, a slow lag); a plain straight-line start guards.
-        result = identify_backlash(u, y, start.degree, sign=sign)
-        fits = [fit_model(AugmentedModel(result.model), u, y)]
-        fits.append(fit_model(_plain_start(u, y, start.degree, sign), u, y))
+        result = identify_backlash(u, y, start.degree, sign=sign, breaks=breaks)
+        fits = [fit_model(AugmentedModel(result.model), u, y, breaks=breaks)]
+        fits.append(fit_model(_plain_start(u, y, start.degree, sign), u, y, breaks=breaks))
         return min(fits, key=lambda fit: fit.sse)
     if isinstance(start, AugmentedModel):
         model = start
@@ -123,7 +132,7 @@ def _start_fit(start: Start, u: FloatArray, y: FloatArray) -> ModelFit:
             f"got {type(start).__name__}"
         )
     try:
-        return fit_model(model, u, y)
+        return fit_model(model, u, y, breaks=breaks)
     except GenBacklashError as err:
         raise GenBacklashError(f"the starting model does not fit the data: {err}") from err
 
@@ -195,6 +204,7 @@ class _Run:
     split: Split
     effects: tuple[Effect, ...]
     settings: DiagnoseSettings
+    breaks: BoolArray | None = None  # of the estimation segment
 
     def nominate(
         self, context: Context
@@ -233,7 +243,7 @@ class _Run:
         firsts = [c for c in candidates if c.bic_change < -settings.bic_margin][:_LOOK_AHEAD]
         for first in firsts:
             first_report = measure_gap(first.fit.model, self.u, self.y, self.split)
-            context = build_context(self.u[est], self.y[est], first.fit, settings)
+            context = build_context(self.u[est], self.y[est], first.fit, settings, self.breaks)
             detections, seconds, trials = self.nominate(context)
             for second in seconds[:_LOOK_AHEAD]:
                 if second.bic_change > -settings.bic_margin:
@@ -262,6 +272,7 @@ def diagnose(
     settings: DiagnoseSettings | None = None,
     catalog: Sequence[Effect] | None = None,
     nonfinite: NonFinitePolicy = "raise",
+    breaks: ArrayLike | None = None,
 ) -> Diagnosis:
     """Find where a backlash model and the measurements disagree, name the missing effects and
     add them while the validation gap drops significantly.
@@ -279,6 +290,10 @@ def diagnose(
         The effects to consider; default :data:`~genbacklash_core.diagnose.effects.CATALOG`.
     nonfinite : {"raise", "drop"}
         Policy for NaN/inf samples.
+    breaks : array_like of bool, shape (N,), optional
+        The sample rule (:func:`~genbacklash_core.samples.sample_breaks`): True where a
+        sample does not follow the one before it on the encoder's clock (a lost reading, a
+        gap); see the module notes. Default: all consecutive.
 
     Returns
     -------
@@ -300,13 +315,14 @@ def diagnose(
     """
     settings = DiagnoseSettings() if settings is None else settings
     effects = tuple(CATALOG if catalog is None else catalog)
-    uu, yy = prepare_series(u, y, nonfinite)
+    uu, yy, bb = _prepare(u, y, nonfinite, breaks)  # a dropped sample breaks the chain
     split = split_record(uu.size, settings.validation)
     u_est, y_est = uu[split.estimation], yy[split.estimation]
+    b_est = None if bb is None else bb[split.estimation]
     check_excitation(u_est, y_est, 4)
-    run = _Run(uu, yy, split, effects, settings)
+    run = _Run(uu, yy, split, effects, settings, b_est)
 
-    current = _start_fit(start, u_est, y_est)
+    current = _start_fit(start, u_est, y_est, b_est)
     initial = current
     report = measure_gap(current.model, uu, yy, split)
     reports = [report]
@@ -314,7 +330,7 @@ def diagnose(
     rounds: list[Round] = []
     reason = f"stopped after the step limit ({settings.max_steps})"
     while True:
-        context = build_context(u_est, y_est, current, settings)
+        context = build_context(u_est, y_est, current, settings, b_est)
         analysis = context.analysis
         noise = analysis.consistent_with_noise(settings.alpha)
         tests = (

@@ -8,6 +8,12 @@ The Jacobian generalises :mod:`genbacklash_core.refine`: while a branch is engag
 output is the branch value, so its sensitivity is the branch derivative; while it holds, the
 sensitivity is the one at the last engagement. With a drifting gap the branch derivative in
 ``k`` is the one in ``c`` times ``s(t)``.
+
+Lost readings (the sample rule, :mod:`genbacklash_core.samples`): the fits pass ``anchors``,
+the samples after a break, where the simulation of a model without linear dynamics restarts
+at the measured output, as :func:`~genbacklash_core.refine.refine_parameters` does -- the
+inputs of the lost readings are unknown, so the state cannot be carried across them. A model
+with linear dynamics simulates on through (its state cannot be read off one output).
 """
 
 from __future__ import annotations
@@ -27,7 +33,23 @@ from genbacklash_core.structure import Structure
 
 from .model import AugmentedModel, Drift, DriftBasis, Saturation, drift_coordinate
 
-__all__ = ["ModelSpec", "SimulationOutput", "shift_input"]
+__all__ = ["ModelSpec", "SimulationOutput", "anchors_of", "shift_input"]
+
+
+def anchors_of(breaks: BoolArray | None) -> BoolArray | None:
+    """The samples a fit restarts its simulation at: those after a break, but the first
+    (where every simulation starts anyway); None when there are none.
+
+    >>> anchors_of(np.array([True, False, True, False])).tolist()
+    [False, False, True, False]
+    >>> anchors_of(np.array([True, False])) is None
+    True
+    """
+    if breaks is None or not np.any(breaks[1:]):
+        return None
+    anchors = np.array(breaks, dtype=bool)
+    anchors[0] = False
+    return anchors
 
 
 class SimulationOutput(NamedTuple):
@@ -209,12 +231,19 @@ class ModelSpec:
     # ------------------------------------------------------------------ simulation
 
     def simulate(
-        self, theta: FloatArray, u: FloatArray, y_start: float | None = None
+        self,
+        theta: FloatArray,
+        u: FloatArray,
+        y_start: float | None = None,
+        anchors: BoolArray | None = None,
+        y: FloatArray | None = None,
     ) -> SimulationOutput:
         """Free-run simulation of the model ``theta`` on input ``u``.
 
         The backlash state starts at ``x0 = (y_start - o) / G(1)`` (0 when ``y_start`` is
-        None) and a linear block at its steady state for ``x0``.
+        None) and a linear block at its steady state for ``x0``. Without a linear block the
+        backlash state restarts at ``y - o`` where ``anchors`` is True (see the module
+        notes; ``y`` the measured output).
         """
         p, offset, rate, low, high = self._parts(theta)
         structure = self.structure
@@ -228,7 +257,11 @@ class ModelSpec:
             left = evaluate_branch(m_left, ud + (c_left + grow))
             right = evaluate_branch(m_right, ud - (c_right + grow))
         x0 = 0.0 if y_start is None else (float(y_start) - offset) / self._gain(p)
-        x = play_operator(*play_bounds(left, right), x0)  # eq. (20)
+        lo, hi = play_bounds(left, right)
+        if anchors is not None and y is not None and not structure.cascade:
+            lo, hi = lo.copy(), hi.copy()
+            lo[anchors] = hi[anchors] = y[anchors] - offset  # the clamp pins x to the reading
+        x = play_operator(lo, hi, x0)  # eq. (20)
         if structure.cascade:
             a, b = structure.linear_part(p)
             num = np.concatenate([[0.0], a])
@@ -267,11 +300,17 @@ class ModelSpec:
     # ------------------------------------------------------------------ Jacobian
 
     def _backlash_sensitivity(
-        self, theta: FloatArray, u: FloatArray, x: FloatArray, x0: float
+        self,
+        theta: FloatArray,
+        u: FloatArray,
+        x: FloatArray,
+        x0: float,
+        anchors: BoolArray | None = None,
     ) -> tuple[FloatArray, BoolArray]:
         """``dx/d(backlash parameters[, drift rate])``, shape (N, 2n+2[+1]), column-major.
 
-        Also returns where no branch has engaged yet (the output still holds ``x0``).
+        Also returns where no branch has engaged since the start or the last anchor (the
+        output still holds the measurement it was pinned to).
         """
         structure = self.structure
         p, _, rate, _, _ = self._parts(theta)
@@ -287,10 +326,14 @@ class ModelSpec:
         x_prev = np.concatenate([[x0], x[:-1]])
         f1 = (left - x_prev) * structure.sign <= 0.0  # eq. (18): left branch engaged
         f2 = ((x_prev - right) * structure.sign <= 0.0) & ~f1  # eq. (19)
-        last = np.where(f1 | f2, np.arange(u.size), -1)
-        np.maximum.accumulate(last, out=last)  # the last engagement at or before t
-        never = last < 0
-        source = np.where(never, 0, last)
+        pinned = np.zeros(u.size, dtype=bool) if anchors is None else anchors
+        if anchors is not None:
+            f1 &= ~pinned
+            f2 &= ~pinned
+        last = np.where(f1 | f2 | pinned, np.arange(u.size), -1)
+        np.maximum.accumulate(last, out=last)  # the last engagement (or pin) at or before t
+        source = np.where(last < 0, 0, last)
+        never = (last < 0) | pinned[source]
         columns = structure.n_backlash + int(s is not None)
         jac = np.empty((u.size, columns), order="F")
 
@@ -316,13 +359,20 @@ class ModelSpec:
         return jac, never
 
     def jacobian(
-        self, theta: FloatArray, u: FloatArray, out: SimulationOutput, y_start: float | None
+        self,
+        theta: FloatArray,
+        u: FloatArray,
+        out: SimulationOutput,
+        y_start: float | None,
+        anchors: BoolArray | None = None,
     ) -> FloatArray:
-        """``dy/dtheta`` of the free-run simulation ``out`` (the start state held fixed)."""
+        """``dy/dtheta`` of the free-run simulation ``out`` (the start state held fixed;
+        ``anchors`` as in :meth:`simulate`, whose pinned states are held fixed too)."""
         structure = self.structure
         p, offset, _, low, high = self._parts(theta)
         x0 = 0.0 if y_start is None else (float(y_start) - offset) / self._gain(p)
-        jx, never = self._backlash_sensitivity(theta, u, out.x, x0)
+        pins = None if structure.cascade else anchors
+        jx, never = self._backlash_sensitivity(theta, u, out.x, x0, pins)
         jac = np.zeros((u.size, self.n_parameters), order="F")
         n_bl = structure.n_backlash
         i_off, i_drift, i_low, i_high = self._index()

@@ -154,6 +154,67 @@ def test_align_holds_the_command() -> None:
     assert s.skipped == 1
 
 
+def test_align_breaks_where_a_reading_is_missing_or_taken_out() -> None:
+    enc_t = np.array([5, 10, 15, 20, 30, 35, 40, 60, 65]) * 1_000_000  # 25, 45..55 lost
+    s = align(np.array([10_000_000]), np.array([1.0]), enc_t, np.arange(9.0))
+    assert s.skipped == 1 and s.t.tolist() == enc_t[1:].tolist()
+    assert np.flatnonzero(s.breaks).tolist() == [0, 3, 6]
+    marks = np.zeros(9, dtype=bool)
+    marks[2] = True  # a rejected reading before the one at 15 ms
+    s = align(np.array([10_000_000]), np.array([1.0]), enc_t, np.arange(9.0), marks=marks)
+    assert np.flatnonzero(s.breaks).tolist() == [0, 1, 3, 6]
+
+
+def copy_without(source: Path, target: Path, topic: str, lost: set[int]) -> None:
+    """Copy a bag, leaving out the messages of ``topic`` whose (0-based) number is in
+    ``lost``."""
+    with BagReader(source) as reader, BagWriter(target) as writer:
+        k = 0
+        for m in reader.raw_messages(list(reader.topics)):
+            if m.topic == topic:
+                k += 1
+                if k - 1 in lost:
+                    continue
+            writer.write_raw(m.topic, m.log_time_ns, m.raw, m.msgtype)
+
+
+def test_read_aligned_breaks_after_lost_encoder_messages(tmp_path: Path) -> None:
+    from genbacklash_ros.simbags import COMMAND_TOPIC, ENCODER_TOPIC, JOINT, write_example_bag
+
+    write_example_bag(tmp_path / "full", 1, seed=0, n_samples=400)
+    lost = {10, 11, 12, 200, 301}
+    copy_without(tmp_path / "full", tmp_path / "lossy", ENCODER_TOPIC, lost)
+    full = read_aligned(tmp_path / "full", COMMAND_TOPIC, ENCODER_TOPIC, joint=JOINT)
+    assert np.flatnonzero(full.breaks).tolist() == [0]
+    s = read_aligned(tmp_path / "lossy", COMMAND_TOPIC, ENCODER_TOPIC, joint=JOINT)
+    kept = [i for i in range(400) if i not in lost]
+    assert np.array_equal(s.y, full.y[kept])
+    expected = [k for k, i in enumerate(kept) if k == 0 or i - 1 in lost]
+    assert np.flatnonzero(s.breaks).tolist() == expected
+
+
+def test_read_aligned_breaks_after_rejected_encoder_messages(tmp_path: Path) -> None:
+    msgs = _messages()
+    bad = {
+        (T0 + 20 * 1_000_000): JointState(
+            Header(Time.from_ns(T0 + 20 * 1_000_000)), ("x",), (0.0,)
+        ),
+        (T0 + 30 * 1_000_000): JointState(
+            Header(Time.from_ns(T0 + 30 * 1_000_000)), ("a", "b"), (1.0, float("nan"))
+        ),
+    }
+    with BagWriter(tmp_path / "bag") as writer:
+        for topic, t, msg in msgs:
+            if topic == "/enc" and t - 100 in bad:
+                writer.write(topic, t - 50, bad[t - 100])  # rejected, just before the reading
+            writer.write(topic, t, msg)  # type: ignore[arg-type]
+            if topic == "/enc" and t - 100 == T0 + 40 * 1_000_000:
+                writer.write(topic, t + 10, msg)  # type: ignore[arg-type]  # a duplicate
+    s = read_aligned(tmp_path / "bag", "/cmd", "/enc", joint="b", command_index=0)
+    assert s.y.size == 50
+    assert np.flatnonzero(s.breaks).tolist() == [0, 20, 30]
+
+
 def test_read_aligned(tmp_path: Path) -> None:
     _write(tmp_path / "bag")
     s = read_aligned(tmp_path / "bag", "/cmd", "/enc", joint="b", command_index=0)

@@ -251,9 +251,9 @@ def test_identifier_input_is_the_raw_or_the_sent_command(
     fed: list[np.ndarray] = []
     real = pipe.identifier.update_many
 
-    def spy(u: Any, y: Any) -> Estimate:
+    def spy(u: Any, y: Any, breaks: Any = None) -> Estimate:
         fed.append(np.array(u))
-        return real(u, y)
+        return real(u, y, breaks=breaks)
 
     monkeypatch.setattr(pipe.identifier, "update_many", spy)
     outputs = run(pipe, example1[:1200])
@@ -309,7 +309,9 @@ def test_zero_header_stamps_fall_back_to_receive_time() -> None:
 def test_command_is_held_until_the_next_one(monkeypatch: pytest.MonkeyPatch) -> None:
     pipe = BacklashPipeline(NodeParameters(command_type="float64", encoder_type="float64"))
     fed: list[tuple[list[float], list[float]]] = []
-    monkeypatch.setattr(pipe.identifier, "update_many", lambda u, y: fed.append((list(u), list(y))))
+    monkeypatch.setattr(
+        pipe.identifier, "update_many", lambda u, y, breaks=None: fed.append((list(u), list(y)))
+    )
     pipe.on_encoder(Float64(9.0), 1 * MS)  # before any command: skipped, counted quietly
     pipe.on_command(Float64(1.0), 2 * MS)
     for t in (3, 4):
@@ -336,7 +338,9 @@ def test_command_history_stays_bounded_without_encoder_data() -> None:
 def test_samples_wait_for_their_command_or_the_timeout(monkeypatch: pytest.MonkeyPatch) -> None:
     pipe = BacklashPipeline(NodeParameters(command_type="float64", encoder_type="float64"), batch=1)
     fed: list[float] = []
-    monkeypatch.setattr(pipe.identifier, "update_many", lambda u, y: fed.extend(list(y)))
+    monkeypatch.setattr(
+        pipe.identifier, "update_many", lambda u, y, breaks=None: fed.extend(list(y))
+    )
     pipe.on_command(Float64(1.0), 1 * MS)
     pipe.on_encoder(Float64(0.5), 2 * MS)
     pipe.on_encoder(Float64(0.6), 3 * MS)
@@ -530,3 +534,219 @@ def test_set_params_restarts_only_when_needed() -> None:
     pipe.set_params(pipe.params.replace(degree=2))
     assert pipe.identifier is not identifier and pipe.identifier.structure.degree == 2
     assert not pipe.estimate.available
+
+
+# --------------------------------------------------------------------------- the sample rule
+
+FLOATS = NodeParameters(command_type="float64", encoder_type="float64")
+
+
+class Recorder:
+    """Stands in for the identifier's ``update_many``: what each feed gave it (and, with
+    ``inner``, passes it on to the real one)."""
+
+    def __init__(self, inner: Any = None) -> None:
+        self.feeds: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        self.inner = inner
+
+    def __call__(self, u: Any, y: Any, breaks: Any = None) -> Any:
+        assert breaks is not None, "the pipeline always says which samples follow"
+        b = np.asarray(breaks)
+        assert b.dtype == np.bool_ and b.shape == np.shape(u) == np.shape(y)
+        self.feeds.append((np.array(u), np.array(y), b.copy()))
+        return None if self.inner is None else self.inner(u, y, breaks=breaks)
+
+    @property
+    def y(self) -> np.ndarray:
+        return np.concatenate([y for _, y, _ in self.feeds])
+
+    @property
+    def breaks(self) -> np.ndarray:
+        return np.concatenate([b for _, _, b in self.feeds])
+
+
+def recording(
+    pipe: BacklashPipeline, monkeypatch: pytest.MonkeyPatch, *, through: bool = False
+) -> Recorder:
+    recorder = Recorder(pipe.identifier.update_many if through else None)
+    monkeypatch.setattr(pipe.identifier, "update_many", recorder)
+    return recorder
+
+
+def send(
+    pipe: BacklashPipeline, stamps: Any, lost: set[int] | frozenset[int] = frozenset()
+) -> None:
+    """Float64 streams (a message's time is its receive time): at each stamp a command,
+    then reading ``i`` with the value ``i`` unless ``i`` is lost."""
+    for i, t in enumerate(np.asarray(stamps, dtype=np.int64).tolist()):
+        pipe.on_command(Float64(math.sin(i / 7.0)), t)
+        if i not in lost:
+            pipe.on_encoder(Float64(float(i)), t)
+
+
+def after_losses(n: int, lost: set[int]) -> list[int]:
+    """Where the fed readings (``0..n-1`` less ``lost``) break: the first, and each that
+    follows a lost one."""
+    kept = [i for i in range(n) if i not in lost]
+    return [k for k, i in enumerate(kept) if k == 0 or i - 1 in lost]
+
+
+def test_lost_readings_break_the_chain_exactly_after_each_loss(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    pipe = BacklashPipeline(FLOATS)
+    rec = recording(pipe, monkeypatch)
+    lost = {40, 41, 100, 163, 300, 301, 302, 303, 450}
+    send(pipe, np.arange(1, 601) * MS, lost)
+    pipe.finish()
+    assert rec.y.tolist() == [float(i) for i in range(600) if i not in lost]
+    assert np.flatnonzero(rec.breaks).tolist() == after_losses(600, lost)
+    assert len(rec.feeds) > 5  # the link from one feed to the next was exercised
+
+
+@pytest.mark.parametrize("kind", ["intervals", "stamps"])
+def test_jittered_stamps_do_not_break(monkeypatch: pytest.MonkeyPatch, kind: str) -> None:
+    """Each interval within +-0.3 period of the period (or each stamp within +-0.2 period of
+    its grid point, so each interval within +-0.4) keeps neighbours neighbours."""
+    rng = np.random.default_rng(3)
+    n = 2000
+    if kind == "intervals":
+        stamps = MS + np.cumsum(np.round(MS * rng.uniform(0.7, 1.3, n))).astype(np.int64)
+    else:
+        stamps = (np.arange(1, n + 1) * MS + rng.uniform(-0.2, 0.2, n) * MS).astype(np.int64)
+    pipe = BacklashPipeline(FLOATS)
+    rec = recording(pipe, monkeypatch)
+    send(pipe, stamps)
+    pipe.finish()
+    assert rec.y.size == n
+    assert np.flatnonzero(rec.breaks).tolist() == [0]
+
+
+def test_each_feed_links_to_the_last_sample_of_the_previous_one(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    pipe = BacklashPipeline(FLOATS, batch=10)
+    rec = recording(pipe, monkeypatch)
+    send(pipe, np.arange(1, 101) * MS, lost={10})  # the first reading of the second feed
+    pipe.finish()
+    links = []
+    for (_, y_prev, _), (_, y, b) in itertools.pairwise(rec.feeds):
+        assert bool(b[0]) == (y[0] - y_prev[-1] != 1.0)
+        links.append(bool(b[0]))
+        assert not b[1:].any()
+    assert links[0] and not all(links)  # one across the loss, the others linked
+
+
+def test_rejected_readings_break_but_duplicates_and_late_ones_do_not(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    pipe = BacklashPipeline(FLOATS)
+    rec = recording(pipe, monkeypatch)
+    values = []
+    for i in range(1, 61):
+        t = i * MS
+        pipe.on_command(Float64(0.1 * i), t)
+        if i == 20:
+            pipe.on_encoder(Float64(math.nan), t - MS // 2)  # an invalid reading between two
+        if i == 30:
+            pipe.on_encoder(Float64(float(i)), t)
+            pipe.on_encoder(Float64(float(i)), t)  # a duplicate
+            values.append(i)
+            continue
+        if i == 40:
+            continue  # reading 40 comes late, after 41 ...
+        pipe.on_encoder(Float64(float(i)), t)
+        values.append(i)
+        if i == 41:
+            pipe.on_encoder(Float64(40.0), 40 * MS)  # ... and is dropped as out of order
+    pipe.reject("encoder", "bytes that do not decode")  # a transport's rejection
+    pipe.on_command(Float64(0.0), 61 * MS)
+    pipe.on_encoder(Float64(61.0), 61 * MS)
+    values.append(61)
+    pipe.finish()
+    dropped = pipe.stats.dropped
+    assert (dropped["encoder_invalid"], dropped["encoder_duplicate"]) == (2, 1)
+    assert dropped["encoder_out_of_order"] == 1
+    assert rec.y.tolist() == [float(v) for v in values]
+    # the reading after the invalid one, the one after the gap 40 left, the one after the
+    # transport's rejection
+    assert [values[k] for k in np.flatnonzero(rec.breaks)] == [1, 20, 41, 61]
+
+
+def test_a_clock_reanchor_breaks_the_chain(monkeypatch: pytest.MonkeyPatch) -> None:
+    pipe = BacklashPipeline(FLOATS)
+    rec = recording(pipe, monkeypatch)
+    send(pipe, np.arange(2001, 2301) * MS)
+    # the clock jumps 1 s back: the first two messages of each stream are dropped as out of
+    # order, the third re-anchors alignment (REANCHOR_COUNT)
+    for i, t in enumerate(range(1301, 1401)):
+        pipe.on_command(Float64(0.5), t * MS)
+        pipe.on_encoder(Float64(1000.0 + i), t * MS)
+    pipe.finish()
+    assert pipe.stats.dropped["encoder_out_of_order"] == 2
+    first_new = rec.y.tolist().index(1002.0)
+    assert np.flatnonzero(rec.breaks).tolist() == [0, first_new]
+    assert rec.y.size == 300 + 98
+
+
+def test_a_spike_screened_out_breaks_the_chain(monkeypatch: pytest.MonkeyPatch) -> None:
+    events = example1_events(seed=11, seconds=4.0)
+    readings = [e for e in events if e.kind == "encoder"]
+    spike = next(e for e in readings if e.msg.header.stamp.to_ns() == 3000 * MS)
+    after = readings[readings.index(spike) + 1].msg.position[1]
+    position = (spike.msg.position[0], spike.msg.position[1] + 3.0)
+    events[events.index(spike)] = Event(
+        spike.receive_ns, "encoder", JointState(spike.msg.header, spike.msg.name, position)
+    )
+    pipe = BacklashPipeline(PARAMS)
+    rec = recording(pipe, monkeypatch, through=True)  # the real identifier judges spikes
+    run(pipe, events)
+    assert pipe.stats.dropped["encoder_spike"] == 1
+    assert position[1] not in rec.y.tolist()
+    assert np.flatnonzero(rec.breaks).tolist() == [0, rec.y.tolist().index(after)]
+
+
+def test_readings_of_a_stuck_encoder_taken_out_break_the_chain(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    pipe = BacklashPipeline(FLOATS)
+    rec = recording(pipe, monkeypatch)
+    send(pipe, np.arange(1, 101) * MS)
+    pipe._feed(final=True)
+    for i in range(100, 110):  # pending, then found stuck: the last five are taken out
+        pipe.on_command(Float64(0.0), (i + 1) * MS)
+        pipe.on_encoder(Float64(float(i)), (i + 1) * MS)
+    assert pipe._discard_after(105 * MS) == 5
+    send(pipe, np.arange(111, 121) * MS)  # values 0..9 again: told apart by their order
+    pipe.finish()
+    assert rec.y.size == 100 + 5 + 10
+    assert np.flatnonzero(rec.breaks).tolist() == [0, 105]
+
+
+def test_grid_samples_break_where_they_hold_a_stale_reading(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """On the grid (sample_period = the encoder's period) a lost reading leaves a grid point
+    holding the reading before it again: that one breaks, and so does the next."""
+    pipe = BacklashPipeline(FLOATS.replace(sample_period=0.001))
+    rec = recording(pipe, monkeypatch)
+    lost = {50, 120, 121}
+    send(pipe, np.arange(1, 301) * MS + MS // 2, lost)  # half a period off the grid
+    pipe.finish()
+    y = rec.y
+    assert np.array_equal(rec.breaks[1:], np.diff(y) != 1.0)
+    assert rec.breaks[0]
+    # the first; 49 held twice, then 51; 119 held three times, then 122
+    assert np.count_nonzero(rec.breaks) == 1 + 2 + 3
+
+
+@pytest.mark.parametrize("method", ["windowed", "recursive"])
+def test_a_stream_losing_30pct_of_its_readings_is_identified_without_bias(method: str) -> None:
+    """A command per encoder period (so each lost reading hides an input): paired across
+    the losses the gaps read about 0.1 too small; with the sample rule they do not."""
+    events = example1_events(seed=11, seconds=8.0, command_hz=1000.0, jitter=0.0)
+    rng = np.random.default_rng(5)
+    lossy = [e for e in events if e.kind == "command" or rng.random() >= 0.3]
+    pipe = BacklashPipeline(PARAMS.replace(method=method))
+    run(pipe, lossy)
+    assert np.max(np.abs(pipe.estimate.parameters - TRUTH.parameters())) < 0.02

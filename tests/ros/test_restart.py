@@ -116,7 +116,9 @@ def test_a_dropped_pipeline_resumes_from_its_checkpoint(tmp_path: Path, method: 
         checkpoint_file=str(path),
         checkpoint_period=PERIOD_S,
     )
-    events = drivetrain_events(11, 16.0)
+    # 22 s: after the restart the identifier needs as many informative rows as the checkpoint
+    # stands for (its window, 1500 rows; ~180 commands/s here) before it stops leaning on it
+    events = drivetrain_events(11, 22.0)
     kill, back = int(9.3 * S), int(10.5 * S)  # killed mid-period, back 1.2 s later
     first = BacklashPipeline(params)
     before = feed(first, [e for e in events if e.receive_ns < kill])  # then: gone, no finish()

@@ -169,8 +169,9 @@ def score_test(context: Context, spec: ModelSpec, theta: FloatArray) -> NestedTe
     model, taken where it equals the current one, explain the residual beyond the current
     model's own Jacobian?  Its coefficients are one Gauss-Newton step into the extension.
     """
-    out = spec.simulate(theta, context.u, context.y_start)
-    extended = spec.jacobian(theta, context.u, out, context.y_start)
+    anchors = context.anchors
+    out = spec.simulate(theta, context.u, context.y_start, anchors, context.y)
+    extended = spec.jacobian(theta, context.u, out, context.y_start, anchors)
     return nested_f_test(context.residual, context.jacobian, extended)
 
 
@@ -194,10 +195,18 @@ def paper_start(
     try:
         if structure.cascade:
             result = identify_cascade(
-                u, y, structure.degree, structure.na, structure.nb, sign=structure.sign
+                u,
+                y,
+                structure.degree,
+                structure.na,
+                structure.nb,
+                sign=structure.sign,
+                breaks=context.breaks,
             )
         else:
-            result = identify_backlash(u, y, structure.degree, sign=structure.sign)
+            result = identify_backlash(
+                u, y, structure.degree, sign=structure.sign, breaks=context.breaks
+            )
     except GenBacklashError:
         return None
     model = AugmentedModel(result.model, spec.delay, offset)

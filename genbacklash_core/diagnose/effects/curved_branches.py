@@ -56,7 +56,7 @@ class CurvedBranches:
             paper = paper_start(context, spec)
             if paper is not None:
                 starts.append(paper)
-        return best_fit(starts, context.u, context.y)
+        return best_fit(starts, context.u, context.y, breaks=context.breaks)
 
 
 EFFECT = CurvedBranches()

@@ -74,7 +74,7 @@ class GapDrift:
                 stepped = theta.copy()
                 stepped[spec.names().index("drift_rate")] = float(detection.hints.get("rate", 0.0))
                 starts.append((spec, stepped))
-        return best_fit(starts, context.u, context.y)
+        return best_fit(starts, context.u, context.y, breaks=context.breaks)
 
 
 EFFECT = GapDrift()

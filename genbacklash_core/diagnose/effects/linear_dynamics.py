@@ -130,14 +130,22 @@ class LinearDynamics:
         for start in starts:
             try:
                 screened.append(
-                    fit_model(start, context.u, context.y, max_iterations=_SCREEN_STEPS)
+                    fit_model(
+                        start,
+                        context.u,
+                        context.y,
+                        max_iterations=_SCREEN_STEPS,
+                        breaks=context.breaks,
+                    )
                 )
             except GenBacklashError:
                 continue  # an invalid start on this record
         screened.sort(key=lambda fit: fit.bic)
         chosen = [fit for fit in screened if minimum_phase(fit.model)][:_FINALISTS]
         chosen += [fit for fit in screened[:1] if fit not in chosen]
-        finals = [fit_model(fit.model, context.u, context.y) for fit in chosen]
+        finals = [
+            fit_model(fit.model, context.u, context.y, breaks=context.breaks) for fit in chosen
+        ]
         valid = [fit for fit in finals if minimum_phase(fit.model)]
         return min(valid, key=lambda fit: fit.bic) if valid else None
 

@@ -123,7 +123,7 @@ class OutputOffset:
             paper = paper_start(context, spec, offset=guess)
             if paper is not None:
                 starts.append(paper)
-        fit = best_fit(starts, context.u, context.y)
+        fit = best_fit(starts, context.u, context.y, breaks=context.breaks)
         if fit is None:
             return None
         return replace(fit, model=centre_gap(fit.model))

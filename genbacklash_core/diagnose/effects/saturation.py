@@ -103,7 +103,7 @@ class OutputLimit:
             if low:
                 start[spec.names().index("saturation_low")] = np.quantile(y_sim, 1.0 - level)
             starts.append((spec, start))
-        return best_fit(starts, context.u, context.y)
+        return best_fit(starts, context.u, context.y, breaks=context.breaks)
 
 
 EFFECT = OutputLimit()

@@ -78,11 +78,20 @@ class TimeDelay:
             fresh = fresh_start(context, spec) if context.degenerate else None
             if fresh is not None:
                 starts.append(fresh)
-            trial = best_fit(starts, context.u, context.y, max_iterations=_SCAN_STEPS)
+            trial = best_fit(
+                starts,
+                context.u,
+                context.y,
+                max_iterations=_SCAN_STEPS,
+                breaks=context.breaks,
+            )
             if trial is not None:
                 trials.append(trial)
         trials.sort(key=lambda fit: fit.sse)
-        finals = [fit_model(trial.model, context.u, context.y) for trial in trials[:_FINALISTS]]
+        finals = [
+            fit_model(trial.model, context.u, context.y, breaks=context.breaks)
+            for trial in trials[:_FINALISTS]
+        ]
         return min(finals, key=lambda fit: fit.bic) if finals else None
 
 
