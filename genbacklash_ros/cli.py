@@ -85,6 +85,7 @@ def _identify(
                 max_iterations=max_iterations,
                 nonfinite=nonfinite,
                 callback=progress,
+                breaks=series.breaks,
             )
         return identify_backlash(
             series.u,
@@ -95,6 +96,7 @@ def _identify(
             max_iterations=max_iterations,
             nonfinite=nonfinite,
             callback=progress,
+            breaks=series.breaks,
         )
     finally:
         progress.close()
@@ -128,13 +130,14 @@ def _summary(result: IdentificationResult) -> str:
 
 
 def _cmd_identify(args: argparse.Namespace) -> int:
-    series = replay_cli.load_series(args)
+    params = replay_cli.node_parameters(args, replay_cli.batch_parameters(args.data)).params
+    series = replay_cli.load_series(args, params)
     result = _identify(
         series,
-        model=args.model,
-        degree=args.degree,
-        na=args.na,
-        nb=args.nb,
+        model=params.model if args.model is None else args.model,
+        degree=params.degree if args.degree is None else args.degree,
+        na=params.na if args.na is None else args.na,
+        nb=params.nb if args.nb is None else args.nb,
         sign=None if args.sign == "auto" else float(args.sign),
         refine=not args.no_refine,
         max_iterations=args.max_iterations,
@@ -214,6 +217,14 @@ def _positive_float(text: str) -> float:
     return value
 
 
+_BATCH_USES = (
+    "{command} uses model, degree, na, nb and, for a bag, joint, command_index; the others "
+    "are validated, then ignored (a note on stderr names those set to other than their "
+    "defaults). Bags are read with header stamps, one sample per encoder message (the node's "
+    "default stamp_source and sample_period)."
+)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser (exposed for tests and documentation)."""
     parser = argparse.ArgumentParser(
@@ -247,26 +258,26 @@ def build_parser() -> argparse.ArgumentParser:
     ident.add_argument(
         "--model",
         choices=("backlash", "cascade"),
-        default="backlash",
+        default=None,
         help="backlash alone (y is the backlash output) or backlash followed by linear "
         "dynamics (default: backlash)",
     )
     ident.add_argument(
         "--degree",
         type=_positive_int,
-        default=3,
+        default=None,
         help="polynomial degree of each branch; 1 = ideal backlash (default 3)",
     )
     ident.add_argument(
         "--na",
         type=_positive_int,
-        default=2,
+        default=None,
         help="cascade: number of input terms r of the linear block, a_1=1 included (default 2)",
     )
     ident.add_argument(
         "--nb",
         type=_non_negative_int,
-        default=2,
+        default=None,
         help="cascade: number of output terms p of the linear block (default 2)",
     )
     ident.add_argument(
@@ -296,6 +307,7 @@ def build_parser() -> argparse.ArgumentParser:
     ident.add_argument(
         "--plot", metavar="DIR", help="also write characteristic.png and history.png into DIR"
     )
+    replay_cli.add_node_parameter_options(ident, used=_BATCH_USES.format(command="identify"))
     ident.set_defaults(func=_cmd_identify)
 
     sim = sub.add_parser(

@@ -22,7 +22,15 @@ from genbacklash_core.diagnose import (
     effect_names,
 )
 
-from .replay_cli import add_bag_input_options, load_series
+from .replay_cli import (
+    BATCH_PARAMETERS,
+    CommandParameters,
+    add_bag_input_options,
+    add_node_parameter_options,
+    batch_parameters,
+    load_series,
+    node_parameters,
+)
 
 __all__ = ["add_parser", "cmd_diagnose", "parse_start"]
 
@@ -34,7 +42,8 @@ and show the gap shrink.
 
 DATA is a CSV with header columns u (command) and y (measured position), optional t. The
 first part of the record (1 - --validation) is the estimation segment: the starting model -
-the ideal backlash of the paper's eq. (1), or --start - is fitted there. The rest is held out:
+the ideal backlash of the paper's eq. (1), or --start, or the structure the node parameters
+(--params-file, --param) set with model/degree/na/nb - is fitted there. The rest is held out:
 the model is simulated free-run over it and the *gap* is the NRMSE there.
 
 Then, in a loop: the estimation residual is tested (Ljung-Box whiteness, prewhitened input
@@ -55,6 +64,8 @@ examples:
   genbacklash diagnose run.csv --start degree=3 --report diag/
   genbacklash identify run.csv --degree 3 --json > start.json
   genbacklash diagnose run.csv --start start.json --validation 0.25
+  genbacklash diagnose run.csv --param degree=3 --param model=cascade
+  genbacklash diagnose run.mcap --command /cmd --encoder /enc --params-file config/params.yaml
 
 --json prints {"steps": [{"effect", "evidence", "gap_before", "gap_after"}, ...],
 "gap_initial", "gap_final", "model"}; model is the identify JSON plus delay, offset, drift and
@@ -148,10 +159,30 @@ def _text(result: Diagnosis) -> str:
     return "\n".join(lines)
 
 
+def _start(
+    args: argparse.Namespace, cli: CommandParameters
+) -> StartStructure | AugmentedModel | None:
+    """``--start``, else the structure the node parameters set (any of model, degree, na, nb
+    in the params file or a --param: the node's structure, its defaults for the rest), else
+    None (the ideal backlash)."""
+    if args.start is not None:
+        clash = [name for name in BATCH_PARAMETERS if name in cli.overrides]
+        if clash:
+            raise GenBacklashError(
+                f"--start and --param {', '.join(clash)} both set the starting model; give one"
+            )
+        return parse_start(args.start)
+    if not any(name in cli.given for name in BATCH_PARAMETERS):
+        return None
+    structure = cli.params.structure()
+    return StartStructure(structure.degree, structure.na, structure.nb)
+
+
 def cmd_diagnose(args: argparse.Namespace) -> int:
     """Run the diagnosis for parsed arguments; print text or JSON; write the report."""
-    series = load_series(args)
-    start = None if args.start is None else parse_start(args.start)
+    cli = node_parameters(args, batch_parameters(args.data))
+    start = _start(args, cli)
+    series = load_series(args, cli.params)
     settings = DiagnoseSettings(validation=args.validation)
     result = diagnose(
         series.u,
@@ -159,6 +190,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         start=start,
         settings=settings,
         nonfinite="drop" if args.drop_nonfinite else "raise",
+        breaks=series.breaks,
     )
     if args.json:
         print(json.dumps(result.to_dict()))
@@ -217,6 +249,13 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
         "--drop-nonfinite",
         action="store_true",
         help="drop NaN/inf samples instead of stopping with an error",
+    )
+    add_node_parameter_options(
+        parser,
+        used="diagnose uses model, degree, na, nb as the starting structure when any of them "
+        "is set and --start is not (the node's defaults for the rest), and, for a bag, joint, "
+        "command_index; the others are validated, then ignored (a note on stderr names those "
+        "set to other than their defaults).",
     )
     parser.set_defaults(func=cmd_diagnose)
     return parser
