@@ -12,7 +12,8 @@ with its log time as the receive time, and writes an output bag with the input t
 each logged at the log time of the input message that produced it. The returned
 :class:`ReplayResult` holds the final estimate, the pipeline's counters and a
 :class:`ReplayHistory` (estimates over time, raw and compensated commands, encoder samples)
-for :mod:`genbacklash_ros.report`.
+and the input bag's metadata ``custom_data`` (a synthetic bag's truth) for
+:mod:`genbacklash_ros.report`.
 
 When the input turns out corrupt or truncated part-way, the replay stops there, flushes the
 pipeline (:meth:`~genbacklash_ros.pipeline.BacklashPipeline.finish`), closes the output bag
@@ -105,6 +106,9 @@ class ReplayResult:
     history : ReplayHistory
     error : str
         Why the replay stopped early ("" when it read the whole input).
+    custom_data : dict or None
+        The input bag's metadata ``custom_data`` (a synthetic bag's truth lives there:
+        :func:`genbacklash_ros.simbags.read_truth`); None when it has none.
     """
 
     output: Path
@@ -116,6 +120,7 @@ class ReplayResult:
     seconds: float
     history: ReplayHistory
     error: str = ""
+    custom_data: dict[str, str] | None = None
 
     def to_dict(self) -> dict[str, object]:
         """JSON-ready summary: the final estimate (``Estimate.to_dict``) plus counters."""
@@ -247,6 +252,7 @@ def replay(
     with BagReader(bag) as reader:
         cmd_info = reader.topic(command_topic, COMMAND_MSGTYPES)
         enc_info = reader.topic(encoder_topic, ENCODER_MSGTYPES)
+        custom_data = reader.custom_data
         overrides: dict[str, object] = {
             "joint": joint,
             "command_index": command_index,
@@ -341,4 +347,5 @@ def replay(
         time.perf_counter() - started,
         history,
         error,
+        custom_data,
     )

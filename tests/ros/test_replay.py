@@ -15,6 +15,7 @@ from genbacklash_ros.replay import OUTPUT_TOPICS, replay
 from genbacklash_ros.simbags import (
     COMMAND_TOPIC,
     ENCODER_TOPIC,
+    read_truth,
     write_drivetrain_bag,
     write_example_bag,
 )
@@ -85,10 +86,21 @@ def test_output_bag_readable_by_mcap_ros2(replayed: tuple[Path, Path]) -> None:
 
 def test_report_files(replayed: tuple[Path, Path]) -> None:
     _, rep = replayed
-    for name in ("characteristic", "convergence", "residuals", "compensation"):
+    for name in ("motion", "tracking_error", "gap", "coverage", "characteristic",
+                 "convergence", "residuals", "compensation"):  # fmt: skip
         assert (rep / f"{name}.png").stat().st_size > 1000
     page = (rep / "index.html").read_text()
     assert "c_right" in page and "convergence.png" in page
+    assert "RMS tracking error without compensation" in page
+    assert "paper Example 1" in page  # the bag's truth, from its metadata
+
+
+def test_replay_keeps_the_bags_custom_data(example_bag: Path, tmp_path: Path) -> None:
+    result = replay(
+        example_bag, tmp_path / "out", command_topic=COMMAND_TOPIC, encoder_topic=ENCODER_TOPIC
+    )
+    truth = read_truth(result.custom_data)
+    assert truth is not None and truth.model == paper_example(1).model
 
 
 def test_replay_json_and_overrides(
