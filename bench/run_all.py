@@ -20,6 +20,7 @@ BENCHMARKS = (
     "accuracy",
     "speed",
     "online",
+    "operation",
     "closed_loop",
     "diagnose",
     "replay",
