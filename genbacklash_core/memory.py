@@ -11,10 +11,13 @@ previous row's state and adds nothing.
 :class:`RowMemory` keeps such rows, and only such rows: pairs that are consecutive on the
 encoder's clock (:mod:`genbacklash_core.samples`) and whose input moved. It files them by
 the direction of the move (up: the right branch, eq. 19; down: the left branch, eq. 18) and
-by where the input was, in ``bins`` equal parts of the input range seen so far, and holds at
-most ``per_bin`` rows in each: a new row pushes out the oldest row *of its own bin*. So old
-information is forgotten only where newer data cover the same region. A wearing gap is
-tracked wherever the drivetrain works; the regions it stopped visiting keep what they knew.
+by where the input was, in ``bins`` equal parts of the input range seen so far, and holds
+``capacity`` rows in all. When it is full, rows are forgotten from the fullest bins only,
+oldest first, down to a common level (water filling): a new row pushes out the oldest row
+*of its own bin* once that bin holds its share, and a bin the data rarely reach keeps all it
+has. So old information is forgotten only where newer data cover the same region. A wearing
+gap is tracked wherever the drivetrain works; the regions it stopped visiting keep what they
+knew.
 
 Examples
 --------
@@ -24,8 +27,8 @@ Examples
 >>> y = u - 0.05
 >>> mem.add_series(u, y, np.array([True, False, False, False, False, False]))
 3
->>> len(mem), mem.per_bin
-(3, 8)
+>>> len(mem), mem.per_bin  # not full: every row is kept, no bin is cut yet
+(3, 64)
 >>> series_u, series_y, breaks = mem.series()
 >>> series_u.tolist(), breaks.tolist()
 ([0.0, 0.1, 0.1, 0.3, 0.3, 0.2], [True, False, True, False, True, False])
@@ -45,6 +48,22 @@ __all__ = ["BranchCoverage", "RowMemory"]
 _PENDING_LIMIT = 256  # rows collected before they are filed into their bins
 
 
+def _level(counts: IntArray, capacity: int) -> int:
+    """The largest ``level`` with ``sum(min(counts, level)) <= capacity`` (water filling):
+    bins above it are cut to it, the others keep every row."""
+    if int(counts.sum()) <= capacity:
+        return capacity
+    ordered = np.sort(counts)
+    below = np.concatenate([[0], np.cumsum(ordered)[:-1]])  # rows in the smaller bins
+    # with the level at ordered[k], the bins from k on hold ordered[k] each
+    fits = below + ordered * (ordered.size - np.arange(ordered.size)) <= capacity
+    k = int(np.argmin(fits)) if not fits.all() else ordered.size
+    # the level lies between ordered[k-1] (fits) and ordered[k] (does not)
+    rest = ordered.size - k
+    base = int(below[k]) if k < ordered.size else int(ordered.sum())
+    return max(1, (capacity - base) // max(rest, 1))
+
+
 class BranchCoverage:
     """How much of the input range each branch's rows cover (a snapshot).
 
@@ -55,7 +74,7 @@ class BranchCoverage:
     up, down : ndarray of int, shape (bins,)
         Rows per bin for moves up (right branch) and down (left branch).
     per_bin : int
-        Capacity of one bin.
+        The level the fullest bins are cut to (the capacity while the memory is not full).
     """
 
     def __init__(self, edges: FloatArray, up: IntArray, down: IntArray, per_bin: int) -> None:
@@ -88,7 +107,7 @@ class RowMemory:
     Parameters
     ----------
     capacity : int
-        About how many rows the memory holds in all: ``per_bin = ceil(capacity / (2 bins))``.
+        How many rows the memory holds in all.
     bins : int
         Regions of the input range per direction.
     """
@@ -100,11 +119,12 @@ class RowMemory:
             raise GenBacklashError(f"bins must be a whole number >= 1, got {bins!r}")
         self.capacity = capacity
         self.bins = bins
-        self.per_bin = max(2, math.ceil(capacity / (2 * bins)))
+        self.per_bin = capacity  # the level the fullest bins are cut to (see _file)
         empty = np.empty(0)
         self._u0, self._u1, self._y0, self._y1 = empty, empty, empty, empty
         self._order: IntArray = np.empty(0, dtype=np.intp)
         self._pending: list[tuple[FloatArray, FloatArray, FloatArray, FloatArray]] = []
+        self._singles: list[tuple[float, float, float, float]] = []
         self._pending_count = 0
         self._lo = math.inf
         self._hi = -math.inf
@@ -143,6 +163,17 @@ class RowMemory:
         if self._pending_count >= _PENDING_LIMIT:
             self._file()
 
+    def add_one(self, u0: float, u1: float, y0: float, y1: float) -> None:
+        """Take one row (as :meth:`add`, without arrays)."""
+        self._singles.append((u0, u1, y0, y1))
+        self._pending_count += 1
+        if u1 < self._lo:
+            self._lo = u1
+        if u1 > self._hi:
+            self._hi = u1
+        if self._pending_count >= _PENDING_LIMIT:
+            self._file()
+
     def clear(self) -> None:
         """Forget every row."""
         self.__init__(self.capacity, self.bins)  # type: ignore[misc]
@@ -160,6 +191,10 @@ class RowMemory:
 
     def _file(self) -> None:
         """File the pending rows: every bin keeps its newest ``per_bin`` rows."""
+        if self._singles:
+            block = np.array(self._singles, dtype=np.float64)
+            self._pending.append((block[:, 0], block[:, 1], block[:, 2], block[:, 3]))
+            self._singles = []
         if not self._pending:
             return
         start = self.added
@@ -184,6 +219,8 @@ class RowMemory:
         position = np.arange(sorted_keys.size)
         bin_start = np.maximum.accumulate(np.where(first_of_bin, position, 0))
         rank = position - bin_start
+        counts = np.bincount(keys, minlength=2 * self.bins)
+        self.per_bin = _level(counts, self.capacity)
         kept = np.sort(newest_first[rank < self.per_bin])  # back in time order
         self._u0, self._u1, self._y0, self._y1 = u0[kept], u1[kept], y0[kept], y1[kept]
         self._order = order[kept]

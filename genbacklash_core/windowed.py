@@ -1007,6 +1007,7 @@ class WindowedIdentifier:
         self._memory = None if self._template.cascade else RowMemory(s.window, s.bins)
         self._last: tuple[float, float] | None = None  # the latest sample (memory mode)
         self._break_next = False  # a dropped sample ended the previous call
+        self._base_confidence = 0.0  # confidence of the last fit, before ageing
         self._rows = 0  # rows taken (memory mode)
         self._idle = 0  # samples since the last informative row
         self._structure = self._template
@@ -1152,7 +1153,23 @@ class WindowedIdentifier:
                 f"|u| <= {self._u_limit:.3g}, |y| <= {self._y_limit:.3g}; pass "
                 "nonfinite='drop' in the settings to skip such samples"
             )
-        return self._take(np.array([uf]), np.array([yf]), np.array([not follows]))
+        if self._memory is None:
+            return self._take(np.array([uf]), np.array([yf]), np.array([not follows]))
+        # one sample, without arrays (the per-sample path of a hand-written loop)
+        self._ring.push(uf, yf, not follows or self._break_next)
+        last = self._last
+        if last is not None and follows and not self._break_next and uf != last[0]:
+            self._memory.add_one(last[0], uf, last[1], yf)  # a row of eq. (24)
+            self._rows += 1
+            self._idle = 0
+        else:
+            self._idle += 1
+        self._break_next = False
+        self._last = (uf, yf)
+        self._samples += 1
+        if self._rows >= self._next_fit:
+            self._fit()
+        return self._publish()
 
     def update_many(self, u: ArrayLike, y: ArrayLike, breaks: ArrayLike | None = None) -> Estimate:
         """Take a series of samples; identical to :meth:`update` on each, vectorised.
@@ -1254,8 +1271,7 @@ class WindowedIdentifier:
         if self._reported is None or self._covariance is None:
             return state, reason, 0.0
         s = self.settings
-        rel = relative_std(self._reported, self._covariance)
-        confidence = confidence_of(state, rel, s.converged_std)
+        confidence = self._base_confidence
         if self._memory is None or state not in (
             EstimatorState.CONVERGED,
             EstimatorState.CONVERGING,
@@ -1302,6 +1318,11 @@ class WindowedIdentifier:
                 )
         return "; ".join(missing)
 
+    def _quick_confidence(self) -> float:
+        """The published confidence from the cached one of the last fit (cheap)."""
+        s = self.settings
+        return aged_confidence(self._base_confidence, float(self._idle), s.confidence_half_life)
+
     def _publish(self) -> Estimate:
         est = self._estimate
         if self._memory is not None and self._reported is None:
@@ -1312,8 +1333,13 @@ class WindowedIdentifier:
                     self._structure, self._samples, self._excitation, self._state, reason
                 )
         if self._memory is not None and self._reported is not None:
-            state, _, confidence = self._published_state()
-            if state is not est.state or abs(confidence - est.confidence) > 1e-3 * max(
+            held = self._idle >= self.settings.idle_samples
+            was_held = est.state is EstimatorState.NO_EXCITATION and self._state in (
+                EstimatorState.CONVERGED,
+                EstimatorState.CONVERGING,
+            )
+            confidence = self._quick_confidence()
+            if held != was_held or abs(confidence - est.confidence) > 1e-3 * max(
                 est.confidence, 1e-12
             ):
                 self._rebuild()
@@ -1541,6 +1567,9 @@ class WindowedIdentifier:
                 self._reason += f"; stopped early: {fit.reason}"
 
     def _rebuild(self) -> None:
+        if self._reported is not None and self._covariance is not None:
+            rel = relative_std(self._reported, self._covariance)
+            self._base_confidence = confidence_of(self._state, rel, self.settings.converged_std)
         if self._reported is None or self._covariance is None:
             self._estimate = Estimate.empty(
                 self._structure, self._samples, self._excitation, self._state, self._reason

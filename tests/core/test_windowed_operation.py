@@ -136,3 +136,17 @@ def test_without_the_rule_loss_would_bias_it() -> None:
     ident = WindowedIdentifier(3)
     est = ident.update_many(d.u[keep], d.y[keep])
     assert est.parameters[3] < 0.95 * ex.model.c_left  # the left gap read too small
+
+
+def test_update_and_update_many_agree_in_memory_mode() -> None:
+    """One sample at a time (with follows=False at the breaks) is the batched path."""
+    rec = operation_record(OperationSettings(duration=6.0, loss=0.05), 2)
+    u, y, breaks = rec.series()
+    one = WindowedIdentifier(3)
+    for uk, yk, bk in zip(u.tolist(), y.tolist(), breaks.tolist(), strict=True):
+        last = one.update(uk, yk, follows=not bk)
+    many = WindowedIdentifier(3)
+    for s in range(0, u.size, 333):
+        est = many.update_many(u[s : s + 333], y[s : s + 333], breaks[s : s + 333])
+    np.testing.assert_array_equal(last.parameters, est.parameters)
+    assert (last.state, last.samples, last.confidence) == (est.state, est.samples, est.confidence)
