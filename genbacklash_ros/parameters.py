@@ -194,18 +194,21 @@ PARAMETER_SPECS: tuple[ParameterSpec, ...] = (
         "window",
         "integer",
         _WINDOWED.window,
-        "Windowed method: samples per fit (more: more accurate; fewer: tracks wear faster).",
+        "Windowed method: regression rows remembered (a backlash alone: pairs of consecutive "
+        "readings whose input moved, forgotten only where new rows cover the same input "
+        "region; a cascade: samples). More: more accurate; fewer: tracks wear faster.",
         20,
         10_000_000,
-        unit="samples",
+        unit="rows",
         restarts=True,
     ),
     ParameterSpec(
         "forgetting",
         "double",
         _RECURSIVE.forgetting,
-        "Recursive method: forgetting factor per sample; each branch remembers about "
-        "1 / (1 - forgetting) samples.",
+        "Recursive method: each branch remembers its newest 1 / (1 - forgetting) regression "
+        "rows (pairs of consecutive readings whose input moved), and every input region a "
+        "few rows however old.",
         0.5,
         1.0,
         restarts=True,

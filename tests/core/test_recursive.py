@@ -1,4 +1,6 @@
-"""Recursive identification: cold-start convergence, both update paths, drift, freeze, recovery."""
+"""Recursive identification: cold-start convergence, both update paths, drift, holding without
+excitation, recovery, seeding. The drivetrain-operation tests (sample rule, memory measured in
+information, lost readings) are in ``test_recursive_operation.py``."""
 
 from __future__ import annotations
 
@@ -50,6 +52,9 @@ def _error(parameters: np.ndarray, truth: np.ndarray) -> float:
         ({"covariance_bound": 0.5}, r"covariance_bound must lie in \[1, inf\]"),
         ({"divergence_ratio": 0.9}, r"divergence_ratio must lie in \[1, inf\]"),
         ({"min_conditioning": -0.1}, r"min_conditioning must lie in \[0, 1\]"),
+        ({"bins": 0}, r"bins must lie in \[1, 1000\]"),
+        ({"idle_samples": 0}, r"idle_samples must lie in \[1, 1e\+10\]"),
+        ({"confidence_half_life": 0.5}, r"confidence_half_life must lie in \[1, inf\]"),
         ({"nonfinite": None}, "nonfinite must be 'raise' or 'drop'"),
     ],
 )
@@ -96,7 +101,7 @@ def test_warming_up_before_the_initial_fit() -> None:
 
 def test_keeps_improving_after_the_initial_fit() -> None:
     data = EX1.generate(6, n_samples=4000)
-    settings = RecursiveSettings(forgetting=1.0)  # no forgetting: the error keeps falling
+    settings = RecursiveSettings(forgetting=1.0)  # memory never full: the error keeps falling
     trace = track(RecursiveIdentifier(3, settings=settings), data.u, data.y, every=400)
     errors = [_error(e.parameters, EX1.model.parameters()) for e in trace]
     assert errors[-1] < 0.5 * errors[0]
@@ -143,17 +148,32 @@ def test_block_of_one_equals_per_sample_updates(number: int) -> None:
 
 
 @pytest.mark.parametrize("number", [1, 3])
-def test_blocks_agree_closely_with_per_sample_updates(number: int) -> None:
+def test_chunking_does_not_matter(number: int) -> None:
+    """Samples are processed at fixed sample counts (every ``block`` samples), so one at a
+    time, in node-sized chunks or all at once give the same estimates."""
     ex = paper_example(number)
     data = ex.generate(3, n_samples=3000)
     one = RecursiveIdentifier(*_args(number))
     for u, y in zip(data.u.tolist(), data.y.tolist(), strict=True):
         last = one.update(u, y)
+    chunked = RecursiveIdentifier(*_args(number))
+    trace = track(chunked, data.u, data.y, every=37)
     est = RecursiveIdentifier(*_args(number)).update_many(data.u, data.y)
-    # switching decisions from the block-start estimate: a small fraction of the uncertainty
-    assert np.all(np.abs(est.parameters - last.parameters) < 0.5 * last.std())
-    np.testing.assert_allclose(est.std(), last.std(), rtol=0.1)
-    assert est.state is last.state is EstimatorState.CONVERGED
+    for other in (trace[-1], est):
+        np.testing.assert_allclose(other.parameters, last.parameters, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(other.std(), last.std(), rtol=1e-6)
+        assert other.state is last.state is EstimatorState.CONVERGED
+    assert _error(est.parameters, ex.model.parameters()) < 0.03
+
+
+def test_refit_takes_the_latest_rows() -> None:
+    data = EX1.generate(5, n_samples=1000)
+    ident = RecursiveIdentifier(3)
+    est = ident.update_many(data.u, data.y)  # 1000 = 300 + 10 * 64 + 60: 60 rows queued
+    refit = ident.refit()
+    assert refit.samples == est.samples == 1000
+    assert not np.array_equal(refit.parameters, est.parameters)
+    assert _error(refit.parameters, EX1.model.parameters()) < 0.03
 
 
 # --------------------------------------------------------------------------- drift
@@ -168,8 +188,9 @@ def test_tracks_a_growing_gap() -> None:
     judged = (7_000, 12_000)
     lag_left = tracking_lag(samples, values[:, 3], c_left, judged)
     lag_right = tracking_lag(samples, values[:, 7], c_right, judged)
-    # forgetting 0.998: about 500 samples of memory per branch, however often it is engaged
-    assert 200 < lag_left < 1000 and 200 < lag_right < 1000, (lag_left, lag_right)
+    # forgetting 0.998: each branch remembers 500 rows; one row per sample on this input, so
+    # the memory spans ~1000 samples and a linear drift is tracked ~500 samples behind
+    assert 200 < lag_left < 800 and 200 < lag_right < 800, (lag_left, lag_right)
     assert trace[-1].state is EstimatorState.CONVERGED
     assert abs(trace[-1].parameters[3] - c_left[-1]) < 0.03
     assert abs(trace[-1].parameters[7] - c_right[-1]) < 0.03
@@ -200,41 +221,62 @@ def _segments(seed: int, *parts: tuple[str, int]) -> tuple[np.ndarray, np.ndarra
 
 
 @pytest.mark.parametrize("kind", ["hold", "dither"])
-def test_freezes_without_excitation_and_recovers(kind: str) -> None:
+def test_holds_without_excitation_and_recovers(kind: str) -> None:
     u, y = _segments(4, ("random", 1500), (kind, 3000), ("random", 1500))
     ident = RecursiveIdentifier(3)
     before = ident.update_many(u[:1500], y[:1500])
     assert before.state is EstimatorState.CONVERGED
     during = track(ident, u[1500:4500], y[1500:4500], every=500)
+    # the rows queued before the input stopped are taken at the next block boundary (64
+    # samples); after that nothing moves and the memory is not flooded by the rest
+    assert np.all(np.abs(during[0].parameters - before.parameters) < before.std())
     for est in during:
-        np.testing.assert_array_equal(est.parameters, before.parameters)  # nothing moves
-        np.testing.assert_array_equal(est.covariance, before.covariance)  # no wind-up
+        np.testing.assert_array_equal(est.parameters, during[0].parameters)
+        np.testing.assert_array_equal(est.covariance, during[0].covariance)  # no wind-up
+    assert len(ident.memory) == 1000
     assert during[-1].state is EstimatorState.NO_EXCITATION
+    assert "no new information" in during[-1].reason
     assert during[-1].excitation < 0.02
-    assert during[-1].confidence == before.confidence
+    # the confidence fades with the age of the information, smoothly, never dropped
+    assert 0.99 * during[0].confidence < during[-1].confidence < during[0].confidence
     after = ident.update_many(u[4500:], y[4500:])
     assert after.state is EstimatorState.CONVERGED
     assert _error(after.parameters, EX1.model.parameters()) < 0.03
     assert ident.restarts == 0
 
 
-def test_freezes_a_branch_the_input_sweeps_too_little_of() -> None:
+def test_a_narrow_sweep_does_not_bend_the_branch() -> None:
+    """A small oscillation on one part of the range (inside the gap, with the right branch
+    touched at its top) refreshes only its own input regions: every other region keeps its
+    floor of rows, so the polynomial is not fitted to the narrow part alone."""
     u, y = _segments(5, ("random", 1500), ("narrow", 4000), ("random", 1500))
     ident = RecursiveIdentifier(3)
-    trace = track(ident, u, y, every=250)
-    narrow = [e for e in trace if 1500 < e.samples <= 5500]
-    assert all(e.state is EstimatorState.NO_EXCITATION for e in narrow[-4:])
-    assert all("right branch" in e.reason for e in narrow[-4:])
-    assert max(_error(e.parameters, EX1.model.parameters()) for e in trace[6:]) < 0.04
-    assert trace[-1].state is EstimatorState.CONVERGED
+
+    def counts() -> list[np.ndarray]:
+        rows, _ = ident.memory.rows()
+        up = rows[:, 1] > rows[:, 0]
+        edges = np.linspace(ident.memory.low, ident.memory.high, ident.settings.bins + 1)
+        return [np.histogram(rows[move, 1], edges)[0] for move in (up, ~up)]
+
+    trace = track(ident, u[:1500], y[:1500], every=250)
+    before = counts()
+    trace += track(ident, u[1500:5500], y[1500:5500], every=250)
+    floor = ident.settings.region_floor
+    for old, new in zip(before, counts(), strict=True):
+        assert np.all(new >= np.minimum(old, floor)), (old, new)
+    assert all(e.state is EstimatorState.CONVERGED for e in trace[2:])
+    assert max(_error(e.parameters, EX1.model.parameters()) for e in trace[2:]) < 0.03
+    est = ident.update_many(u[5500:], y[5500:])
+    assert est.state is EstimatorState.CONVERGED
+    assert _error(est.parameters, EX1.model.parameters()) < 0.03
     assert ident.restarts == 0
 
 
 def test_covariance_stays_bounded() -> None:
     u, y = _segments(6, ("random", 1000), ("narrow", 6000))
-    ident = RecursiveIdentifier(3, settings=RecursiveSettings(min_conditioning=0.0))
+    ident = RecursiveIdentifier(3)
     start = ident.update_many(u[:1000], y[:1000])
-    end = ident.update_many(u[1000:], y[1000:])  # no coverage test: the narrow data update
+    end = ident.update_many(u[1000:], y[1000:])  # the narrow data refill part of the memory
     bound = RecursiveSettings().covariance_bound
     ratio = end.covariance.diagonal() / start.covariance.diagonal()
     assert np.all(ratio < 2.0 * bound)  # P <= bound * P_init (sigma^2 may change a little)
@@ -276,18 +318,37 @@ def test_recovers_after_a_sensor_fault() -> None:
     assert all(e.confidence == 0.0 for e in diverged)
     # while diverged the last valid estimate is shown
     assert all(_error(e.parameters, EX1.model.parameters()) < 0.03 for e in diverged)
-    assert ident.restarts >= 1
+    # the burst's rows were held back, never remembered: once the errors are normal again
+    # the identification goes on without a re-initialisation
+    _, stamps = ident.memory.rows()
+    assert not np.any((stamps >= 3000) & (stamps < 3300))
+    assert ident.restarts == 0
     assert trace[-1].state is EstimatorState.CONVERGED
     assert _error(trace[-1].parameters, EX1.model.parameters()) < 0.03
 
 
-def test_recovers_when_the_recursion_is_pushed_off() -> None:
+def test_restarts_from_the_rows_held_back_after_a_sudden_change() -> None:
+    """The gaps widen by half at once (a loosened coupling): the new rows do not fit the
+    memory, are held back, and a batch fit on them replaces it."""
+    changed = GeneralBacklash(EX1.backlash.m_left, 1.05, EX1.backlash.m_right, 1.2)
+    rng = np.random.default_rng(9)
+    u = rng.uniform(-2.0, 2.0, 6000)
+    x = np.concatenate([EX1.model.simulate(u[:3000]), changed.simulate(u[3000:])])
+    y = x + rng.normal(0.0, float(np.std(x)) / 25.0, u.size)
+    ident = RecursiveIdentifier(3)
+    trace = track(ident, u, y, every=100)
+    assert ident.restarts == 1
+    assert trace[-1].state is EstimatorState.CONVERGED
+    assert _error(trace[-1].parameters, changed.parameters()) < 0.03
+
+
+def test_recovers_when_the_estimate_is_pushed_off() -> None:
     data = EX1.generate(8, n_samples=3000)
     ident = RecursiveIdentifier(3)
     ident.update_many(data.u[:1000], data.y[:1000])
     ident._theta[1] = -ident._theta[1]  # corrupt the state: c_left < 0
     est = ident.update(float(data.u[1000]), float(data.y[1000]))
-    assert ident.restarts == 1  # re-initialised at once from the buffered window
+    assert ident.restarts == 1  # re-initialised at once from the memory
     assert est.state is EstimatorState.CONVERGED
     est = ident.update_many(data.u[1001:], data.y[1001:])
     assert _error(est.parameters, EX1.model.parameters()) < 0.03
@@ -324,8 +385,8 @@ def _saved(
 
 @pytest.mark.parametrize("number", [1, 3])
 def test_seed_continues_as_if_never_stopped(number: int) -> None:
-    """A seeded recursion follows the uninterrupted one closely: the information matrix
-    recovered from the covariance weighs the new rows as the old one did."""
+    """A seeded identifier follows the uninterrupted one closely: the information recovered
+    from the covariance weighs the new rows as the remembered ones did."""
     ex = paper_example(number)
     data = ex.generate(3, n_samples=9000)
     through = RecursiveIdentifier(*_args(number))
@@ -335,7 +396,7 @@ def test_seed_continues_as_if_never_stopped(number: int) -> None:
     assert np.allclose(first.parameters, saved.parameters, rtol=1e-12, atol=1e-12)
     assert np.allclose(first.covariance, saved.covariance, rtol=1e-6, atol=1e-15)
     assert first.state is EstimatorState.CONVERGED and ident.from_seed
-    assert first.confidence == pytest.approx(saved.confidence)
+    assert first.confidence == pytest.approx(saved.confidence, rel=1e-3)
     assert first.samples == saved.samples and ident.restarts == 0
     std = saved.std()
     u, y = data.u[6000:], data.y[6000:]
@@ -343,13 +404,15 @@ def test_seed_continues_as_if_never_stopped(number: int) -> None:
     b = track(ident, u, y, every=50)
     assert all(e.state is EstimatorState.CONVERGED for e in b)
     assert max(np.max(np.abs(e.parameters - first.parameters) / std) for e in b[:4]) < 3.0
-    # the two runs differ by a fraction of the uncertainty only
+    # the two runs differ by about the uncertainty: the uninterrupted one forgets its oldest
+    # rows one by one, the seeded one the seed's information as a whole, as the memory
+    # refills (two least-squares fits over partly different rows)
     assert (
         max(np.max(np.abs(e.parameters - f.parameters) / std) for e, f in zip(a, b, strict=True))
-        < 1.0
+        < 2.5
     )
     assert _error(b[-1].parameters, ex.model.parameters()) < 0.03
-    assert not ident.from_seed  # the recursion has taken more rows than it remembers
+    assert not ident.from_seed  # the memory has refilled: the seed no longer counts
 
 
 def test_seeded_cascade_waits_for_its_internal_state() -> None:
