@@ -1419,6 +1419,33 @@ class WindowedIdentifier:
         self._accept(outcome, u, y, b)
         self._reason = "cold start: " + self._reason
 
+    def _retry_cold(self, u: FloatArray, y: FloatArray, b: BoolArray) -> bool:
+        """A fresh batch start over the whole memory; True when it gave an estimate (the
+        current one stands otherwise, without counting as a divergence)."""
+        found = cold_fit(self._structure, self._sign_known_now, u, y, b)
+        if isinstance(found, str):
+            return False
+        structure, p = found
+        outcome = fit_window(
+            structure,
+            u,
+            y,
+            p,
+            iterations=self.settings.iterations,
+            tol=self.settings.tol,
+            settle=self.settings.settle,
+            deadband=self._deadband(u),
+            breaks=b,
+        )
+        if isinstance(outcome, FitFailure):
+            return False
+        self._structure = structure
+        self._restarted = True
+        self._failures = 0
+        self._accept(outcome, u, y, b)
+        self._reason = "restarted from the memory: " + self._reason
+        return True
+
     def _cold_failed(self, why: str) -> None:
         self._cold_failures += 1
         self._reason = f"cold start failed: {why}"
@@ -1469,6 +1496,11 @@ class WindowedIdentifier:
             self._accept(outcome, u, y, b, conditioning)
             return
         self._excitation = outcome.excitation
+        if outcome.no_information and memory and self._retry_cold(u, y, b):
+            # memory mode: the memory holds every region it has seen, so a regression that
+            # is singular (or a block that looks unexcited) at the current estimate says the
+            # estimate is off (an early cold start on few rows), not that data are missing
+            return
         if outcome.no_information:
             self._state = EstimatorState.NO_EXCITATION
             self._reason = f"estimate frozen: {outcome.reason}"

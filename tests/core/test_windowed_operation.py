@@ -14,6 +14,7 @@ import pytest
 from genbacklash_core import EstimatorState, WindowedIdentifier, nrmse, paper_example
 from genbacklash_core.samples import sample_breaks
 from genbacklash_core.scenarios import (
+    OPERATION_BACKLASH,
     STRAIGHT_BACKLASH,
     OperationRecord,
     OperationSettings,
@@ -150,3 +151,16 @@ def test_update_and_update_many_agree_in_memory_mode() -> None:
         est = many.update_many(u[s : s + 333], y[s : s + 333], breaks[s : s + 333])
     np.testing.assert_array_equal(last.parameters, est.parameters)
     assert (last.state, last.samples, last.confidence) == (est.state, est.samples, est.confidence)
+
+
+def test_a_bad_early_start_is_replaced_from_the_memory() -> None:
+    """180 s at 30 % loss, seed 3: the first cold start (1.9 s, few rows) gave a wild left
+    branch, and every later fit from it met a singular regression. That was reported as no
+    excitation and frozen for good; with the memory holding every region seen, it now
+    restarts from it."""
+    rec = operation_record(OperationSettings(duration=180.0, loss=0.3), 3)
+    ident = WindowedIdentifier(3)
+    _feed(ident, rec)
+    est = ident.refit()
+    assert est.state is EstimatorState.CONVERGED, est.reason
+    assert np.max(np.abs(est.parameters - OPERATION_BACKLASH.parameters())) < 0.005
