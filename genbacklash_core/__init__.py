@@ -17,6 +17,13 @@ from .data import check_excitation, count_reversals, prepare_series
 from .errors import GenBacklashError, NonFiniteInputError, NotEnoughExcitationError
 from .estimate import Estimate, EstimatorState, OnlineIdentifier, track
 from .examples import ExampleData, PaperExample, paper_example
+from .excite import (
+    CommissioningCheck,
+    MotionLimits,
+    Trajectory,
+    check_commissioning,
+    commissioning_trajectory,
+)
 from .identify import (
     Fit,
     IdentificationResult,
@@ -52,6 +59,7 @@ __version__ = "0.1.0"
 __all__ = [
     "Cascade",
     "CascadeOutput",
+    "CommissioningCheck",
     "CompensatorOptions",
     "CompensatorState",
     "Estimate",
@@ -64,6 +72,7 @@ __all__ = [
     "InverseBacklash",
     "IterationHistory",
     "LinearBlock",
+    "MotionLimits",
     "NonFiniteInputError",
     "NotEnoughExcitationError",
     "OnlineIdentifier",
@@ -72,10 +81,13 @@ __all__ = [
     "RecursiveSettings",
     "RefinementResult",
     "Structure",
+    "Trajectory",
     "WindowedIdentifier",
     "WindowedSettings",
     "__version__",
+    "check_commissioning",
     "check_excitation",
+    "commissioning_trajectory",
     "compensate",
     "compensate_step",
     "count_reversals",

@@ -27,7 +27,7 @@ from genbacklash_core import (
 )
 from genbacklash_core.data import NonFinitePolicy
 
-from . import diagnose_cli, node_cli, replay_cli  # node_cli imports no middleware
+from . import diagnose_cli, excite_cli, node_cli, replay_cli  # node_cli: no middleware
 from .csvio import Series, write_series_csv
 
 __all__ = ["main"]
@@ -367,6 +367,7 @@ def build_parser() -> argparse.ArgumentParser:
     diagnose_cli.add_parser(sub)
     replay_cli.add_parser(sub)
     node_cli.add_parser(sub)
+    excite_cli.add_parser(sub)
     return parser
 
 
