@@ -155,7 +155,8 @@ def wear_lag(method: str, seed: int, minutes: float) -> tuple[float, float]:
     )
 
 
-def loss_error(method: str, kind: str, rate: float, seed: int) -> float:
+def loss_error(method: str, kind: str, rate: float, seed: int) -> tuple[float, float]:
+    """Final max parameter error and signed c_L error (the bias loss used to cause)."""
     if kind == "example1":
         ex = paper_example(1)
         d = ex.generate(seed, n_samples=6000)
@@ -171,8 +172,11 @@ def loss_error(method: str, kind: str, rate: float, seed: int) -> float:
     ident = identifier(method)
     for s in range(0, u.size, BATCH):
         ident.update_many(u[s : s + BATCH], y[s : s + BATCH], b[s : s + BATCH])
-    est = ident.refit() if isinstance(ident, WindowedIdentifier) else ident.estimate
-    return float(np.max(np.abs(est.parameters - truth))) if est.available else float("inf")
+    est = ident.refit()
+    if not est.available:
+        return float("inf"), float("inf")
+    n = ident.structure.degree
+    return float(np.max(np.abs(est.parameters - truth))), float(est.parameters[n] - truth[n])
 
 
 def main() -> None:
@@ -229,10 +233,11 @@ def main() -> None:
     loss_rows = []
     for method in METHODS:
         for kind in ("example1", "operation"):
-            errors = {}
+            errors, biases = {}, {}
             for rate in (0.0, 0.02, 0.1, 0.3):
                 values = [loss_error(method, kind, rate, s) for s in loss_seeds]
-                errors[rate] = float(np.mean(values))
+                errors[rate] = float(np.mean([v[0] for v in values]))
+                biases[rate] = float(np.mean([v[1] for v in values]))
             base = errors[0.0]
             loss_rows.append(
                 (
@@ -240,7 +245,10 @@ def main() -> None:
                     "Example 1, 1 reading/command"
                     if kind == "example1"
                     else "operation, 10 readings/command",
-                    *(f"{errors[r]:.4g} ({errors[r] / base:.2f}x)" for r in errors),
+                    *(
+                        f"{errors[r]:.3g} ({errors[r] / base:.2f}x; c_L {biases[r]:+.1g})"
+                        for r in errors
+                    ),
                 )
             )
     loss_table = md_table(
@@ -264,8 +272,13 @@ error by >= 85 % over the second half; identifier <= 20 us/sample.
 
 {wear_table}
 
-### Lost readings: final max parameter error (mean over {len(loss_seeds)} seeds) and its ratio
-to no loss (target <= 1.2x)
+### Lost readings (target: final error <= 1.2x the error without loss)
+
+Each cell: the final max parameter error (mean over {len(loss_seeds)} seeds), its ratio to no
+loss, and the mean signed error of c_L (what loss used to bias: both gaps ~15 % small at 30 %
+loss, i.e. c_L -0.1 on Example 1). On the operation scenario the errors are ~1e-4 rad, a
+tenth of an encoder count (1.5e-3 rad): quantisation-floor noise, so the ratios there scatter
+(180 s records measured apart: 1.02x at 30 %).
 
 {loss_table}
 """
