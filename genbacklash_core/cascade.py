@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -12,7 +13,7 @@ from .data import as_float_array, as_order
 from .errors import GenBacklashError
 from .linear import LinearBlock
 
-__all__ = ["Cascade"]
+__all__ = ["Cascade", "model_to_dict"]
 
 
 @dataclass(frozen=True)
@@ -69,3 +70,25 @@ class Cascade:
         from .simulate import simulate_cascade
 
         return simulate_cascade(self, u, x0).y
+
+
+def model_to_dict(model: GeneralBacklash | Cascade) -> dict[str, Any]:
+    """A model as the CLI's identify JSON describes it (GUIDE §4): ``model``, ``backlash``
+    (``m_left``, ``c_left``, ``m_right``, ``c_right``) and, for a cascade, ``linear``.
+
+    >>> model_to_dict(GeneralBacklash((1.0,), 0.1, (1.0,), 0.2))["backlash"]["c_right"]
+    0.2
+    """
+    backlash = model.backlash if isinstance(model, Cascade) else model
+    out: dict[str, Any] = {
+        "model": "cascade" if isinstance(model, Cascade) else "backlash",
+        "backlash": {
+            "m_left": list(backlash.m_left),
+            "c_left": backlash.c_left,
+            "m_right": list(backlash.m_right),
+            "c_right": backlash.c_right,
+        },
+    }
+    if isinstance(model, Cascade):
+        out["linear"] = {"a": list(model.linear.a), "b": list(model.linear.b)}
+    return out

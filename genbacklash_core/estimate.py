@@ -26,7 +26,7 @@ import numpy as np
 
 from ._typing import ArrayLike, FloatArray
 from .backlash import GeneralBacklash
-from .cascade import Cascade
+from .cascade import Cascade, model_to_dict
 from .data import as_float_array
 from .errors import GenBacklashError
 from .structure import Structure
@@ -288,21 +288,7 @@ class Estimate:
 
 def _model_dict(model: GeneralBacklash | Cascade | None) -> dict[str, Any] | None:
     """A model as the CLI's identify JSON describes it (GUIDE §4), or None."""
-    if model is None:
-        return None
-    backlash = model.backlash if isinstance(model, Cascade) else model
-    out: dict[str, Any] = {
-        "model": "cascade" if isinstance(model, Cascade) else "backlash",
-        "backlash": {
-            "m_left": list(backlash.m_left),
-            "c_left": backlash.c_left,
-            "m_right": list(backlash.m_right),
-            "c_right": backlash.c_right,
-        },
-    }
-    if isinstance(model, Cascade):
-        out["linear"] = {"a": list(model.linear.a), "b": list(model.linear.b)}
-    return out
+    return None if model is None else model_to_dict(model)
 
 
 class _LazyCovarianceEstimate(Estimate):

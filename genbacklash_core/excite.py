@@ -84,7 +84,7 @@ from .errors import GenBacklashError
 from .estimate import EstimatorState
 from .identify import nrmse
 from .samples import sample_breaks
-from .scenarios import OPERATION_BACKLASH, OperationSettings, operation_record
+from .scenarios import OPERATION_BACKLASH, OperationSettings, operation_record, trapezoid
 from .simulate import simulate_backlash
 from .windowed import WindowedIdentifier, WindowedSettings
 
@@ -304,30 +304,10 @@ class Trajectory:
 
 def _move(start: float, target: float, v: float, a: float, dt: float) -> FloatArray:
     """Samples (after ``start``, the last exactly at ``target``) of a time-optimal
-    trapezoidal move from rest to rest; continuous velocity, ``|v'| <= a``."""
-    distance = abs(target - start)
-    if distance == 0.0:
+    trapezoidal move from rest to rest (:func:`~genbacklash_core.scenarios.trapezoid`)."""
+    if target == start:
         return np.zeros(0)
-    t_acc = v / a
-    if a * t_acc * t_acc >= distance:  # triangular: never reaches v
-        t_acc = math.sqrt(distance / a)
-        v = a * t_acc
-        t_flat = 0.0
-    else:
-        t_flat = (distance - a * t_acc * t_acc) / v
-    total = 2.0 * t_acc + t_flat
-    t = np.minimum(np.arange(1, math.ceil(total / dt) + 1) * dt, total)
-    s = np.where(
-        t < t_acc,
-        0.5 * a * t * t,
-        np.where(
-            t < t_acc + t_flat,
-            0.5 * a * t_acc * t_acc + v * (t - t_acc),
-            distance - 0.5 * a * np.square(np.maximum(total - t, 0.0)),
-        ),
-    )
-    s = np.minimum(s, distance)
-    out = start + math.copysign(1.0, target - start) * s
+    out = start + trapezoid(target - start, v, a, dt)
     out[-1] = target
     return np.asarray(out, dtype=np.float64)
 

@@ -20,7 +20,7 @@ import numpy as np
 
 from ._typing import ArrayLike, BoolArray, FloatArray
 from .backlash import GeneralBacklash
-from .cascade import Cascade
+from .cascade import Cascade, model_to_dict
 from .data import (
     NonFinitePolicy,
     as_float_array,
@@ -115,19 +115,7 @@ class IdentificationResult:
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON object of the CLI contract (GUIDE §4)."""
-        model = self.model
-        backlash = model.backlash if isinstance(model, Cascade) else model
-        out: dict[str, Any] = {
-            "model": "cascade" if isinstance(model, Cascade) else "backlash",
-            "backlash": {
-                "m_left": list(backlash.m_left),
-                "c_left": backlash.c_left,
-                "m_right": list(backlash.m_right),
-                "c_right": backlash.c_right,
-            },
-        }
-        if isinstance(model, Cascade):
-            out["linear"] = {"a": list(model.linear.a), "b": list(model.linear.b)}
+        out = model_to_dict(self.model)
         out["iterations"] = self.iterations
         out["converged"] = self.converged
         out["reason"] = self.reason

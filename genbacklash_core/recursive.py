@@ -80,13 +80,14 @@ from .estimate import (
     confidence_of,
     relative_std_of,
 )
-from .identify import _backlash_columns, _switching, identify_backlash, identify_cascade
+from .identify import _backlash_columns, _switching
 from .play import play_operator
 from .samples import as_breaks
 from .simulate import play_bounds
 from .structure import Structure
 from .windowed import (
     SeedPrior,
+    cold_fit,
     natural_covariance,
     natural_from_theta,
     natural_variances,
@@ -528,38 +529,6 @@ def _pairs(rows: FloatArray) -> tuple[FloatArray, FloatArray, BoolArray]:
     breaks = np.zeros(2 * m, dtype=bool)
     breaks[0::2] = True
     return u, y, breaks
-
-
-def _batch_fit(
-    structure: Structure, sign_known: bool, u: FloatArray, y: FloatArray, breaks: BoolArray
-) -> tuple[Structure, FloatArray] | str:
-    """The paper's batch iteration (§3b / §4b, with its restarts) on a series with breaks;
-    the structure (sense detected when unknown) and parameters, or why it failed."""
-    sign = structure.sign if sign_known else None
-    try:
-        for refine in (False, True):  # refinement only when the plain iteration does not settle
-            if structure.cascade:
-                result = identify_cascade(
-                    u,
-                    y,
-                    structure.degree,
-                    structure.na,
-                    structure.nb,
-                    sign=sign,
-                    refine=refine,
-                    breaks=breaks,
-                )
-            else:
-                result = identify_backlash(
-                    u, y, structure.degree, sign=sign, refine=refine, breaks=breaks
-                )
-            if result.converged:
-                break
-    except GenBacklashError as err:
-        return str(err)
-    if not result.converged:
-        return result.reason
-    return Structure.of(result.model), result.model.parameters()
 
 
 def _cascade_rows(
@@ -1201,7 +1170,7 @@ class RecursiveIdentifier:
         if structure.cascade:
             latest = self._ever_started and attempt > 0  # a retried restart: the latest only
             u, y, b = self._recent.window(s.initial_samples if latest else None)
-            found = _batch_fit(structure, self._sign_now, u, y, b)
+            found = cold_fit(structure, self._sign_now, u, y, b)
             if isinstance(found, str):
                 self._reason = f"batch fit failed: {found}"
                 return False
@@ -1214,7 +1183,7 @@ class RecursiveIdentifier:
             rows, _ = source.rows()
             self._fresh = 0
             self._need = max(rows.shape[0] // 4, 1)
-            found = _batch_fit(structure, self._sign_now, *_pairs(rows))
+            found = cold_fit(structure, self._sign_now, *_pairs(rows))
             if isinstance(found, str):
                 self._reason = f"batch fit failed: {found}"
                 return False

@@ -59,6 +59,7 @@ __all__ = [
     "OperationRecord",
     "OperationSettings",
     "operation_record",
+    "trapezoid",
     "worn",
 ]
 
@@ -267,7 +268,7 @@ def worn(model: GeneralBacklash, factor: float) -> GeneralBacklash:
 # --------------------------------------------------------------------------- motions
 
 
-def _trapezoid(distance: float, v: float, a: float, dt: float) -> FloatArray:
+def trapezoid(distance: float, v: float, a: float, dt: float) -> FloatArray:
     """Positions (from 0 to ``distance``) of a trapezoidal-velocity move, sampled every
     ``dt``, the last sample at the target."""
     d = abs(distance)
@@ -310,7 +311,7 @@ def _operation(
         if abs(target - pos) < 1e-3:
             target = float(np.clip(pos - last_dir * cfg.jog_size[1], lo, hi))
         v = cfg.v_max * rng.uniform(0.3, 1.0)
-        path = pos + _trapezoid(target - pos, v, cfg.a_max, dt)
+        path = pos + trapezoid(target - pos, v, cfg.a_max, dt)
         dwell = np.full(max(1, round(rng.uniform(*cfg.dwell) / dt)), target)
         out += [path, dwell]
         count += path.size + dwell.size
@@ -345,7 +346,7 @@ def _pick_and_place(
     pos, count, k = start, 0, 0
     while count < n:
         target = (pick if k % 2 == 0 else place) + rng.normal(0.0, 0.002)
-        path = pos + _trapezoid(target - pos, 0.8 * cfg.v_max, cfg.a_max, dt)
+        path = pos + trapezoid(target - pos, 0.8 * cfg.v_max, cfg.a_max, dt)
         dwell = np.full(max(1, round(rng.uniform(0.2, 0.4) / dt)), target)
         out += [path, dwell]
         count += path.size + dwell.size

@@ -1390,41 +1390,14 @@ class WindowedIdentifier:
             self._span_ref, float(np.ptp(u)) * self._needs_cold
         )
 
-    def _cold_start(self, u: FloatArray, y: FloatArray, b: BoolArray) -> None:
-        self._seed = None  # a restart after divergence: the seed is discredited
+    def _start_fit(
+        self, u: FloatArray, y: FloatArray, b: BoolArray
+    ) -> tuple[Structure, WindowFit] | str:
+        """The batch iteration from the paper's start, then the warm iterations from its
+        result: the structure and the fit, or why it failed."""
         found = cold_fit(self._structure, self._sign_known_now, u, y, b)
         if isinstance(found, str):
-            self._cold_failed(found)
-            return
-        self._structure, p = found
-        self._sign_known_now = True
-        outcome = fit_window(
-            self._structure,
-            u,
-            y,
-            p,
-            iterations=self.settings.iterations,
-            tol=self.settings.tol,
-            settle=self.settings.settle,
-            deadband=self._deadband(u),
-            breaks=b,
-        )
-        if isinstance(outcome, FitFailure):
-            self._cold_failed(outcome.reason)
-            return
-        self._restarted = True
-        self._needs_cold = False
-        self._cold_failures = 0
-        self._failures = 0
-        self._accept(outcome, u, y, b)
-        self._reason = "cold start: " + self._reason
-
-    def _retry_cold(self, u: FloatArray, y: FloatArray, b: BoolArray) -> bool:
-        """A fresh batch start over the whole memory; True when it gave an estimate (the
-        current one stands otherwise, without counting as a divergence)."""
-        found = cold_fit(self._structure, self._sign_known_now, u, y, b)
-        if isinstance(found, str):
-            return False
+            return found
         structure, p = found
         outcome = fit_window(
             structure,
@@ -1437,9 +1410,30 @@ class WindowedIdentifier:
             deadband=self._deadband(u),
             breaks=b,
         )
-        if isinstance(outcome, FitFailure):
+        return outcome.reason if isinstance(outcome, FitFailure) else (structure, outcome)
+
+    def _cold_start(self, u: FloatArray, y: FloatArray, b: BoolArray) -> None:
+        self._seed = None  # a restart after divergence: the seed is discredited
+        started = self._start_fit(u, y, b)
+        if isinstance(started, str):
+            self._cold_failed(started)
+            return
+        self._structure, outcome = started
+        self._sign_known_now = True
+        self._restarted = True
+        self._needs_cold = False
+        self._cold_failures = 0
+        self._failures = 0
+        self._accept(outcome, u, y, b)
+        self._reason = "cold start: " + self._reason
+
+    def _retry_cold(self, u: FloatArray, y: FloatArray, b: BoolArray) -> bool:
+        """A fresh batch start over the whole memory; True when it gave an estimate (the
+        current one stands otherwise, without counting as a divergence)."""
+        started = self._start_fit(u, y, b)
+        if isinstance(started, str):
             return False
-        self._structure = structure
+        self._structure, outcome = started
         self._restarted = True
         self._failures = 0
         self._accept(outcome, u, y, b)

@@ -45,6 +45,7 @@ from genbacklash_core import (
     paper_example,
     simulate_backlash,
 )
+from genbacklash_core.cascade import model_to_dict
 from genbacklash_core.scenarios import (
     OPERATION_BACKLASH,
     STRAIGHT_BACKLASH,
@@ -119,22 +120,6 @@ class SimulatedBag:
 
 
 # --------------------------------------------------------------------------- truth
-
-
-def _model_to_dict(model: GeneralBacklash | Cascade) -> dict[str, Any]:
-    backlash = model.backlash if isinstance(model, Cascade) else model
-    out: dict[str, Any] = {
-        "model": "cascade" if isinstance(model, Cascade) else "backlash",
-        "backlash": {
-            "m_left": list(backlash.m_left),
-            "c_left": backlash.c_left,
-            "m_right": list(backlash.m_right),
-            "c_right": backlash.c_right,
-        },
-    }
-    if isinstance(model, Cascade):
-        out["linear"] = {"a": list(model.linear.a), "b": list(model.linear.b)}
-    return out
 
 
 def _model_from_dict(data: object) -> GeneralBacklash | Cascade:
@@ -216,8 +201,8 @@ class BagTruth:
                 "description": self.description,
                 "seed": self.seed,
                 "start_ns": self.start_ns,
-                "model": _model_to_dict(self.model),
-                "model_end": _model_to_dict(self.model_end),
+                "model": model_to_dict(self.model),
+                "model_end": model_to_dict(self.model_end),
                 "dead_zones": {
                     "t": r(self.t_s),
                     "c_left": r(self.c_left),
@@ -500,7 +485,7 @@ def _settings_dict(settings: OperationSettings) -> dict[str, Any]:
     for item in fields(settings):
         value = getattr(settings, item.name)
         if item.name == "model":
-            out["model"] = _model_to_dict(value)
+            out["model"] = model_to_dict(value)
         elif item.name == "phases":
             out["phases"] = [[kind, seconds] for kind, seconds in settings.schedule]
         else:
