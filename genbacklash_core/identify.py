@@ -34,7 +34,7 @@ from .data import (
 from .errors import GenBacklashError, NonFiniteInputError
 from .play import play_operator
 from .refine import RefinementResult, refine_parameters, simulate_parameters
-from .samples import as_breaks, breaks_to_rows
+from .samples import as_breaks, breaks_to_rows, restart_points
 from .simulate import play_bounds
 from .structure import Structure
 
@@ -312,19 +312,6 @@ def _cascade_regression(
     return phi, target
 
 
-def _theta_of(structure: Structure, p: FloatArray) -> FloatArray:
-    """The separated vector of eqs. (23)/(33) from natural parameters (inverse of eq. 34)."""
-    n = structure.degree
-    theta = np.array(p, dtype=np.float64)
-    theta[0] = p[0]
-    theta[1] = p[0] * p[n]  # m_L1 c_L, eq. (23)
-    theta[2 : n + 1] = p[1:n]
-    theta[n + 1] = p[n + 1]
-    theta[n + 2] = p[n + 1] * p[2 * n + 1]  # m_R1 c_R, eq. (23)
-    theta[n + 3 : 2 * n + 2] = p[n + 2 : 2 * n + 1]
-    return theta
-
-
 @dataclass
 class _IterationOutcome:
     """Working state of :func:`_iterate` (internal, mutable)."""
@@ -372,7 +359,7 @@ def _iterate(
         if theta is None and target.size > 0 and not structure.cascade:
             # (a cascade's singular regression means a structure that does not fit, e.g. a
             # dead time it lacks: GUIDE §2; it ends there with that reason)
-            theta = _solve_damped(phi, target, _theta_of(structure, p))
+            theta = _solve_damped(phi, target, structure.theta(p))
             out.damped += 1
         if theta is None:  # step (a) impossible
             out.reason = (
@@ -525,9 +512,7 @@ def _candidate(
         spread = float(np.sum((y - np.mean(y)) ** 2))
         fit = float(np.sqrt(refinement.cost_end / spread)) if spread > 0 else float("inf")
     else:
-        anchors = None if breaks is None else breaks.copy()
-        if anchors is not None:
-            anchors[0] = False
+        anchors = restart_points(breaks)
         fit = nrmse(y, simulate_parameters(structure, p_final, u, x0, anchors, y)[1])
     if converged and not fit < _USELESS_FIT:
         converged = False

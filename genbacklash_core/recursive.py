@@ -95,7 +95,6 @@ from .windowed import (
     scaled_inverse,
     seed_prior,
     settling_samples,
-    theta_from_natural,
 )
 
 __all__ = ["BinnedRows", "RecursiveIdentifier", "RecursiveSettings", "memory_regression"]
@@ -1263,7 +1262,7 @@ class RecursiveIdentifier:
         rows, _ = memory.rows()
         if rows.shape[0] == 0:
             return "no rows in the memory"
-        theta = theta_from_natural(structure, p)  # eq. (34) inverted
+        theta = structure.theta(p)  # eq. (34) inverted
         phi, _, _, _, _ = memory_regression(structure, p, rows)
         pull = (phi.T @ phi) / self.settings.covariance_bound
         found: _Solution | None = None

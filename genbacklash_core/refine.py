@@ -31,6 +31,7 @@ from .cascade import Cascade
 from .data import as_order, as_real, check_scale, prepare_series
 from .errors import GenBacklashError, NotEnoughExcitationError
 from .play import play_operator
+from .samples import restart_points
 from .simulate import play_bounds
 from .structure import Structure
 
@@ -208,10 +209,7 @@ def refine_parameters(
     u_range = (float(u.min()), float(u.max()))
     if (problem := structure.problem(p, u_range)) is not None:
         raise GenBacklashError(f"cannot refine from an invalid model: {problem}")
-    anchors = None
-    if breaks is not None and not structure.cascade and breaks[1:].any():
-        anchors = breaks.copy()
-        anchors[0] = False  # the first sample starts from x0
+    anchors = None if structure.cascade else restart_points(breaks)  # the first: from x0
 
     def simulate(q: FloatArray) -> tuple[FloatArray, FloatArray]:
         return simulate_parameters(structure, q, u, x0, anchors, y)

@@ -30,7 +30,14 @@ import numpy as np
 from ._typing import ArrayLike, BoolArray, FloatArray
 from .errors import GenBacklashError
 
-__all__ = ["as_breaks", "breaks_to_rows", "nominal_period", "sample_breaks", "segment_lengths"]
+__all__ = [
+    "as_breaks",
+    "breaks_to_rows",
+    "nominal_period",
+    "restart_points",
+    "sample_breaks",
+    "segment_lengths",
+]
 
 
 def nominal_period(times_ns: ArrayLike) -> float:
@@ -122,6 +129,22 @@ def breaks_to_rows(breaks: BoolArray, lags: int = 1) -> BoolArray:
     for j in range(lags):  # sample t - j must follow t - j - 1, for j < lags
         bad |= b[lags - j : n - j]
     return ~bad
+
+
+def restart_points(breaks: BoolArray | None) -> BoolArray | None:
+    """Where a simulation restarts at the measurement: the samples after a break, but the
+    first (where every simulation starts anyway); None when there are none.
+
+    >>> restart_points(np.array([True, False, True, False])).tolist()
+    [False, False, True, False]
+    >>> restart_points(np.array([True, False])) is None
+    True
+    """
+    if breaks is None or not np.any(breaks[1:]):
+        return None
+    anchors = np.array(breaks, dtype=bool)
+    anchors[0] = False
+    return anchors
 
 
 def segment_lengths(breaks: BoolArray) -> FloatArray:

@@ -137,6 +137,19 @@ class Structure:
         p[2 * n + 2 :] = theta[2 * n + 2 :]
         return p
 
+    def theta(self, p: FloatArray) -> FloatArray:
+        """The separated vector of eqs. (23)/(33) from natural parameters (eq. 34 inverted)."""
+        n = self.degree
+        theta = np.empty(self.n_parameters)
+        theta[0] = p[0]
+        theta[1] = p[0] * p[n]  # eq. (23): m_L1 c_L
+        theta[2 : n + 1] = p[1:n]
+        theta[n + 1] = p[n + 1]
+        theta[n + 2] = p[n + 1] * p[2 * n + 1]  # eq. (23): m_R1 c_R
+        theta[n + 3 : 2 * n + 2] = p[n + 2 : 2 * n + 1]
+        theta[2 * n + 2 :] = p[2 * n + 2 :]
+        return theta
+
     def problem(self, p: FloatArray, u_range: tuple[float, float] | None = None) -> str | None:
         """Why ``p`` is not a valid model, or None when it is.
 

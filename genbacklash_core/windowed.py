@@ -318,20 +318,6 @@ def natural_from_theta(structure: Structure, theta: list[float]) -> list[float]:
     ]
 
 
-def theta_from_natural(structure: Structure, p: FloatArray) -> FloatArray:
-    """The separated vector of eqs. (23)/(33) from natural parameters (inverse of eq. 34)."""
-    n = structure.degree
-    theta = np.empty(structure.n_parameters)
-    theta[0] = p[0]
-    theta[1] = p[0] * p[n]  # m_L1 c_L
-    theta[2 : n + 1] = p[1:n]
-    theta[n + 1] = p[n + 1]
-    theta[n + 2] = p[n + 1] * p[2 * n + 1]  # m_R1 c_R
-    theta[n + 3 : 2 * n + 2] = p[n + 2 : 2 * n + 1]
-    theta[2 * n + 2 :] = p[2 * n + 2 :]
-    return theta
-
-
 def natural_variances(
     structure: Structure, theta: list[float], theta_covariance: FloatArray
 ) -> list[float]:
@@ -661,7 +647,7 @@ def seed_prior(template: Structure, sign_known: bool, estimate: Estimate) -> See
             f"cannot seed: the estimate's residual {estimate.residual!r} is not a positive number"
         )
     p = np.array(estimate.parameters, dtype=np.float64)
-    theta = theta_from_natural(saved, p)
+    theta = saved.theta(p)
     inverse = scaled_inverse(np.array(estimate.covariance, dtype=np.float64))
     bad = "cannot seed: the estimate's covariance is not finite and positive definite"
     if inverse is None:

@@ -28,6 +28,7 @@ from genbacklash_core._typing import BoolArray, FloatArray
 from genbacklash_core.backlash import evaluate_branch
 from genbacklash_core.errors import GenBacklashError
 from genbacklash_core.play import play_operator
+from genbacklash_core.samples import restart_points
 from genbacklash_core.simulate import play_bounds
 from genbacklash_core.structure import Structure
 
@@ -36,20 +37,7 @@ from .model import AugmentedModel, Drift, DriftBasis, Saturation, drift_coordina
 __all__ = ["ModelSpec", "SimulationOutput", "anchors_of", "shift_input"]
 
 
-def anchors_of(breaks: BoolArray | None) -> BoolArray | None:
-    """The samples a fit restarts its simulation at: those after a break, but the first
-    (where every simulation starts anyway); None when there are none.
-
-    >>> anchors_of(np.array([True, False, True, False])).tolist()
-    [False, False, True, False]
-    >>> anchors_of(np.array([True, False])) is None
-    True
-    """
-    if breaks is None or not np.any(breaks[1:]):
-        return None
-    anchors = np.array(breaks, dtype=bool)
-    anchors[0] = False
-    return anchors
+anchors_of = restart_points  # the samples a fit restarts its simulation at
 
 
 class SimulationOutput(NamedTuple):
