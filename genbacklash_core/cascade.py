@@ -13,7 +13,7 @@ from .data import as_float_array, as_order
 from .errors import GenBacklashError
 from .linear import LinearBlock
 
-__all__ = ["Cascade", "model_to_dict"]
+__all__ = ["Cascade", "model_from_dict", "model_to_dict"]
 
 
 @dataclass(frozen=True)
@@ -92,3 +92,23 @@ def model_to_dict(model: GeneralBacklash | Cascade) -> dict[str, Any]:
     if isinstance(model, Cascade):
         out["linear"] = {"a": list(model.linear.a), "b": list(model.linear.b)}
     return out
+
+
+def model_from_dict(data: object) -> GeneralBacklash | Cascade:
+    """The model of a :func:`model_to_dict` object (raises ``ValueError``, ``KeyError`` or
+    ``TypeError`` on anything else).
+
+    >>> m = GeneralBacklash((1.0,), 0.1, (1.0,), 0.2)
+    >>> model_from_dict(model_to_dict(m)) == m
+    True
+    """
+    if not isinstance(data, dict):
+        raise ValueError(f"a model must be an object, got {data!r}")
+    bl = data["backlash"]
+    backlash = GeneralBacklash(
+        tuple(bl["m_left"]), float(bl["c_left"]), tuple(bl["m_right"]), float(bl["c_right"])
+    )
+    if data.get("model") == "cascade":
+        lin = data["linear"]
+        return Cascade(backlash, LinearBlock(tuple(lin["a"]), tuple(lin["b"])))
+    return backlash

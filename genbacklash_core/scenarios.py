@@ -59,6 +59,7 @@ __all__ = [
     "OperationRecord",
     "OperationSettings",
     "operation_record",
+    "simulate_worn",
     "trapezoid",
     "worn",
 ]
@@ -265,6 +266,34 @@ def worn(model: GeneralBacklash, factor: float) -> GeneralBacklash:
     )
 
 
+def simulate_worn(
+    model: GeneralBacklash,
+    u: FloatArray,
+    x0: float,
+    c_left: FloatArray,
+    c_right: FloatArray,
+) -> FloatArray:
+    """``model`` with the dead zones ``c_left[k]``, ``c_right[k]`` at sample ``k`` (a gap that
+    wears), driven by ``u`` from the state ``x0``: the play operator of eqs. (20)-(21) over each
+    run of equal dead zones, the state carried from one run to the next.
+
+    >>> m = GeneralBacklash((1.0,), 0.1, (1.0,), 0.1)
+    >>> simulate_worn(m, np.array([0.5, 0.0, 0.5]), 0.0, np.array([0.1, 0.1, 0.2]),
+    ...               np.array([0.1, 0.1, 0.2])).tolist()
+    [0.4, 0.1, 0.3]
+    """
+    out = np.empty(u.size)
+    change = np.flatnonzero((np.diff(c_left) != 0.0) | (np.diff(c_right) != 0.0)) + 1
+    starts = np.concatenate([[0], change]).astype(int)
+    stops = np.append(change, u.size).astype(int)
+    x = float(x0)
+    for a, b in zip(starts.tolist(), stops.tolist(), strict=True):
+        piece = GeneralBacklash(model.m_left, float(c_left[a]), model.m_right, float(c_right[a]))
+        out[a:b] = simulate_backlash(piece, u[a:b], x)
+        x = float(out[b - 1])
+    return out
+
+
 # --------------------------------------------------------------------------- motions
 
 
@@ -429,17 +458,13 @@ def operation_record(settings: OperationSettings | None = None, seed: int = 0) -
     # the drivetrain, with linear wear of the dead zones, in blocks
     progress = np.arange(n) / max(n - 1, 1)
     factor = 1.0 + cfg.wear * progress
-    x = np.empty(n)
     model = cfg.model
-    x_prev = 0.5 * float(model.left(u[:1])[0] + model.right(u[:1])[0])  # at rest, mid-gap
-    for start in range(0, n, _BLOCK):
-        stop = min(start + _BLOCK, n)
-        mid = float(np.mean(factor[start:stop]))
-        x[start:stop] = simulate_backlash(worn(model, mid), u[start:stop], x_prev)
-        x_prev = float(x[stop - 1])
     block_factor = np.repeat(
         [float(np.mean(factor[s : min(s + _BLOCK, n)])) for s in range(0, n, _BLOCK)], _BLOCK
     )[:n]
+    c_left, c_right = model.c_left * block_factor, model.c_right * block_factor
+    x0 = 0.5 * float(model.left(u[:1])[0] + model.right(u[:1])[0])  # at rest, mid-gap
+    x = simulate_worn(model, u, x0, c_left, c_right)
     y = x + (rng.normal(0.0, cfg.noise, n) if cfg.noise > 0 else 0.0)
     q = cfg.quantum
     if q > 0:
@@ -456,7 +481,7 @@ def operation_record(settings: OperationSettings | None = None, seed: int = 0) -
         x_all=x,
         y_all=np.asarray(y, dtype=np.float64),
         received=received,
-        c_left=model.c_left * block_factor,
-        c_right=model.c_right * block_factor,
+        c_left=c_left,
+        c_right=c_right,
         phase_starts=phase_starts,
     )

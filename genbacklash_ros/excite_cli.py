@@ -33,8 +33,8 @@ from genbacklash_core.excite import (
 from genbacklash_core.scenarios import OPERATION_BACKLASH, OperationSettings
 
 from .bagio import BagError, BagWriter
-from .messages import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
-from .simbags import COMMAND_TOPIC, START_NS
+from .messages import Float64MultiArray
+from .simbags import COMMAND_TOPIC, START_NS, command_message
 
 __all__ = ["add_parser", "cmd_excite", "write_trajectory_bag", "write_trajectory_csv"]
 
@@ -133,11 +133,6 @@ def write_trajectory_csv(path: str | Path, trajectory: Trajectory) -> None:
         raise GenBacklashError(f"cannot write {file}: {err.strerror or err}") from err
 
 
-def _command(value: float) -> Float64MultiArray:
-    layout = MultiArrayLayout((MultiArrayDimension("joints", 1, 1),), 0)
-    return Float64MultiArray(layout, (value,))
-
-
 def write_trajectory_bag(
     path: str | Path, trajectory: Trajectory, topic: str = COMMAND_TOPIC
 ) -> int:
@@ -147,7 +142,7 @@ def write_trajectory_bag(
     with BagWriter(path) as writer:
         writer.add_topic(topic, Float64MultiArray.ros_type)
         for k, value in enumerate(trajectory.u.tolist()):
-            writer.write(topic, START_NS + round(k * period_ns), _command(value))
+            writer.write(topic, START_NS + round(k * period_ns), command_message((value,)))
         return writer.count
 
 

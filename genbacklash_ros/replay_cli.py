@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 from genbacklash_core import GenBacklashError
+from genbacklash_core.scenarios import PHASE_KINDS
 
 from .bagio import BagError, read_aligned
 from .csvio import Series, read_series_csv
@@ -268,7 +269,7 @@ def node_parameters(args: argparse.Namespace, used: Collection[str]) -> CommandP
 # --------------------------------------------------------------------------- simulate
 
 
-OPERATION_SCENARIOS = ("operation", "one_way", "pick_and_place", "sine_sweep")
+OPERATION_SCENARIOS = PHASE_KINDS
 """``--scenario`` values that simulate a drivetrain in normal operation (issue 12)."""
 
 _SCENARIO_HELP = """\

@@ -31,6 +31,7 @@ writes into a directory
 
 from __future__ import annotations
 
+import functools
 import html
 import math
 from dataclasses import dataclass
@@ -53,6 +54,7 @@ from genbacklash_core import (
     compensate,
     simulate_backlash,
 )
+from genbacklash_core.scenarios import simulate_worn
 
 from .bagio import align
 from .replay import ReplayResult
@@ -135,6 +137,21 @@ class ReportData:
     model: GeneralBacklash | None
     window: tuple[float, float]
     end: float
+
+    @property
+    def truth_end(self) -> GeneralBacklash | None:
+        """The true backlash at the end of the record (None without truth)."""
+        return _backlash(self.truth.model_end) if self.truth is not None else None
+
+    @functools.cached_property
+    def tracking(self) -> TrackingErrors | None:
+        """The predicted tracking errors (:func:`tracking_errors`), computed once."""
+        return _tracking_errors(self)
+
+    @functools.cached_property
+    def coverage(self) -> Coverage | None:
+        """The branch coverage (:func:`branch_coverage`), computed once."""
+        return branch_coverage(self, self.truth_end)
 
 
 def _reversals(values: np.ndarray) -> np.ndarray:
@@ -439,41 +456,29 @@ def _plant(
 ) -> np.ndarray:
     """The load the plant makes of the commands ``u`` at times ``t`` (s), starting at rest
     at the first desired position. The true plant is simulated in pieces between the
-    truth's dead-zone times (the gap as it wears)."""
+    truth's dead-zone times (the gap as it wears; each piece at its midpoint's gap)."""
     x0 = float(u[0])
     if truth is None:
         assert model is not None
         return simulate_backlash(model, u, x0)
     base = _backlash(truth.model)
     assert base is not None
-    if truth.t_s.size < 2 or (
-        np.allclose(truth.c_left, truth.c_left[0]) and np.allclose(truth.c_right, truth.c_right[0])
-    ):
-        fixed = GeneralBacklash(
-            base.m_left, float(truth.c_left[0]), base.m_right, float(truth.c_right[0])
-        )
-        return simulate_backlash(fixed, u, x0)
     edges = truth.t_s
-    piece = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, edges.size - 1)
-    out = np.empty(u.size)
-    starts = np.flatnonzero(np.diff(piece, prepend=-1))
-    stops = np.append(starts[1:], u.size)
-    x_prev = x0
-    for a, b in zip(starts, stops, strict=True):
-        i = int(piece[a])
-        j = min(i + 1, edges.size - 1)
-        c_left = 0.5 * (truth.c_left[i] + truth.c_left[j])
-        c_right = 0.5 * (truth.c_right[i] + truth.c_right[j])
-        model_i = GeneralBacklash(base.m_left, float(c_left), base.m_right, float(c_right))
-        out[a:b] = simulate_backlash(model_i, u[a:b], x_prev)
-        x_prev = float(out[b - 1])
-    return out
+    i = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, edges.size - 1)
+    j = np.minimum(i + 1, edges.size - 1)
+    c_left = 0.5 * (truth.c_left[i] + truth.c_left[j])
+    c_right = 0.5 * (truth.c_right[i] + truth.c_right[j])
+    return simulate_worn(base, u, x0, c_left, c_right)
 
 
 def tracking_errors(result: ReplayResult, data: ReportData | None = None) -> TrackingErrors | None:
     """The predicted tracking errors (see :class:`TrackingErrors`); None when there is no
     plant (no truth and no final estimate) or no command."""
-    d = report_data(result) if data is None else data
+    return (report_data(result) if data is None else data).tracking
+
+
+def _tracking_errors(d: ReportData) -> TrackingErrors | None:
+    """:func:`tracking_errors` of the report's data (see :attr:`ReportData.tracking`)."""
     plant = "truth" if d.truth is not None else "estimate"
     if d.cmd_t.size == 0 or (d.truth is None and d.model is None):
         return None
@@ -782,8 +787,8 @@ def plot_coverage(result: ReplayResult, data: ReportData | None = None) -> Figur
     """Time spent on each branch per command bin, and the branches around the 1:1 line
     with the engaged parts bold."""
     d = report_data(result) if data is None else data
-    truth_end = _backlash(d.truth.model_end) if d.truth is not None else None
-    cov = branch_coverage(d, truth_end)
+    cov = d.coverage
+    truth_end = d.truth_end
     fig, (hx, cx) = plt.subplots(1, 2, figsize=(12, 4.8))
     if cov is None:
         for ax in (hx, cx):
@@ -859,24 +864,18 @@ def plot_coverage(result: ReplayResult, data: ReportData | None = None) -> Figur
 def _truth_values(truth: BagTruth, names: tuple[str, ...], t_s: np.ndarray) -> np.ndarray:
     """The true parameters in the estimate's names at times ``t_s`` (shape (K, P)); NaN
     for names the truth lacks (coefficients beyond its degree are 0)."""
-    base = _backlash(truth.model)
-    assert base is not None
+    known = dict(zip(truth.model.parameter_names, truth.model.parameters().tolist(), strict=True))
     c_left, c_right = truth.dead_zones(t_s)
     out = np.full((t_s.size, len(names)), np.nan)
-    linear = truth.model.linear if isinstance(truth.model, Cascade) else None
     for k, name in enumerate(names):
-        if name == "c_left":
-            out[:, k] = c_left
-        elif name == "c_right":
-            out[:, k] = c_right
-        elif name.startswith(("m_left_", "m_right_")):
-            coefs = base.m_left if name.startswith("m_left_") else base.m_right
-            i = int(name.rsplit("_", 1)[1]) - 1
-            out[:, k] = coefs[i] if i < len(coefs) else 0.0
-        elif linear is not None and name.startswith(("a_", "b_")):
-            coefs = linear.a if name.startswith("a_") else linear.b
-            i = int(name.rsplit("_", 1)[1]) - 1
-            out[:, k] = coefs[i] if i < len(coefs) else 0.0
+        if name in ("c_left", "c_right"):
+            out[:, k] = c_left if name == "c_left" else c_right
+        elif name in known:
+            out[:, k] = known[name]
+        elif name.startswith(("m_left_", "m_right_")) or (
+            isinstance(truth.model, Cascade) and name.startswith(("a_", "b_"))
+        ):
+            out[:, k] = 0.0  # a coefficient beyond the truth's degree or order
     return out
 
 
@@ -984,7 +983,7 @@ def plot_characteristic_report(result: ReplayResult, data: ReportData | None = N
     d = report_data(result) if data is None else data
     model = result.estimate.model
     backlash = _backlash(model)
-    truth = _backlash(d.truth.model_end) if d.truth is not None else None
+    truth = d.truth_end
     fig, (ax, bx) = plt.subplots(1, 2, figsize=(12, 4.8))
     if d.u.size:
         step = max(1, d.u.size // 20000)
@@ -1092,8 +1091,7 @@ def tracking_summary(errors: TrackingErrors | None, end: float) -> str:
 
 def coverage_summary(data: ReportData) -> str:
     """One paragraph: the command range each branch was engaged over."""
-    truth_end = _backlash(data.truth.model_end) if data.truth is not None else None
-    cov = branch_coverage(data, truth_end)
+    cov = data.coverage
     if cov is None:
         return "<p>Not enough samples to say which branches were engaged.</p>"
     lo, hi = float(np.min(cov.u)), float(np.max(cov.u))

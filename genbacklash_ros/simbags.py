@@ -41,16 +41,16 @@ import numpy as np
 from genbacklash_core import (
     Cascade,
     GeneralBacklash,
-    LinearBlock,
     paper_example,
-    simulate_backlash,
 )
-from genbacklash_core.cascade import model_to_dict
+from genbacklash_core.cascade import model_from_dict, model_to_dict
 from genbacklash_core.scenarios import (
     OPERATION_BACKLASH,
     STRAIGHT_BACKLASH,
     OperationSettings,
     operation_record,
+    simulate_worn,
+    worn,
 )
 
 from .bagio import BagWriter
@@ -122,19 +122,6 @@ class SimulatedBag:
 # --------------------------------------------------------------------------- truth
 
 
-def _model_from_dict(data: object) -> GeneralBacklash | Cascade:
-    if not isinstance(data, dict):
-        raise ValueError(f"a model must be an object, got {data!r}")
-    bl = data["backlash"]
-    backlash = GeneralBacklash(
-        tuple(bl["m_left"]), float(bl["c_left"]), tuple(bl["m_right"]), float(bl["c_right"])
-    )
-    if data.get("model") == "cascade":
-        lin = data["linear"]
-        return Cascade(backlash, LinearBlock(tuple(lin["a"]), tuple(lin["b"])))
-    return backlash
-
-
 def _backlash(model: GeneralBacklash | Cascade) -> GeneralBacklash:
     return model.backlash if isinstance(model, Cascade) else model
 
@@ -181,12 +168,6 @@ class BagTruth:
         interpolated linearly and held beyond the ends."""
         t = np.asarray(t_s, dtype=np.float64)
         return np.interp(t, self.t_s, self.c_left), np.interp(t, self.t_s, self.c_right)
-
-    def backlash_at(self, t_s: float) -> GeneralBacklash:
-        """The true backlash at time ``t_s`` (s from :attr:`start_ns`)."""
-        base = _backlash(self.model)
-        c_left, c_right = self.dead_zones(np.array([t_s]))
-        return GeneralBacklash(base.m_left, float(c_left[0]), base.m_right, float(c_right[0]))
 
     def to_json(self) -> str:
         """The JSON stored under :data:`TRUTH_KEY` (compact, rounded to 1e-9)."""
@@ -235,8 +216,8 @@ class BagTruth:
             description=str(data.get("description", "")),
             seed=int(data["seed"]),
             start_ns=int(data["start_ns"]),
-            model=_model_from_dict(data["model"]),
-            model_end=_model_from_dict(data["model_end"]),
+            model=model_from_dict(data["model"]),
+            model_end=model_from_dict(data["model_end"]),
             t_s=t_s,
             c_left=c_left,
             c_right=c_right,
@@ -268,7 +249,8 @@ def _constant_zones(
     return t, bl.c_left * factor, bl.c_right * factor
 
 
-def _command(values: tuple[float, ...]) -> Float64MultiArray:
+def command_message(values: tuple[float, ...]) -> Float64MultiArray:
+    """A ``/command`` message: one element per joint, the drivetrain first."""
     size = len(values)
     layout = MultiArrayLayout((MultiArrayDimension("joints", size, size),), 0)
     return Float64MultiArray(layout, values)
@@ -327,7 +309,7 @@ def write_example_bag(
         writer.add_topic(ENCODER_TOPIC, JointState.ros_type)
         for k in range(n):
             t = int(times[k])
-            writer.write(COMMAND_TOPIC, t, _command((float(data.u[k]),)))
+            writer.write(COMMAND_TOPIC, t, command_message((float(data.u[k]),)))
             writer.write(ENCODER_TOPIC, t + int(delay[k]), _encoder(t, (float(data.y[k]),)))
         writer.set_custom_data(TRUTH_KEY, custom[TRUTH_KEY])
     return SimulatedBag(
@@ -341,12 +323,6 @@ def write_example_bag(
         },
         duration_s,
         custom,
-    )
-
-
-def _worn(model: GeneralBacklash, factor: float) -> GeneralBacklash:
-    return GeneralBacklash(
-        model.m_left, model.c_left * factor, model.m_right, model.c_right * factor
     )
 
 
@@ -391,14 +367,12 @@ def write_drivetrain_bag(
     k = np.searchsorted(cmd_t, enc_t, side="right") - 1
     held = np.where(k >= 0, cmd_u[np.maximum(k, 0)], 0.0)
     # the play operator with a gap that grows linearly: blocks of 50 samples
-    clean = np.empty(n)
-    x_prev = 0.0
     block = 50
-    for start in range(0, n, block):
-        stop = min(start + block, n)
-        factor = 1.0 + wear * (start + stop - 1) / 2 / max(n - 1, 1)
-        clean[start:stop] = simulate_backlash(_worn(base, factor), held[start:stop], x_prev)
-        x_prev = float(clean[stop - 1])
+    starts = np.arange(0, n, block)
+    factor = np.repeat(
+        1.0 + wear * (starts + np.minimum(starts + block, n) - 1) / 2 / max(n - 1, 1), block
+    )[:n]
+    clean = simulate_worn(base, held, 0.0, base.c_left * factor, base.c_right * factor)
     y = clean + rng.normal(0.0, float(np.std(clean)) / snr, n)
     other = np.cumsum(rng.normal(0.0, 1e-3, n))  # a second joint, slowly drifting
     delay = _latencies(rng, n)
@@ -415,7 +389,7 @@ def write_drivetrain_bag(
         seed,
         START_NS,
         base,
-        _worn(base, 1.0 + wear),
+        worn(base, 1.0 + wear),
         t_s,
         c_left,
         c_right,
@@ -431,7 +405,7 @@ def write_drivetrain_bag(
         events.sort()
         for log_time, kind, i in events:
             if kind == 0:
-                writer.write(COMMAND_TOPIC, log_time, _command((float(cmd_u[i]), 0.0)))
+                writer.write(COMMAND_TOPIC, log_time, command_message((float(cmd_u[i]), 0.0)))
             else:
                 msg = _encoder(int(enc_t[i]), (float(y[i]), float(other[i])))
                 writer.write(ENCODER_TOPIC, log_time, msg)
@@ -439,7 +413,7 @@ def write_drivetrain_bag(
         Path(path),
         description,
         base,
-        _worn(base, 1.0 + wear),
+        worn(base, 1.0 + wear),
         {
             COMMAND_TOPIC: (Float64MultiArray.ros_type, int(cmd_t.size)),
             ENCODER_TOPIC: (JointState.ros_type, n),
@@ -572,7 +546,7 @@ def write_operation_bag(
             i = int(item[j])
             if kind[j] == 0:
                 values = (float(rec.command_u[i]), float(wheel_cmd[i]))
-                writer.write(COMMAND_TOPIC, int(log[j]), _command(values))
+                writer.write(COMMAND_TOPIC, int(log[j]), command_message(values))
             else:
                 msg = _encoder(int(enc_stamp[i]), (float(enc_y[i]), float(enc_wheel[i])))
                 writer.write(ENCODER_TOPIC, int(log[j]), msg)
