@@ -39,17 +39,17 @@ from genbacklash_core import (
     WindowedIdentifier,
     nrmse,
     paper_example,
-    simulate_backlash,
 )
 from genbacklash_core.samples import sample_breaks
 from genbacklash_core.scenarios import (
     OperationRecord,
     OperationSettings,
     operation_record,
-    worn,
+    simulate_worn,
 )
 from genbacklash_ros.parameters import NodeParameters
 from genbacklash_ros.pipeline import BacklashPipeline
+from genbacklash_ros.simbags import feed_record
 
 RECEIVE_DELAY_NS = 200_000  # encoder readings reach the node 0.2 ms after their stamp
 METHODS = ("windowed", "recursive")
@@ -58,53 +58,24 @@ BATCH = 64
 
 def true_load(rec: OperationRecord, u: np.ndarray) -> np.ndarray:
     """The true drivetrain (wear included) driven by ``u`` at every sampling instant."""
-    out = np.empty(u.size)
-    x = float(rec.x_all[0])
-    model = rec.settings.model
-    block = 250
-    for start in range(0, u.size, block):
-        stop = min(start + block, u.size)
-        factor = float(rec.c_left[start]) / model.c_left
-        out[start:stop] = simulate_backlash(worn(model, factor), u[start:stop], x)
-        x = float(out[stop - 1])
-    return out
+    return simulate_worn(rec.settings.model, u, float(rec.x_all[0]), rec.c_left, rec.c_right)
 
 
 def run_pipeline(rec: OperationRecord, method: str) -> dict[str, float]:
     """Replay the record through the node's pipeline; what it published, judged."""
     params = NodeParameters(command_type="float64", encoder_type="float64", method=method)
     pipe = BacklashPipeline(params)
-    cmd_t, cmd_u = rec.command_t_ns, rec.command_u
-    enc_t, enc_y = rec.encoder_t_ns, rec.encoder_y
-    events = np.concatenate([cmd_t, enc_t + RECEIVE_DELAY_NS])
-    kinds = np.concatenate([np.zeros(cmd_t.size, dtype=int), np.ones(enc_t.size, dtype=int)])
-    index = np.concatenate([np.arange(cmd_t.size), np.arange(enc_t.size)])
-    order = np.lexsort((kinds, events))
-    sent = np.empty(cmd_t.size)
-    first_estimate = None
     t0 = time.perf_counter()
-    for j in order:
-        i = int(index[j])
-        if kinds[j] == 0:
-            accepted = pipe.on_command_value(None, float(cmd_u[i]), int(cmd_t[i]))
-            if accepted is None:
-                sent[i] = cmd_u[i]
-                continue
-            _, sent[i], outputs = accepted
-        else:
-            outputs = pipe.on_encoder_value(
-                int(enc_t[i]), float(enc_y[i]), int(enc_t[i]) + RECEIVE_DELAY_NS
-            )
-        if first_estimate is None and any(o.topic == "estimate" for o in outputs):
-            first_estimate = (int(events[j]) - int(cmd_t[0])) / 1e9
+    fed = feed_record(pipe, rec, RECEIVE_DELAY_NS)
     pipe.finish()
-    cost = (time.perf_counter() - t0) / enc_t.size
+    cost = (time.perf_counter() - t0) / rec.encoder_t_ns.size
+    sent, first_estimate = fed.sent, fed.first_estimate_s
     est = pipe.estimate
     model = est.model
     fit = float("inf")
     if isinstance(model, GeneralBacklash):
         fit = nrmse(rec.x_all, model.simulate(rec.u_all, rec.x_all[0]))
-    k = np.searchsorted(cmd_t, rec.sample_t_ns, side="right") - 1
+    k = np.searchsorted(rec.command_t_ns, rec.sample_t_ns, side="right") - 1
     load_comp = true_load(rec, sent[k])
     half = rec.sample_t_ns >= rec.sample_t_ns[-1] / 2
     desired = rec.u_all

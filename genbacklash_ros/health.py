@@ -406,7 +406,7 @@ class StreamHealth:
         if last is None or value != previous:
             self._still_since, self._stuck = None, False
             return False
-        return self._watch_stuck(stamp, last, value, _held_input(stamp, commands, inputs))
+        return self._watch_stuck(stamp, last, value, commands, inputs)
 
     def jumped_back(self, stream: str, stamp: int, last: int) -> int | None:
         """Whether a message of ``stream`` (``"command"`` or ``"encoder"``) at ``stamp``, not
@@ -599,7 +599,9 @@ class StreamHealth:
                 stamp,
             )
 
-    def _watch_stuck(self, stamp: int, last: int, value: float, held: float | None) -> bool:
+    def _watch_stuck(
+        self, stamp: int, last: int, value: float, commands: list[int], inputs: list[float]
+    ) -> bool:
         """True when the reading ``value`` at ``stamp``, equal to the one at ``last``, belongs
         to a stuck encoder (not to be fed)."""
         since = self._still_since
@@ -609,13 +611,13 @@ class StreamHealth:
         if stamp - since < STUCK_NS:
             return False
         if not self._stuck:
-            why = self._stuck_reason(value, held)
+            why = self._stuck_reason(value, _held_input(stamp, commands, inputs))
             if not why:
                 return False
             self._stuck, self._stuck_why = True, why
-            held = self._discard(since)  # keep the first equal reading
-            if held:
-                self._drop("encoder_stuck", "encoder reading unchanged", held)
+            pending = self._discard(since)  # keep the first equal reading
+            if pending:
+                self._drop("encoder_stuck", "encoder reading unchanged", pending)
         self._drop("encoder_stuck", "encoder reading unchanged", 1)
         self.fault(
             "encoder_stuck",

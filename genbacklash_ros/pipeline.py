@@ -766,9 +766,8 @@ class BacklashPipeline:
         early = int(np.count_nonzero(k < 0))
         if early:
             self._drop("before_first_command", "samples before the first command", early)
+            breaks, _ = keep_breaks(breaks, k >= 0)  # the samples before it were taken out
             k, ys, times, held = k[early:], ys[early:], times[early:], held[early:]
-            breaks = breaks[early:]
-            breaks[:1] = True  # the samples before it were taken out
         if k.size == 0:
             self._fed_last_t = None
             return

@@ -12,41 +12,25 @@ import numpy as np
 import pytest
 
 from genbacklash_core import simulate_backlash
-from genbacklash_core.scenarios import OperationRecord, OperationSettings, operation_record
+from genbacklash_core.scenarios import OperationSettings, operation_record
 from genbacklash_ros.parameters import NodeParameters
 from genbacklash_ros.pipeline import BacklashPipeline
+from genbacklash_ros.simbags import feed_record
 
 DELAY_NS = 200_000  # readings reach the node 0.2 ms after their stamp
-
-
-def _replay(rec: OperationRecord, method: str) -> tuple[BacklashPipeline, np.ndarray, float]:
-    pipe = BacklashPipeline(
-        NodeParameters(command_type="float64", encoder_type="float64", method=method)
-    )
-    events = sorted(
-        [(int(t), 0, i) for i, t in enumerate(rec.command_t_ns)]
-        + [(int(t) + DELAY_NS, 1, i) for i, t in enumerate(rec.encoder_t_ns)]
-    )
-    sent = rec.command_u.copy()
-    first = np.inf
-    for t, kind, i in events:
-        if kind == 0:
-            accepted = pipe.on_command_value(None, float(rec.command_u[i]), t)
-            assert accepted is not None
-            _, sent[i], outputs = accepted
-        else:
-            outputs = pipe.on_encoder_value(int(rec.encoder_t_ns[i]), float(rec.encoder_y[i]), t)
-        if first == np.inf and any(o.topic == "estimate" for o in outputs):
-            first = t / 1e9
-    pipe.finish()
-    return pipe, sent, first
 
 
 @pytest.mark.parametrize("method", ["windowed", "recursive"])
 def test_compensation_cuts_the_tracking_error_in_operation(method: str) -> None:
     rec = operation_record(OperationSettings(duration=20.0), 0)
-    pipe, sent, first = _replay(rec, method)
-    assert first <= 10.0  # an estimate within 10 s of operation
+    pipe = BacklashPipeline(
+        NodeParameters(command_type="float64", encoder_type="float64", method=method)
+    )
+    fed = feed_record(pipe, rec, DELAY_NS)
+    pipe.finish()
+    assert fed.accepted.all()
+    sent, first = fed.sent, fed.first_estimate_s
+    assert first is not None and first <= 10.0  # an estimate within 10 s of operation
     # a dwell is not a stuck encoder, a move starting is not one either
     assert pipe.stats.dropped["encoder_stuck"] == 0
     k = np.searchsorted(rec.command_t_ns, rec.sample_t_ns, side="right") - 1
