@@ -43,9 +43,26 @@ import numpy as np
 from ._typing import BoolArray, FloatArray, IntArray
 from .errors import GenBacklashError
 
-__all__ = ["BranchCoverage", "RowMemory"]
+__all__ = ["BranchCoverage", "RowMemory", "pair_series"]
 
 _PENDING_LIMIT = 256  # rows collected before they are filed into their bins
+
+
+def pair_series(
+    u0: FloatArray, u1: FloatArray, y0: FloatArray, y1: FloatArray
+) -> tuple[FloatArray, FloatArray, BoolArray]:
+    """Rows ``(u(t-1), u(t), x(t-1), x(t))`` as a series of pairs, ``(u, y, breaks)`` with
+    a break before each pair: what the batch iteration
+    (:func:`~genbacklash_core.identify.identify_backlash`) and the window fits take,
+    forming exactly one row of eq. (24) per pair."""
+    m = u1.size
+    u = np.empty(2 * m)
+    y = np.empty(2 * m)
+    u[0::2], u[1::2] = u0, u1
+    y[0::2], y[1::2] = y0, y1
+    breaks = np.zeros(2 * m, dtype=bool)
+    breaks[0::2] = True
+    return u, y, breaks
 
 
 def _level(counts: IntArray, capacity: int) -> int:
@@ -134,7 +151,6 @@ class RowMemory:
         self._file()
         return int(self._u1.size)
 
-    @property
     def input_range(self) -> tuple[float, float]:
         """The input range of the rows taken so far (``(inf, -inf)`` when none)."""
         return self._lo, self._hi
@@ -173,10 +189,6 @@ class RowMemory:
             self._hi = u1
         if self._pending_count >= _PENDING_LIMIT:
             self._file()
-
-    def clear(self) -> None:
-        """Forget every row."""
-        self.__init__(self.capacity, self.bins)  # type: ignore[misc]
 
     def _keys(self, u0: FloatArray, u1: FloatArray) -> IntArray:
         """Bin key per row: direction (0 down, 1 up) times ``bins`` plus the region."""
@@ -230,14 +242,7 @@ class RowMemory:
         what the batch iteration (:func:`~genbacklash_core.identify.identify_backlash`) and
         the window fits take, forming exactly one row of eq. (24) per pair."""
         self._file()
-        m = self._u1.size
-        u = np.empty(2 * m)
-        y = np.empty(2 * m)
-        u[0::2], u[1::2] = self._u0, self._u1
-        y[0::2], y[1::2] = self._y0, self._y1
-        breaks = np.zeros(2 * m, dtype=bool)
-        breaks[0::2] = True
-        return u, y, breaks
+        return pair_series(self._u0, self._u1, self._y0, self._y1)
 
     def rows(self) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
         """The filed rows ``(u(t-1), u(t), x(t-1), x(t))``, in time order (views)."""
@@ -254,11 +259,6 @@ class RowMemory:
             self._y0, self._y1 = self._y0[keep], self._y1[keep]
             self._order = self._order[keep]
         return count
-
-    def newest(self, count: int) -> BoolArray:
-        """Mask over the filed rows (time order) of those among the ``count`` latest taken."""
-        self._file()
-        return np.asarray(self._order >= self.added - count, dtype=bool)
 
     def coverage(self) -> BranchCoverage:
         """Rows per direction and region (for diagnostics and reports)."""

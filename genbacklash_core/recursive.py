@@ -81,11 +81,13 @@ from .estimate import (
     relative_std_of,
 )
 from .identify import _backlash_columns, _switching
+from .memory import pair_series
 from .play import play_operator
 from .samples import as_breaks
 from .simulate import play_bounds
 from .structure import Structure
 from .windowed import (
+    SampleRing,
     SeedPrior,
     cold_fit,
     natural_covariance,
@@ -309,12 +311,6 @@ class BinnedRows:
         up = int(np.count_nonzero(self._data[:, 1] > self._data[:, 0]))
         return len(self) - up, up
 
-    def clear(self) -> None:
-        """Forget every row."""
-        self._data = np.empty((0, self.width))
-        self._stamp = np.empty(0, dtype=np.intp)
-        self.low, self.high = math.inf, -math.inf
-
     def rows(self) -> tuple[FloatArray, IntArray]:
         """The rows, oldest first, and the sample index each was taken at."""
         return self._data, self._stamp
@@ -450,41 +446,6 @@ class _Solution:
     rows: int  # rows used
 
 
-class _Recent:
-    """The latest ``size`` samples and their breaks (the cascade's batch fits)."""
-
-    def __init__(self, size: int) -> None:
-        self.size = size
-        self.u = np.zeros(2 * size)
-        self.y = np.zeros(2 * size)
-        self.b = np.ones(2 * size, dtype=bool)
-        self.count = 0
-
-    def extend(self, u: FloatArray, y: FloatArray, b: BoolArray) -> None:
-        n = u.size
-        if n > self.size:  # only the last `size` samples survive
-            self.count += n - self.size
-            u, y, b, n = u[-self.size :], y[-self.size :], b[-self.size :], self.size
-        k = (self.count + np.arange(n)) % self.size
-        for store, values in ((self.u, u), (self.y, y), (self.b, b)):
-            store[k] = values
-            store[k + self.size] = values
-        self.count += n
-
-    def __len__(self) -> int:
-        return min(self.count, self.size)
-
-    def window(self, last: int | None = None) -> tuple[FloatArray, FloatArray, BoolArray]:
-        """The latest ``last`` (default all held) samples, oldest first; the first breaks."""
-        held = len(self)
-        n = held if last is None else min(last, held)
-        end = held if self.count <= self.size else self.count % self.size + self.size
-        b = self.b[end - n : end].copy()
-        if n:
-            b[0] = True
-        return self.u[end - n : end].copy(), self.y[end - n : end].copy(), b
-
-
 def _runs(breaks: BoolArray, carried: int) -> IntArray:
     """Per sample, how many consecutive samples end there (``carried`` before the first)."""
     index = np.arange(breaks.size)
@@ -515,19 +476,6 @@ def _row_width(structure: Structure) -> int:
     if structure.cascade:
         return max(structure.na, 2) + structure.nb + 2
     return 4
-
-
-def _pairs(rows: FloatArray) -> tuple[FloatArray, FloatArray, BoolArray]:
-    """Backlash rows as a series of pairs with a break before each: one row of eq. (24)
-    per pair for the batch iteration."""
-    m = rows.shape[0]
-    u = np.empty(2 * m)
-    y = np.empty(2 * m)
-    u[0::2], u[1::2] = rows[:, 0], rows[:, 1]
-    y[0::2], y[1::2] = rows[:, 2], rows[:, 3]
-    breaks = np.zeros(2 * m, dtype=bool)
-    breaks[0::2] = True
-    return u, y, breaks
 
 
 def _cascade_rows(
@@ -729,7 +677,7 @@ class RecursiveIdentifier:
         # the memory, the rows held back while the errors are blown up, the recent samples
         self._memory = self._new_memory(_row_width(structure))
         self._held_back: BinnedRows | None = None
-        self._recent = _Recent(s.buffer)
+        self._recent = SampleRing(s.buffer)
         self._pending: list[tuple[FloatArray, IntArray]] = []  # rows of the current block
         self._queue: list[tuple[FloatArray, FloatArray, BoolArray]] = []  # samples not seen
         self._queued = 0
@@ -1168,7 +1116,9 @@ class RecursiveIdentifier:
         lags = self._lags
         if structure.cascade:
             latest = self._ever_started and attempt > 0  # a retried restart: the latest only
-            u, y, b = self._recent.window(s.initial_samples if latest else None)
+            last = s.initial_samples if latest else None
+            u, y = (a.copy() for a in self._recent.window(last))
+            b = self._recent.breaks(last)
             found = cold_fit(structure, self._sign_now, u, y, b)
             if isinstance(found, str):
                 self._reason = f"batch fit failed: {found}"
@@ -1182,7 +1132,11 @@ class RecursiveIdentifier:
             rows, _ = source.rows()
             self._fresh = 0
             self._need = max(rows.shape[0] // 4, 1)
-            found = cold_fit(structure, self._sign_now, *_pairs(rows))
+            found = cold_fit(
+                structure,
+                self._sign_now,
+                *pair_series(rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3]),
+            )
             if isinstance(found, str):
                 self._reason = f"batch fit failed: {found}"
                 return False

@@ -994,6 +994,8 @@ class WindowedIdentifier:
         self._last: tuple[float, float] | None = None  # the latest sample (memory mode)
         self._break_next = False  # a dropped sample ended the previous call
         self._base_confidence = 0.0  # confidence of the last fit, before ageing
+        self._advice_key: tuple[int, bool, str] | None = None  # what the advice was made for
+        self._advice = ""
         self._rows = 0  # rows taken (memory mode)
         self._idle = 0  # samples since the last informative row
         self._structure = self._template
@@ -1213,12 +1215,13 @@ class WindowedIdentifier:
         follows = ~bb
         follows[0] = link
         row = follows & (uu != u_prev)  # a held command or a dwell adds no row
+        counts = np.cumsum(row)  # rows up to each sample of the call
         start = 0
         while start < uu.size:
             need = self._next_fit - self._rows
-            counts = np.cumsum(row[start:])
-            hit = int(np.searchsorted(counts, max(need, 1)))
-            stop = uu.size if hit >= counts.size else start + hit + 1
+            before = int(counts[start - 1]) if start else 0
+            hit = int(np.searchsorted(counts[start:], before + max(need, 1)))
+            stop = uu.size if hit >= counts.size - start else start + hit + 1
             part = slice(start, stop)
             self._ring.extend(uu[part], yy[part], bb[part])  # the refinement's recent series
             taken = row[part]
@@ -1312,7 +1315,10 @@ class WindowedIdentifier:
     def _publish(self) -> Estimate:
         est = self._estimate
         if self._memory is not None and self._reported is None:
-            advice = self.excitation_advice()
+            key = (self._rows, self._samples > 1, self._reason)
+            if key != self._advice_key:  # the memory changes only when rows come
+                self._advice_key, self._advice = key, self.excitation_advice()
+            advice = self._advice
             reason = self._reason if not advice else f"{self._reason}: {advice}"
             if reason != est.reason:
                 self._estimate = est = Estimate.empty(
