@@ -84,7 +84,13 @@ from .errors import GenBacklashError
 from .estimate import EstimatorState
 from .identify import nrmse
 from .samples import sample_breaks
-from .scenarios import OPERATION_BACKLASH, OperationSettings, operation_record, trapezoid
+from .scenarios import (
+    OPERATION_BACKLASH,
+    OperationSettings,
+    drive,
+    operation_record,
+    trapezoid,
+)
 from .simulate import simulate_backlash
 from .windowed import WindowedIdentifier, WindowedSettings
 
@@ -531,28 +537,19 @@ def _drivetrain(
     """The scenario's drivetrain on the commands: ``(stamps_ns, u, y, period_ns)`` of the
     readings that arrived (see :func:`genbacklash_core.scenarios.operation_record`)."""
     defaults = OperationSettings()
-    rng = np.random.default_rng([int(seed), 31])
-    n_cmd = u_commands.size
     cmd_period = 1e9 / trajectory.command_rate
-    cmd_t = np.round(np.arange(n_cmd) * cmd_period).astype(np.int64)
-    jitter_ns = min(defaults.command_jitter * 1e9, 0.5 * cmd_period)
-    cmd_t += rng.integers(0, round(jitter_ns) + 1, n_cmd)
+    _, t, u, _, y, received, _, _ = drive(
+        np.random.default_rng([int(seed), 31]),
+        u_commands,
+        model,
+        command_rate=trajectory.command_rate,
+        encoder_rate=encoder_rate,
+        command_jitter_ns=round(min(defaults.command_jitter * 1e9, 0.5 * cmd_period)),
+        stamp_jitter_ns=defaults.stamp_jitter * 1e9,
+        quantum=2.0 * math.pi / counts_per_rev if counts_per_rev else 0.0,
+        loss=loss,
+    )
     enc_period = 1e9 / encoder_rate
-    n = math.floor(n_cmd * cmd_period / enc_period)
-    nominal = np.round(np.arange(n) * enc_period)
-    clip = enc_period / 3.0
-    stamp_jitter = rng.normal(0.0, defaults.stamp_jitter * 1e9, n)
-    t = (nominal + np.clip(stamp_jitter, -clip, clip)).astype(np.int64)
-    t[0] = max(int(t[0]), int(cmd_t[0]))
-    t = np.maximum.accumulate(t)
-    k = np.searchsorted(cmd_t, t, side="right") - 1
-    u = u_commands[np.maximum(k, 0)]
-    x_rest = 0.5 * float(model.left(u[:1])[0] + model.right(u[:1])[0])  # at rest, mid-gap
-    x = simulate_backlash(model, u, x_rest)
-    quantum = 2.0 * math.pi / counts_per_rev if counts_per_rev else 0.0
-    y = np.round(x / quantum) * quantum if quantum > 0.0 else x
-    received = rng.random(n) >= loss
-    received[0] = True
     return (
         np.asarray(t[received], dtype=np.float64),
         np.asarray(u[received], dtype=np.float64),

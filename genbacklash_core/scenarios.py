@@ -424,6 +424,58 @@ def _commands(
     return np.clip(np.concatenate(pieces), *cfg.travel), tuple(starts)
 
 
+def drive(
+    rng: np.random.Generator,
+    values: FloatArray,
+    model: GeneralBacklash,
+    *,
+    command_rate: float,
+    encoder_rate: float,
+    command_jitter_ns: int,
+    stamp_jitter_ns: float,
+    wear: float = 0.0,
+    noise: float = 0.0,
+    quantum: float = 0.0,
+    loss: float = 0.0,
+) -> tuple[
+    IntArray, IntArray, FloatArray, FloatArray, FloatArray, BoolArray, FloatArray, FloatArray
+]:
+    """The drivetrain's time line for commands ``values`` at the nominal command ticks (see
+    the module notes): ``(command stamps, reading stamps, held input, load, reading,
+    received, c_left, c_right)``, every reading included. Draws from ``rng`` in this order:
+    command jitter, stamp jitter, noise, loss (each only when non-zero, loss always)."""
+    n_cmd = values.size
+    cmd_period = 1e9 / command_rate
+    cmd_t = np.round(np.arange(n_cmd) * cmd_period).astype(np.int64)
+    if command_jitter_ns > 0:
+        cmd_t += rng.integers(0, command_jitter_ns + 1, n_cmd)
+    total_ns = n_cmd * cmd_period
+    enc_period = 1e9 / encoder_rate
+    n = math.floor(total_ns / enc_period)
+    nominal = np.round(np.arange(n) * enc_period)
+    jitter = rng.normal(0.0, stamp_jitter_ns, n) if stamp_jitter_ns > 0 else 0.0
+    clip = enc_period / 3.0
+    t = (nominal + np.clip(jitter, -clip, clip)).astype(np.int64)
+    t[0] = max(int(t[0]), int(cmd_t[0]))  # the first reading after the first command
+    t = np.maximum.accumulate(t)
+    k = np.searchsorted(cmd_t, t, side="right") - 1
+    u = values[np.maximum(k, 0)]
+    # the drivetrain, with linear wear of the dead zones, in blocks
+    factor = 1.0 + wear * (np.arange(n) / max(n - 1, 1))
+    block_factor = np.repeat(
+        [float(np.mean(factor[s : min(s + _BLOCK, n)])) for s in range(0, n, _BLOCK)], _BLOCK
+    )[:n]
+    c_left, c_right = model.c_left * block_factor, model.c_right * block_factor
+    x0 = 0.5 * float(model.left(u[:1])[0] + model.right(u[:1])[0])  # at rest, mid-gap
+    x = simulate_worn(model, u, x0, c_left, c_right)
+    y = x + (rng.normal(0.0, noise, n) if noise > 0 else 0.0)
+    if quantum > 0:
+        y = np.round(y / quantum) * quantum
+    received = rng.random(n) >= loss
+    received[0] = True
+    return cmd_t, t, u, x, np.asarray(y, dtype=np.float64), received, c_left, c_right
+
+
 def operation_record(settings: OperationSettings | None = None, seed: int = 0) -> OperationRecord:
     """Simulate a drivetrain in operation (see the module notes).
 
@@ -439,38 +491,20 @@ def operation_record(settings: OperationSettings | None = None, seed: int = 0) -
         raise GenBacklashError(f"settings must be OperationSettings, got {cfg!r}")
     rng = np.random.default_rng([int(seed), 12])
     values, phase_starts = _commands(rng, cfg)
-    n_cmd = values.size
-    cmd_period = 1e9 / cfg.command_rate
-    cmd_t = np.round(np.arange(n_cmd) * cmd_period).astype(np.int64)
-    if cfg.command_jitter > 0:
-        cmd_t += rng.integers(0, round(cfg.command_jitter * 1e9) + 1, n_cmd)
-    total_ns = n_cmd * cmd_period
-    enc_period = 1e9 / cfg.encoder_rate
-    n = math.floor(total_ns / enc_period)
-    nominal = np.round(np.arange(n) * enc_period)
-    jitter = rng.normal(0.0, cfg.stamp_jitter * 1e9, n) if cfg.stamp_jitter > 0 else 0.0
-    clip = enc_period / 3.0
-    t = (nominal + np.clip(jitter, -clip, clip)).astype(np.int64)
-    t[0] = max(int(t[0]), int(cmd_t[0]))  # the first reading after the first command
-    t = np.maximum.accumulate(t)
-    k = np.searchsorted(cmd_t, t, side="right") - 1
-    u = values[np.maximum(k, 0)]
-    # the drivetrain, with linear wear of the dead zones, in blocks
-    progress = np.arange(n) / max(n - 1, 1)
-    factor = 1.0 + cfg.wear * progress
-    model = cfg.model
-    block_factor = np.repeat(
-        [float(np.mean(factor[s : min(s + _BLOCK, n)])) for s in range(0, n, _BLOCK)], _BLOCK
-    )[:n]
-    c_left, c_right = model.c_left * block_factor, model.c_right * block_factor
-    x0 = 0.5 * float(model.left(u[:1])[0] + model.right(u[:1])[0])  # at rest, mid-gap
-    x = simulate_worn(model, u, x0, c_left, c_right)
-    y = x + (rng.normal(0.0, cfg.noise, n) if cfg.noise > 0 else 0.0)
-    q = cfg.quantum
-    if q > 0:
-        y = np.round(y / q) * q
-    received = rng.random(n) >= cfg.loss
-    received[0] = True
+    driven = drive(
+        rng,
+        values,
+        cfg.model,
+        command_rate=cfg.command_rate,
+        encoder_rate=cfg.encoder_rate,
+        command_jitter_ns=round(cfg.command_jitter * 1e9),
+        stamp_jitter_ns=cfg.stamp_jitter * 1e9,
+        wear=cfg.wear,
+        noise=cfg.noise,
+        quantum=cfg.quantum,
+        loss=cfg.loss,
+    )
+    cmd_t, t, u, x, y, received, c_left, c_right = driven
     return OperationRecord(
         settings=cfg,
         seed=int(seed),
