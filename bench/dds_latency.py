@@ -3,7 +3,7 @@
     python bench/dds_latency.py [--seconds S] [--rate HZ] [--quick]
 
 Three processes share a DDS domain of their own (an id in 201-231, apart from the tests'):
-the node as users run it (``python -m genbacklash_ros.node_cli --transport dds --params-file
+the node as users run it (``python -m genbacklash_ros.cli.node --transport dds --params-file
 params.yaml``, Float64MultiArray commands, a checkpoint file in a temporary directory); a
 plain DDS echo (this script with ``--role echo``) that writes every Float64MultiArray taken on
 ``rt/dds_latency/ping`` back unchanged on ``rt/dds_latency/pong``, with the node's loop
@@ -75,8 +75,8 @@ try:
     from cyclonedds.topic import Topic
     from cyclonedds.util import duration
 
-    from genbacklash_ros.dds_node import DEFAULT_QOS, SENSOR_QOS
-    from genbacklash_ros.dds_types import (
+    from genbacklash_ros.transports.dds_node import DEFAULT_QOS, SENSOR_QOS
+    from genbacklash_ros.transports.dds_types import (
         DiagnosticArray_,
         Float64MultiArray_,
         Header_,
@@ -451,7 +451,7 @@ def run(rate: float, warmup_s: float, seconds: float, domain_id: int) -> Run:
     with tempfile.TemporaryDirectory(prefix="dds_latency_") as tmp:
         params = _write_params(Path(tmp) / "params.yaml")
         log_path = Path(tmp) / "node.log"
-        node_cmd = [sys.executable, "-m", "genbacklash_ros.node_cli", "--transport", "dds"]
+        node_cmd = [sys.executable, "-m", "genbacklash_ros.cli.node", "--transport", "dds"]
         node_cmd += ["--params-file", str(params), "--domain-id", str(domain_id)]
         node_cmd += ["--duration", f"{lifetime:.0f}"]
         echo_cmd = [sys.executable, str(Path(__file__).resolve()), "--role", "echo"]

@@ -2,10 +2,10 @@
 
     python bench/faults.py [--quick]
 
-Runs the fault-injection scenarios of ``tests/ros/test_faults.py`` (the same driver and the
+Runs the fault-injection scenarios of ``tests/ros/node/test_faults.py`` (the same driver and the
 same faults, imported from there, not restated) over several seeds: Example 1 at 1 kHz with
 ~200 Hz Float64MultiArray commands, a clean warm-up to 2 s, one fault, clean data to 6 s,
-fed message by message into :class:`~genbacklash_ros.pipeline.BacklashPipeline` with the
+fed message by message into :class:`~genbacklash_ros.node.pipeline.BacklashPipeline` with the
 default parameters (``joint`` set; ``u_min``/``u_max`` = +-2.5 for the saturated command).
 
 Per fault and over the seeds: outputs carrying a non-finite number (every number of every
@@ -27,7 +27,6 @@ from _common import ROOT, command_line, machine_description, md_table, parse_arg
 
 sys.path.insert(0, str(ROOT))  # the fault driver lives with its tests
 
-from genbacklash_ros.messages import DiagnosticStatus
 from tests.ros.test_faults import (
     FAULT_HOLD_NS,
     FAULTS,
@@ -36,6 +35,8 @@ from tests.ros.test_faults import (
     numbers_in,
     run_fault,
 )
+
+from genbacklash_ros.node.messages import DiagnosticStatus
 
 LEVELS = {DiagnosticStatus.OK: "OK", DiagnosticStatus.WARN: "WARN", DiagnosticStatus.ERROR: "ERROR"}
 
@@ -116,7 +117,7 @@ def main() -> None:
 
 Each run: Example 1 (general backlash, degree 3) at 1 kHz, SNR 25, commands at ~200 Hz with
 jitter; converged warm-up to 2 s, the fault from 2 s (0.3-1.0 s long), clean data to 6 s; the
-node's default parameters. The driver and the faults are those of `tests/ros/test_faults.py`.
+node's default parameters. The driver and the faults are those of `tests/ros/node/test_faults.py`.
 "Compensation back" is the time from the end of the fault to the first command that is
 corrected again (the fault clears 0.5 s of data time after its last sign).
 

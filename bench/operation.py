@@ -47,9 +47,9 @@ from genbacklash_core.scenarios import (
     operation_record,
     simulate_worn,
 )
-from genbacklash_ros.parameters import NodeParameters
-from genbacklash_ros.pipeline import BacklashPipeline
-from genbacklash_ros.simbags import feed_record
+from genbacklash_ros.bags.simbags import feed_record
+from genbacklash_ros.node.parameters import NodeParameters
+from genbacklash_ros.node.pipeline import BacklashPipeline
 
 RECEIVE_DELAY_NS = 200_000  # encoder readings reach the node 0.2 ms after their stamp
 METHODS = ("windowed", "recursive")

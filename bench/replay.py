@@ -4,7 +4,7 @@
 
 Issue 4's target: replay >= 100k encoder messages/s end to end (read, decode, align, estimate,
 compensate, write). A drivetrain bag (JointState encoder at 1 kHz, Float64MultiArray commands
-at 100-1000 Hz, a wearing gap) is replayed by :func:`genbacklash_ros.replay.replay`, and in
+at 100-1000 Hz, a wearing gap) is replayed by :func:`genbacklash_ros.bags.replay.replay`, and in
 the same run, round-robin, against two references on the same bag:
 
 * **decode-all replay**: the same pipeline fed our message objects, every message decoded by
@@ -28,13 +28,13 @@ from pathlib import Path
 import numpy as np
 from _common import command_line, machine_description, md_table, parse_args, write_section
 
-from genbacklash_ros.bagio import BagReader, BagWriter, align
-from genbacklash_ros.checkpoint import warm_start
-from genbacklash_ros.messages import read_command, read_encoder
-from genbacklash_ros.parameters import NodeParameters
-from genbacklash_ros.pipeline import BATCH_SAMPLES, BacklashPipeline
-from genbacklash_ros.replay import OUTPUT_TOPICS, replay
-from genbacklash_ros.simbags import COMMAND_TOPIC, ENCODER_TOPIC, write_drivetrain_bag
+from genbacklash_ros.bags.bagio import BagReader, BagWriter, align
+from genbacklash_ros.bags.replay import OUTPUT_TOPICS, replay
+from genbacklash_ros.bags.simbags import COMMAND_TOPIC, ENCODER_TOPIC, write_drivetrain_bag
+from genbacklash_ros.node.checkpoint import warm_start
+from genbacklash_ros.node.messages import read_command, read_encoder
+from genbacklash_ros.node.parameters import NodeParameters
+from genbacklash_ros.node.pipeline import BATCH_SAMPLES, BacklashPipeline
 
 SEED = 4400
 REPEATS = 3
@@ -126,7 +126,7 @@ def run_pipeline_only(events: list[Event]) -> float:
 
 def aligned_samples(events: list[Event]) -> tuple[np.ndarray, np.ndarray]:
     """``(u, y)``: each encoder reading with the command holding at its time (the pipeline's
-    zero-order hold, :func:`~genbacklash_ros.bagio.align`, without its fault checks)."""
+    zero-order hold, :func:`~genbacklash_ros.bags.bagio.align`, without its fault checks)."""
     commands = [e for e in events if e[0]]
     readings = [e for e in events if not e[0]]
     series = align(

@@ -2,7 +2,7 @@
 
     python bench/restart.py [--quick]
 
-The measurement is the real multi-process run of ``tests/ros/test_restart.py`` (a player
+The measurement is the real multi-process run of ``tests/ros/transports/test_restart.py`` (a player
 process at 500 Hz, the node as its own process over DDS with a checkpoint every 2 s of data
 time, SIGKILL mid-run, a restart with the same parameters; plus a checkpoint writer SIGKILLed
 repeatedly mid-save). This script runs that test module once with ``pytest -s``, so the
@@ -32,7 +32,7 @@ def main() -> None:
             "-p",
             "no:cacheprovider",
             "-rs",
-            "tests/ros/test_restart.py",
+            "tests/ros/transports/test_restart.py",
         ],
         cwd=ROOT,
         capture_output=True,
@@ -49,10 +49,10 @@ def main() -> None:
 
 `{command_line()}`. Machine: {machine}. Run time {seconds:.0f} s.
 
-`pytest -s tests/ros/test_restart.py`: {summary.strip(" =")}. The DDS node (its own process,
-checkpoint every 2 s of data time) is SIGKILLed mid-run while a player process publishes
-command and encoder at 500 Hz, then restarted with the same parameters; a checkpoint writer
-is SIGKILLed repeatedly mid-save. What the run measured:
+`pytest -s tests/ros/transports/test_restart.py`: {summary.strip(" =")}. The DDS
+node (its own process, checkpoint every 2 s of data time) is SIGKILLed mid-run while a player
+process publishes command and encoder at 500 Hz, then restarted with the same parameters; a
+checkpoint writer is SIGKILLed repeatedly mid-save. What the run measured:
 
 {bullets}
 

@@ -5,7 +5,7 @@
 The node's own code path, message by message: a ``std_msgs/Float64MultiArray`` command at
 ~200 Hz (0-30 % jitter, held between messages) and a ``sensor_msgs/JointState`` encoder at
 1 kHz (header-stamped, received 0-0.3 ms later) go through
-:class:`~genbacklash_ros.pipeline.BacklashPipeline` (``on_command`` / ``on_encoder``, the
+:class:`~genbacklash_ros.node.pipeline.BacklashPipeline` (``on_command`` / ``on_encoder``, the
 estimate published at 10 Hz, diagnostics at 1 Hz, a checkpoint every 10 s of data time to a
 temporary file). The drivetrain is Example 1's general backlash whose dead-zone widths
 ``c_L``, ``c_R`` widen linearly by ``--wear`` (default 50 %) over the run, SNR 25. The data are
@@ -38,7 +38,7 @@ import numpy as np
 from _common import command_line, fmt_bytes, machine_description, md_table, write_section
 
 from genbacklash_core import EstimatorState, GeneralBacklash, paper_example, simulate_backlash
-from genbacklash_ros.messages import (
+from genbacklash_ros.node.messages import (
     Float64MultiArray,
     Header,
     JointState,
@@ -46,8 +46,8 @@ from genbacklash_ros.messages import (
     MultiArrayLayout,
     Time,
 )
-from genbacklash_ros.parameters import NodeParameters
-from genbacklash_ros.pipeline import BacklashPipeline
+from genbacklash_ros.node.parameters import NodeParameters
+from genbacklash_ros.node.pipeline import BacklashPipeline
 
 SEED = 7300
 MS = 1_000_000

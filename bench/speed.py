@@ -50,7 +50,7 @@ from genbacklash_core import (
     simulate_cascade_loop,
 )
 from genbacklash_core.structure import Structure
-from genbacklash_ros.csvio import Series, read_series_csv, write_series_csv
+from genbacklash_ros.bags.csvio import Series, read_series_csv, write_series_csv
 
 TARGET_GENERIC = 50.0  # identify must be at least 50x faster than the generic loop fit
 TARGET_PASSES = 1.5  # identify_cascade incl. CSV read: < 1.5 per-sample passes at N = 1e6

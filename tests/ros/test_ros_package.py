@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from genbacklash_ros.parameters import PARAMETER_SPECS, NodeParameters, load_params_file
+from genbacklash_ros.node.parameters import PARAMETER_SPECS, NodeParameters, load_params_file
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -83,7 +83,7 @@ def test_pyproject_installs_data_files_and_only_two_packages() -> None:
         for source in sources:
             assert (ROOT / source).is_file(), (target, source)
     scripts = data["project"]["scripts"]
-    assert scripts["backlash_identifier"] == "genbacklash_ros.node_cli:ros2_main"
+    assert scripts["backlash_identifier"] == "genbacklash_ros.cli.node:ros2_main"
 
 
 def test_config_params_yaml_holds_every_default() -> None:

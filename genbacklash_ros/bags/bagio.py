@@ -1,0 +1,869 @@
+"""Reading and writing rosbag2 MCAP bags with rosbags (Jazzy typestore).
+
+:class:`BagReader` opens a rosbag2 directory (``metadata.yaml`` + ``.mcap``) or a bare
+``.mcap`` file with :class:`rosbags.highlevel.AnyReader` and yields :class:`BagMessage` s
+(topic, log time in integer nanoseconds, our message of :mod:`genbacklash_ros.node.messages`,
+the raw CDR bytes) for chosen topics in log-time order. Every problem -- a missing path, a
+file that is not a bag, a corrupt or truncated file, an unknown topic, a message type we do
+not read -- is a :class:`BagError` with a one-line reason.
+
+A truncated MCAP file (a recording cut short: no summary, no footer) cannot be opened by
+rosbags. The reader then *salvages* it: it scans the records from the start and yields the
+messages of every complete chunk, then raises :class:`BagError` saying where the file ends,
+so that a replay can keep (and properly close) what it wrote so far.
+
+:class:`BagWriter` writes a rosbag2 directory with one MCAP file
+(``rosbags.rosbag2.Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)``) from our
+messages (:func:`~genbacklash_ros.bags.rosbags_types.to_rosbags` + ``serialize_cdr``) or from raw
+CDR bytes. :func:`align` is the batch form of the pipeline's alignment (one sample per
+encoder message, the command held), used by ``genbacklash identify`` on bags.
+
+Examples
+--------
+>>> import tempfile, pathlib
+>>> from genbacklash_ros.node.messages import Float64
+>>> out = pathlib.Path(tempfile.mkdtemp()) / "bag"
+>>> with BagWriter(out) as writer:
+...     writer.write("/x", 1_000, Float64(0.5))
+>>> with BagReader(out) as reader:
+...     [(m.topic, m.log_time_ns, m.message) for m in reader.messages(["/x"])]
+[('/x', 1000, Float64(data=0.5))]
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+from typing import Any, Literal, NamedTuple
+
+import numpy as np
+
+from genbacklash_core import GenBacklashError
+from genbacklash_ros.bags.rosbags_types import from_rosbags, jazzy_typestore, to_rosbags
+from genbacklash_ros.node.messages import (
+    CommandType,
+    DiagnosticArray,
+    EncoderType,
+    Float64,
+    Float64MultiArray,
+    JointState,
+    Message,
+    MessageError,
+    read_command,
+    read_encoder,
+)
+from genbacklash_ros.node.sample_rule import keep_breaks, link_breaks, record_period
+
+__all__ = [
+    "COMMAND_MSGTYPES",
+    "ENCODER_MSGTYPES",
+    "SUPPORTED_MSGTYPES",
+    "AlignedSeries",
+    "BagError",
+    "BagMessage",
+    "BagReader",
+    "BagWriter",
+    "RawMessage",
+    "TopicInfo",
+    "align",
+    "read_aligned",
+    "read_custom_data",
+]
+
+COMMAND_MSGTYPES: dict[str, CommandType] = {
+    Float64.ros_type: "float64",
+    Float64MultiArray.ros_type: "float64_multi_array",
+    JointState.ros_type: "joint_state",
+}
+"""Command topic types and the pipeline's ``command_type`` for each."""
+
+ENCODER_MSGTYPES: dict[str, EncoderType] = {
+    JointState.ros_type: "joint_state",
+    Float64.ros_type: "float64",
+}
+"""Encoder topic types and the pipeline's ``encoder_type`` for each."""
+
+SUPPORTED_MSGTYPES = frozenset(
+    {Float64.ros_type, Float64MultiArray.ros_type, JointState.ros_type, DiagnosticArray.ros_type}
+)
+"""Message types :class:`BagReader` converts into our messages."""
+
+_MCAP_MAGIC = b"\x89MCAP0\r\n"
+_OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK, _OP_FOOTER = 0x03, 0x04, 0x05, 0x06, 0x02
+
+
+class BagError(GenBacklashError):
+    """A bag cannot be read or written (the message says why, in one line)."""
+
+
+@dataclass(frozen=True, slots=True)
+class TopicInfo:
+    """One topic of a bag: its name, ROS message type and message count."""
+
+    name: str
+    msgtype: str
+    count: int
+
+
+@dataclass(frozen=True, slots=True)
+class BagMessage:
+    """One message of a bag.
+
+    Attributes
+    ----------
+    topic : str
+    log_time_ns : int
+        When the recorder received it (integer nanoseconds since the epoch).
+    message : Message
+        The message as our dataclass (:mod:`genbacklash_ros.node.messages`).
+    msgtype : str
+        Its ROS type, e.g. ``sensor_msgs/msg/JointState``.
+    raw : bytes
+        The CDR bytes as stored (to copy the message to another bag unchanged).
+    """
+
+    topic: str
+    log_time_ns: int
+    message: Message
+    msgtype: str
+    raw: bytes
+
+
+class RawMessage(NamedTuple):
+    """One message of a bag as stored: topic, log time (ns), ROS type, CDR bytes."""
+
+    topic: str
+    log_time_ns: int
+    msgtype: str
+    raw: bytes
+
+
+def _one_line(err: BaseException) -> str:
+    text = " ".join(str(a) for a in err.args) if err.args else type(err).__name__
+    return " ".join(text.split()) or type(err).__name__
+
+
+# --------------------------------------------------------------------------- salvage
+
+
+class _Truncated(Exception):
+    """The MCAP records end before the file does (internal)."""
+
+
+class _ChunkDamaged(Exception):
+    """The records inside a chunk stop making sense (internal; args: what was kept)."""
+
+
+def _string(buf: bytes, pos: int) -> tuple[str, int]:
+    (size,) = struct.unpack_from("<I", buf, pos)
+    end = pos + 4 + size
+    if end > len(buf):
+        raise _Truncated
+    return buf[pos + 4 : end].decode("utf-8"), end
+
+
+class _Salvage:
+    """Sequential scan of an MCAP file that has no valid footer (a cut-off recording).
+
+    Yields ``(topic, msgtype, log_time_ns, raw)`` for the messages outside chunks and in
+    every complete chunk, in file order (sorted by log time within a chunk), and records
+    where and why the scan stopped in :attr:`problem`.
+    """
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.problem = ""
+        self.schemas: dict[int, str] = {}
+        self.channels: dict[int, tuple[str, str]] = {}
+
+    def _records(self, buf: bytes) -> Iterator[tuple[int, bytes]]:
+        pos = 0
+        while pos < len(buf):
+            if pos + 9 > len(buf):
+                raise _Truncated
+            op = buf[pos]
+            (size,) = struct.unpack_from("<Q", buf, pos + 1)
+            end = pos + 9 + size
+            if end > len(buf):
+                raise _Truncated
+            yield op, buf[pos + 9 : end]
+            pos = end
+
+    def _record(self, op: int, body: bytes) -> Iterator[tuple[str, str, int, bytes]]:
+        if op == _OP_SCHEMA:
+            (sid,) = struct.unpack_from("<H", body, 0)
+            name, _ = _string(body, 2)
+            self.schemas[sid] = name
+        elif op == _OP_CHANNEL:
+            cid, sid = struct.unpack_from("<HH", body, 0)
+            topic, _ = _string(body, 4)
+            self.channels[cid] = (topic, self.schemas.get(sid, ""))
+        elif op == _OP_MESSAGE:
+            cid, _seq, log_time, _pub = struct.unpack_from("<HIQQ", body, 0)
+            if cid in self.channels:
+                topic, msgtype = self.channels[cid]
+                yield topic, msgtype, int(log_time), bytes(body[22:])
+        elif op == _OP_CHUNK:
+            from rosbags.rosbag2.storage_mcap import decompress
+
+            _start, _end, size, crc = struct.unpack_from("<QQQI", body, 0)
+            compression, pos = _string(body, 28)
+            (length,) = struct.unpack_from("<Q", body, pos)
+            data = body[pos + 8 : pos + 8 + length]
+            inner = decompress(data, compression, size, crc)
+            found: list[tuple[str, str, int, bytes]] = []
+            damage: Exception | None = None
+            try:
+                for sub_op, sub_body in self._records(inner):
+                    found.extend(self._record(sub_op, sub_body))
+            except (_Truncated, struct.error, UnicodeDecodeError) as err:
+                # a chunk without a CRC (rosbags writes none) damaged inside: its records
+                # up to the damage are intact, the rest is lost
+                damage = _ChunkDamaged(f"{len(found)} messages of the chunk read before it")
+                damage.__cause__ = err
+            found.sort(key=lambda item: item[2])
+            yield from found
+            if damage is not None:
+                raise damage
+
+    def _partial_chunk(self, body: bytes) -> Iterator[tuple[str, str, int, bytes]]:
+        """The complete message records of an uncompressed chunk cut short (a compressed
+        one cannot be read in part: nothing)."""
+        try:
+            compression, pos = _string(body, 28)
+        except (_Truncated, struct.error, UnicodeDecodeError):
+            return
+        if compression:
+            return
+        found: list[tuple[str, str, int, bytes]] = []
+        try:
+            for sub_op, sub_body in self._records(body[pos + 8 :]):
+                found.extend(self._record(sub_op, sub_body))
+        except (_Truncated, struct.error, UnicodeDecodeError):
+            pass  # the record cut by the end of the file
+        found.sort(key=lambda item: item[2])
+        yield from found
+
+    def messages(self) -> Iterator[tuple[str, str, int, bytes]]:
+        count = 0
+        offset = len(_MCAP_MAGIC)
+        try:
+            with self.path.open("rb") as stream:
+                if stream.read(len(_MCAP_MAGIC)) != _MCAP_MAGIC:
+                    self.problem = f"{self.path} is not an MCAP file (bad magic)"
+                    return
+                while True:
+                    head = stream.read(9)
+                    if not head:
+                        raise _Truncated
+                    if len(head) < 9:
+                        raise _Truncated
+                    op = head[0]
+                    (size,) = struct.unpack_from("<Q", head, 1)
+                    body = stream.read(size)
+                    if len(body) != size:
+                        if op == _OP_CHUNK:  # cut inside a chunk: keep its complete records
+                            for item in self._partial_chunk(body):
+                                count += 1
+                                yield item
+                        raise _Truncated
+                    if op == _OP_FOOTER:
+                        return
+                    for item in self._record(op, body):
+                        count += 1
+                        yield item
+                    offset += 9 + size
+        except _ChunkDamaged as err:
+            self.problem = (
+                f"{self.path} is corrupt inside the chunk at byte {offset} ({err}); "
+                f"read {count} messages before the damage"
+            )
+        except _Truncated:
+            self.problem = (
+                f"{self.path} is truncated (records end at byte {offset}); "
+                f"read {count} messages before the cut"
+            )
+        except (struct.error, UnicodeDecodeError, ValueError, OSError) as err:
+            self.problem = (
+                f"{self.path} is corrupt at byte {offset} ({_one_line(err)}); "
+                f"read {count} messages before it"
+            )
+        except Exception as err:  # rosbags' ReaderError for a bad chunk, and the like
+            self.problem = (
+                f"{self.path} is corrupt at byte {offset} ({_one_line(err)}); "
+                f"read {count} messages before it"
+            )
+
+
+def _mcap_files(path: Path) -> list[Path]:
+    if path.is_dir():
+        return sorted(path.glob("*.mcap"))
+    return [path]
+
+
+# --------------------------------------------------------------------------- reading
+
+
+class BagReader:
+    """Read the messages of a rosbag2 directory or a bare ``.mcap`` file.
+
+    Parameters
+    ----------
+    path : str or Path
+        A rosbag2 directory (with ``metadata.yaml``) or an ``.mcap`` file.
+
+    Notes
+    -----
+    Use as a context manager. :attr:`salvaged` is True when the file could not be opened
+    normally and is scanned record by record (a truncated recording): :meth:`messages` then
+    yields what it can and raises :class:`BagError` at the damage.
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        if not self.path.exists():
+            raise BagError(f"no bag at {self.path}: the path does not exist")
+        self._reader: Any = None
+        self._salvage: list[Path] = []
+        self._salvage_reason = ""
+        self._topics: dict[str, TopicInfo] = {}
+        self._custom_data: object = _UNREAD
+
+    # context management
+
+    def __enter__(self) -> BagReader:
+        self.open()
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> Literal[False]:
+        self.close()
+        return False
+
+    def open(self) -> None:
+        """Open the bag (or prepare its salvage); raises :class:`BagError`."""
+        from rosbags.highlevel import AnyReader
+
+        try:
+            reader = AnyReader([self.path], default_typestore=jazzy_typestore())
+            reader.open()
+        except Exception as err:  # AnyReaderError, FileNotFoundError, yaml and type errors
+            reason = _one_line(err)
+            files = [f for f in _mcap_files(self.path) if f.is_file()]
+            with_magic = [f for f in files if _starts_with_magic(f)]
+            if not with_magic:
+                kind = "directory" if self.path.is_dir() else "file"
+                raise BagError(
+                    f"{self.path} is not a readable rosbag2 MCAP bag ({kind}): {reason}"
+                ) from err
+            self._salvage = with_magic
+            self._salvage_reason = reason
+            self._topics = self._scan_topics()
+            if not any(t.count for t in self._topics.values()):
+                raise BagError(
+                    f"{self.path} cannot be opened ({reason}) and holds no complete message"
+                ) from err
+            return
+        self._reader = reader
+        topics: dict[str, TopicInfo] = {}
+        for conn in reader.connections:
+            old = topics.get(conn.topic)
+            count = conn.msgcount + (old.count if old else 0)
+            topics[conn.topic] = TopicInfo(conn.topic, conn.msgtype, count)
+        self._topics = topics
+
+    def _scan_topics(self) -> dict[str, TopicInfo]:
+        counts: dict[tuple[str, str], int] = {}
+        for file in self._salvage:
+            scan = _Salvage(file)
+            for topic, msgtype, _t, _raw in scan.messages():
+                counts[topic, msgtype] = counts.get((topic, msgtype), 0) + 1
+            for topic, msgtype in scan.channels.values():
+                counts.setdefault((topic, msgtype), 0)
+        return {t: TopicInfo(t, m, n) for (t, m), n in sorted(counts.items())}
+
+    def close(self) -> None:
+        """Close the bag (idempotent)."""
+        reader, self._reader = self._reader, None
+        if reader is not None:
+            try:
+                reader.close()
+            except Exception:  # closing a reader that failed mid-way: nothing to keep
+                pass
+
+    # topics
+
+    @property
+    def salvaged(self) -> bool:
+        """True when the bag is read record by record because it could not be opened."""
+        return bool(self._salvage)
+
+    @property
+    def topics(self) -> dict[str, TopicInfo]:
+        """Topic name -> :class:`TopicInfo` (for a salvaged bag: what the scan found)."""
+        return dict(self._topics)
+
+    def topic_list(self) -> str:
+        """The topics as ``name (type, count)``, one comma-separated line."""
+        if not self._topics:
+            return "none"
+        return ", ".join(f"{t.name} ({t.msgtype}, {t.count})" for t in self._topics.values())
+
+    def topic(self, name: str, allowed: Iterable[str] | None = None) -> TopicInfo:
+        """The topic ``name``, checked to exist (and to have one of the ``allowed`` types).
+
+        Raises :class:`BagError` listing the topics that exist, or the supported types.
+        """
+        info = self._topics.get(name)
+        if info is None:
+            raise BagError(
+                f"topic {name!r} is not in {self.path}; the bag has: {self.topic_list()}"
+            )
+        kinds = SUPPORTED_MSGTYPES if allowed is None else frozenset(allowed)
+        if info.msgtype not in kinds:
+            raise BagError(
+                f"topic {name!r} has type {info.msgtype}, which is not supported here; "
+                f"use one of: {', '.join(sorted(kinds))}"
+            )
+        return info
+
+    def count(self, topics: Iterable[str]) -> int:
+        """Number of messages on ``topics`` (for progress bars)."""
+        return sum(self._topics[t].count for t in topics if t in self._topics)
+
+    @property
+    def custom_data(self) -> dict[str, str] | None:
+        """The bag's ``custom_data`` (rosbag2 metadata: a string -> string map), or None.
+
+        Read from ``metadata.yaml`` of a bag directory, else from the rosbag2 metadata
+        record embedded in the MCAP file (a bare ``.mcap`` keeps it too). Tolerant: a bag
+        without it, or with one that is not a string -> string map, gives None.
+        """
+        if self._custom_data is _UNREAD:
+            self._custom_data = read_custom_data(self.path)
+        value = self._custom_data
+        return dict(value) if isinstance(value, dict) else None
+
+    # messages
+
+    def messages(self, topics: Sequence[str]) -> Iterator[BagMessage]:
+        """The messages of ``topics`` in log-time order, decoded into our dataclasses.
+
+        Raises :class:`BagError` for an unknown topic or unsupported type (before yielding
+        anything), and for a corrupt message or a truncated file (after yielding the
+        messages before the damage).
+        """
+        store = jazzy_typestore()
+        for item in self.raw_messages(topics):
+            try:
+                message = from_rosbags(store.deserialize_cdr(item.raw, item.msgtype))
+            except Exception as err:  # rosbags' deserializer errors, MessageError
+                raise BagError(
+                    f"{self.path} is corrupt: a {item.msgtype} message on {item.topic} "
+                    f"(log time {item.log_time_ns} ns) cannot be decoded: {_one_line(err)}"
+                ) from err
+            yield BagMessage(item.topic, item.log_time_ns, message, item.msgtype, item.raw)
+
+    def raw_messages(self, topics: Sequence[str]) -> Iterator[RawMessage]:
+        """The messages of ``topics`` in log-time order as stored (CDR bytes, not decoded).
+
+        The same checks and the same handling of damage as :meth:`messages`.
+        """
+        for name in topics:
+            self.topic(name)
+        wanted = set(topics)
+        if self._salvage:
+            yield from self._salvaged_messages(wanted)
+            return
+        reader = self._reader
+        if reader is None:
+            raise BagError(f"{self.path} is not open")
+        connections = [c for c in reader.connections if c.topic in wanted]
+        count = 0
+        try:
+            for conn, log_time, raw in reader.messages(connections=connections):
+                count += 1
+                yield RawMessage(conn.topic, int(log_time), conn.msgtype, bytes(raw))
+        except GeneratorExit:
+            raise
+        except Exception as err:  # rosbags' reader errors
+            reason = f"{self.path} is corrupt after {count} messages: {_one_line(err)}"
+            files = [f for f in _mcap_files(self.path) if f.is_file() and _starts_with_magic(f)]
+            if not files:
+                raise BagError(reason) from err
+            # rosbags reads through the summary's indexes, so damage anywhere (a chunk,
+            # an index) can stop it early: scan the records from the start instead and keep
+            # every intact chunk before the damage (the CRCs tell).
+            self._salvage, self._salvage_reason = files, reason
+            yield from self._salvaged_messages(wanted, skip=count)
+
+    def _salvaged_messages(self, wanted: set[str], skip: int = 0) -> Iterator[RawMessage]:
+        """The messages a record-by-record scan finds, after the first ``skip`` of them
+        (those yielded already), then :class:`BagError` saying where the damage is."""
+        seen = 0
+        for file in self._salvage:
+            scan = _Salvage(file)
+            for topic, msgtype, log_time, raw in scan.messages():
+                if topic not in wanted:
+                    continue
+                seen += 1
+                if seen <= skip:
+                    continue
+                yield RawMessage(topic, log_time, msgtype, raw)
+            if scan.problem:
+                raise BagError(scan.problem)
+        raise BagError(
+            f"{self.path} could not be read normally ({self._salvage_reason}); "
+            f"a record-by-record scan recovered {seen} messages"
+        )
+
+
+# --------------------------------------------------------------------------- custom data
+
+_UNREAD = object()
+_OP_METADATA, _OP_METADATA_INDEX = 0x0C, 0x0D
+_FOOTER_SIZE = 1 + 8 + 20  # opcode, length, summary start, summary offset start, CRC
+_MAX_SUMMARY = 64 << 20  # a summary section larger than this is not searched
+
+
+def _string_map(value: object) -> dict[str, str] | None:
+    if not isinstance(value, dict) or not value:
+        return None
+    if not all(isinstance(k, str) and isinstance(v, str) for k, v in value.items()):
+        return None
+    return dict(value)
+
+
+def _custom_data_of(info: object) -> dict[str, str] | None:
+    """``custom_data`` of a ``rosbag2_bagfile_information`` mapping (None if absent/bad)."""
+    return _string_map(info.get("custom_data")) if isinstance(info, dict) else None
+
+
+def _embedded_metadata(path: Path) -> object:
+    """The rosbag2 metadata an MCAP file holds (its ``rosbag2`` metadata record, found
+    through the summary's metadata index), parsed from YAML; None when there is none."""
+    import yaml
+
+    size = path.stat().st_size
+    with path.open("rb") as stream:
+        if size < 2 * len(_MCAP_MAGIC) + _FOOTER_SIZE:
+            return None
+        stream.seek(size - len(_MCAP_MAGIC) - _FOOTER_SIZE)
+        footer = stream.read(_FOOTER_SIZE)
+        if footer[0] != _OP_FOOTER:
+            return None
+        (summary_start,) = struct.unpack_from("<Q", footer, 9)
+        summary_end = size - len(_MCAP_MAGIC) - _FOOTER_SIZE
+        if not 0 < summary_start < summary_end or summary_end - summary_start > _MAX_SUMMARY:
+            return None
+        stream.seek(summary_start)
+        summary = stream.read(summary_end - summary_start)
+        pos = 0
+        while pos + 9 <= len(summary):
+            op = summary[pos]
+            (length,) = struct.unpack_from("<Q", summary, pos + 1)
+            body = summary[pos + 9 : pos + 9 + length]
+            pos += 9 + length
+            if op != _OP_METADATA_INDEX:
+                continue
+            offset, record_length = struct.unpack_from("<QQ", body, 0)
+            name, _ = _string(body, 16)
+            if name != "rosbag2" or record_length > _MAX_SUMMARY:
+                continue
+            stream.seek(offset)
+            record = stream.read(record_length)
+            if len(record) < 9 or record[0] != _OP_METADATA:
+                return None
+            _, at = _string(record, 9)
+            (map_size,) = struct.unpack_from("<I", record, at)
+            at += 4
+            end = at + map_size
+            while at < end:
+                key, at = _string(record, at)
+                value, at = _string(record, at)
+                if key == "serialized_metadata":
+                    return yaml.safe_load(value)
+            return None
+    return None
+
+
+def read_custom_data(path: str | Path) -> dict[str, str] | None:
+    """The ``custom_data`` map of a bag (directory or bare ``.mcap``), or None.
+
+    Looks in ``metadata.yaml`` first, then in the rosbag2 metadata embedded in the MCAP
+    file(s). Never raises for a bag without one or with a damaged one: None.
+    """
+    import yaml
+
+    bag = Path(path)
+    if bag.is_dir():
+        try:
+            document = yaml.safe_load((bag / "metadata.yaml").read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, yaml.YAMLError):
+            document = None
+        if isinstance(document, dict) and "rosbag2_bagfile_information" in document:
+            return _custom_data_of(document["rosbag2_bagfile_information"])
+    for file in _mcap_files(bag):
+        try:
+            found = _custom_data_of(_embedded_metadata(file))
+        except (OSError, struct.error, UnicodeDecodeError, _Truncated, yaml.YAMLError):
+            continue
+        if found is not None:
+            return found
+    return None
+
+
+def _starts_with_magic(path: Path) -> bool:
+    try:
+        with path.open("rb") as stream:
+            return stream.read(len(_MCAP_MAGIC)) == _MCAP_MAGIC
+    except OSError:
+        return False
+
+
+# --------------------------------------------------------------------------- writing
+
+
+class BagWriter:
+    """Write a rosbag2 directory with one MCAP file (rosbag2 metadata version 9).
+
+    Parameters
+    ----------
+    path : str or Path
+        The bag directory to create; it must not exist.
+
+    Notes
+    -----
+    Topics are registered on first use (or with :meth:`add_topic`). Use as a context
+    manager: the writer is closed (metadata and MCAP summary written) even when an
+    exception leaves the block, so that what was written stays a valid bag.
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        from rosbags.rosbag2 import StoragePlugin, Writer
+
+        self.path = Path(path)
+        if self.path.exists():
+            raise BagError(f"{self.path} exists already; remove it or choose another output")
+        try:  # like `ros2 bag record -o a/b`, create missing parent directories
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise BagError(f"cannot write {self.path}: {_one_line(err)}") from err
+        self._store = jazzy_typestore()
+        try:
+            self._writer: Any = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
+            self._writer.open()
+        except Exception as err:
+            raise BagError(f"cannot create {self.path}: {_one_line(err)}") from err
+        self._connections: dict[str, tuple[Any, str]] = {}
+        self._open = True
+        self.count = 0
+
+    def set_custom_data(self, key: str, value: str) -> None:
+        """Store ``value`` under ``key`` in the bag's ``custom_data`` (rosbag2 metadata:
+        ``metadata.yaml`` and the MCAP file's embedded copy), written when the bag closes.
+        Read back with :attr:`BagReader.custom_data`."""
+        if not self._open:
+            raise BagError(f"{self.path} is closed")
+        if not isinstance(key, str) or not isinstance(value, str):
+            raise BagError(f"custom_data needs string keys and values, got {key!r}: {value!r}")
+        self._writer.set_custom_data(key, value)
+
+    def __enter__(self) -> BagWriter:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> Literal[False]:
+        self.close()
+        return False
+
+    def add_topic(self, topic: str, msgtype: str) -> None:
+        """Register ``topic`` with the ROS type ``msgtype`` (a Jazzy type)."""
+        known = self._connections.get(topic)
+        if known is not None:
+            if known[1] != msgtype:
+                raise BagError(f"topic {topic!r} has type {known[1]}, not {msgtype}")
+            return
+        try:
+            conn = self._writer.add_connection(topic, msgtype, typestore=self._store)
+        except Exception as err:
+            raise BagError(f"cannot add topic {topic!r} ({msgtype}): {_one_line(err)}") from err
+        self._connections[topic] = (conn, msgtype)
+
+    def write(self, topic: str, log_time_ns: int, message: Message) -> None:
+        """Write one of our messages on ``topic`` at ``log_time_ns``."""
+        store = self._store
+        raw = store.serialize_cdr(to_rosbags(message, store), message.ros_type)
+        self.write_raw(topic, log_time_ns, raw, message.ros_type)
+
+    def write_raw(
+        self, topic: str, log_time_ns: int, raw: bytes | memoryview, msgtype: str
+    ) -> None:
+        """Write CDR bytes of type ``msgtype`` on ``topic`` at ``log_time_ns``."""
+        if not self._open:
+            raise BagError(f"{self.path} is closed")
+        entry = self._connections.get(topic)
+        if entry is None:
+            self.add_topic(topic, msgtype)
+            entry = self._connections[topic]
+        self._writer.write(entry[0], int(log_time_ns), raw)
+        self.count += 1
+
+    def close(self) -> None:
+        """Finish the bag (idempotent)."""
+        if self._open:
+            self._open = False
+            self._writer.close()
+
+
+# --------------------------------------------------------------------------- alignment
+
+
+@dataclass(frozen=True, eq=False)
+class AlignedSeries:
+    """Identification samples: one per encoder message, the command held.
+
+    ``t`` (int64 ns), ``u`` (the latest command at or before ``t``), ``y`` (the encoder);
+    ``skipped`` counts encoder samples before the first command; ``breaks`` (bool) the
+    sample rule: True where a sample does not follow the one before it on the encoder's
+    clock (:mod:`genbacklash_ros.node.sample_rule`; pass it to the identifiers' ``breaks``).
+    """
+
+    t: np.ndarray
+    u: np.ndarray
+    y: np.ndarray
+    skipped: int
+    breaks: np.ndarray
+
+
+def align(
+    cmd_t: np.ndarray,
+    cmd_u: np.ndarray,
+    enc_t: np.ndarray,
+    enc_y: np.ndarray,
+    *,
+    marks: np.ndarray | None = None,
+) -> AlignedSeries:
+    """Zero-order-hold alignment of a command stream to encoder times (batch form).
+
+    The pipeline's rule (:mod:`genbacklash_ros.node.pipeline`, ``sample_period = 0``): the input
+    of the sample at encoder time ``t`` is the latest command with time ``<= t``; samples
+    before the first command are skipped. Both streams must be sorted by time.
+
+    The breaks follow the pipeline's sample rule too: the encoder's nominal period is the
+    median difference of ``enc_t`` (:func:`~genbacklash_core.samples.nominal_period`), a
+    sample breaks where its stamp is not one period, rounded, after the one before, and
+    where ``marks`` (one per encoder reading) says a reading was taken out before it (a
+    message the adapters rejected); the first sample kept always breaks.
+
+    >>> s = align(np.array([10, 20]), np.array([1.0, 2.0]), np.array([5, 10, 15, 25]),
+    ...           np.array([0.1, 0.2, 0.3, 0.4]))
+    >>> s.u.tolist(), s.y.tolist(), s.skipped
+    ([1.0, 1.0, 2.0], [0.2, 0.3, 0.4], 1)
+    >>> s.breaks.tolist()  # 20 ns lost between 15 and 25
+    [True, False, True]
+    """
+    ct = np.asarray(cmd_t, dtype=np.int64)
+    et = np.asarray(enc_t, dtype=np.int64)
+    k = np.searchsorted(ct, et, side="right") - 1
+    keep = k >= 0
+    breaks, _ = keep_breaks(link_breaks(et, record_period(et), marks=marks), keep)
+    return AlignedSeries(
+        et[keep],
+        np.asarray(cmd_u, dtype=np.float64)[k[keep]],
+        np.asarray(enc_y, dtype=np.float64)[keep],
+        int(np.count_nonzero(~keep)),
+        breaks,
+    )
+
+
+def _increasing(times: list[int], values: list[float]) -> tuple[np.ndarray, np.ndarray]:
+    """Drop samples whose time is not after the previous accepted one (as the pipeline)."""
+    t = np.asarray(times, dtype=np.int64)
+    keep = _increasing_mask(t)
+    return t[keep], np.asarray(values, dtype=np.float64)[keep]
+
+
+def _increasing_mask(t: np.ndarray) -> np.ndarray:
+    """Which of the times ``t`` are after every one before them."""
+    if t.size < 2:
+        return np.ones(t.size, dtype=bool)
+    return t > np.maximum.accumulate(np.concatenate(([np.iinfo(np.int64).min], t[:-1])))
+
+
+def read_aligned(
+    path: str | Path,
+    command_topic: str,
+    encoder_topic: str,
+    *,
+    joint: str = "",
+    command_index: int = 0,
+) -> AlignedSeries:
+    """Read a command and an encoder topic from a bag and align them (see :func:`align`).
+
+    Times are header stamps when the message has a non-zero one, else the log time (the
+    pipeline's default ``stamp_source = "header"``). Messages the adapters reject (joint
+    missing, index out of range, non-finite values) are skipped; a rejected encoder message
+    breaks the chain of consecutive samples at the next encoder reading in log order, as in
+    the pipeline (``breaks``, see :func:`align`).
+    """
+    with BagReader(path) as reader:
+        cmd_kind = COMMAND_MSGTYPES[reader.topic(command_topic, COMMAND_MSGTYPES).msgtype]
+        enc_kind = ENCODER_MSGTYPES[reader.topic(encoder_topic, ENCODER_MSGTYPES).msgtype]
+        ct: list[int] = []
+        cu: list[float] = []
+        et: list[int] = []
+        ey: list[float] = []
+        em: list[bool] = []  # the reading follows one the adapters rejected (log order)
+        rejected = False
+        for item in reader.messages([command_topic, encoder_topic]):
+            if item.topic == command_topic:
+                try:
+                    stamp, value = read_command(
+                        item.message, cmd_kind, index=command_index, joint=joint
+                    )
+                except MessageError:
+                    pass
+                else:
+                    ct.append(stamp or item.log_time_ns)
+                    cu.append(value)
+            if item.topic == encoder_topic:
+                try:
+                    stamp, value = read_encoder(item.message, enc_kind, joint=joint)
+                except MessageError:
+                    rejected = True  # a reading taken out: the next one breaks the chain
+                    continue
+                et.append(stamp or item.log_time_ns)
+                ey.append(value)
+                em.append(rejected)
+                rejected = False
+    if not ct:
+        raise BagError(f"no readable command on {command_topic!r} in {path}")
+    if not et:
+        raise BagError(f"no readable encoder reading on {encoder_topic!r} in {path}")
+    order_c = np.argsort(np.asarray(ct, dtype=np.int64), kind="stable")
+    order_e = np.argsort(np.asarray(et, dtype=np.int64), kind="stable")
+    c_t, c_u = _increasing([ct[i] for i in order_c], [cu[i] for i in order_c])
+    e_t = np.asarray(et, dtype=np.int64)[order_e]
+    e_y = np.asarray(ey, dtype=np.float64)[order_e]
+    e_m = np.asarray(em, dtype=bool)[order_e]
+    unique = _increasing_mask(e_t)
+    if not unique.all():  # a duplicate's mark passes to the next reading kept
+        seen = np.cumsum(e_m)[unique]
+        e_m = np.diff(seen, prepend=0) > 0
+        e_t, e_y = e_t[unique], e_y[unique]
+    series = align(c_t, c_u, e_t, e_y, marks=e_m)
+    if series.t.size == 0:
+        raise BagError(f"no encoder reading on {encoder_topic!r} follows the first command")
+    return series

@@ -1,0 +1,288 @@
+"""The command or encoder value of a raw CDR message, fast, for bag replay.
+
+Replay reads tens of thousands of messages a second; decoding each with rosbags' generic
+deserializer (and converting it to our dataclass) costs about 50 us, far more than the
+pipeline. Yet the messages of one topic almost always share one byte layout: the same frame id,
+joint names and array lengths, only stamps and numbers change. :class:`RawValueReader`
+therefore decodes the first message of each layout with rosbags and our adapters
+(:func:`~genbacklash_ros.node.messages.read_command` /
+:func:`~genbacklash_ros.node.messages.read_encoder`), and *learns* from rosbags' own serializer
+where that layout keeps its stamp and its float arrays: it re-serializes the message with
+sentinel values in those fields and looks where they land. A later message of the same length
+whose every other byte equals the learnt message's (names, lengths, counts, padding) has its
+numbers at the same offsets, so its value is one ``struct.unpack_from``. Anything else --
+another length, another joint order, a big-endian message, a message rosbags does not write
+back byte for byte -- takes the full rosbags path, so the result is always the adapters'
+result.
+
+:meth:`RawValueReader.patch` writes a compensated value into a copy of a command's bytes:
+the compensated command of :func:`~genbacklash_ros.node.messages.compensated_command`, serialized.
+
+Examples
+--------
+>>> from genbacklash_ros.node.messages import Float64MultiArray
+>>> from genbacklash_ros.bags.rosbags_types import jazzy_typestore, to_rosbags
+>>> store = jazzy_typestore()
+>>> def cdr(msg):
+...     return bytes(store.serialize_cdr(to_rosbags(msg, store), msg.ros_type))
+>>> reader = RawValueReader(Float64MultiArray.ros_type, "command", index=1)
+>>> reader.read(cdr(Float64MultiArray(data=(0.5, -0.25))))  # learns the layout
+(0, -0.25)
+>>> reader.read(cdr(Float64MultiArray(data=(0.1, 0.75))))  # a byte compare and an unpack
+(0, 0.75)
+>>> reader.fast, reader.slow
+(1, 1)
+>>> raw = reader.patch(cdr(Float64MultiArray(data=(0.1, 0.75))), 0.8)
+>>> reader.read(raw)
+(0, 0.8)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import struct
+from dataclasses import dataclass
+from typing import Any, Literal, cast
+
+import numpy as np
+
+from genbacklash_ros.bags.rosbags_types import from_rosbags, jazzy_typestore, to_rosbags
+from genbacklash_ros.node.messages import (
+    NS_PER_S,
+    CommandType,
+    EncoderType,
+    Float64,
+    Float64MultiArray,
+    JointState,
+    MessageError,
+    compensated_command,
+    read_command,
+    read_encoder,
+)
+
+__all__ = ["RawValueReader", "UndecodableMessage"]
+
+Role = Literal["command", "encoder"]
+
+_KINDS: dict[str, str] = {
+    Float64.ros_type: "float64",
+    Float64MultiArray.ros_type: "float64_multi_array",
+    JointState.ros_type: "joint_state",
+}
+_ARRAYS: dict[str, tuple[str, ...]] = {  # the float arrays of each type
+    Float64.ros_type: (),
+    Float64MultiArray.ros_type: ("data",),
+    JointState.ros_type: ("position", "velocity", "effort"),
+}
+_STAMP_SEC = 0x5EC5A17D  # sentinels: values no real message field holds
+_STAMP_NSEC = 0x3C0FFEE7
+_MAX_LAYOUTS = 8  # learnt layouts kept per reader (a topic rarely has more than one)
+_unpack_d = struct.Struct("<d").unpack_from
+_unpack_stamp = struct.Struct("<iI").unpack_from
+_pack_d = struct.Struct("<d").pack
+
+
+def _sentinels(n: int, base: float) -> np.ndarray:
+    return base * (1.0 + np.arange(1, n + 1) * 2.0**-20)
+
+
+class UndecodableMessage(MessageError):
+    """The bytes are not a CDR message of the reader's type (a corrupt message)."""
+
+
+@dataclass(frozen=True, slots=True)
+class _Layout:
+    """Where one byte layout keeps its numbers."""
+
+    constant: tuple[tuple[int, bytes], ...]  # (offset, bytes) every message must hold
+    value_at: int  # offset of the value read
+    stamp_at: int  # offset of header.stamp (sec, nanosec); -1: no header
+    checked: tuple[tuple[int, int], ...]  # (offset, count) of floats that must be finite
+
+
+class RawValueReader:
+    """Read the command (or encoder) value of raw CDR messages of one topic.
+
+    Parameters
+    ----------
+    msgtype : str
+        ROS type of the topic (``std_msgs/msg/Float64``, ``std_msgs/msg/Float64MultiArray``,
+        ``sensor_msgs/msg/JointState``).
+    role : {"command", "encoder"}
+        Which adapter's rules apply (a command's other elements must be finite as well: the
+        compensated command echoes them; an encoder's other joints are not looked at).
+    index : int
+        ``command_index`` (Float64MultiArray commands).
+    joint : str
+        Joint name (JointState; ``''``: the first).
+
+    Attributes
+    ----------
+    fast, slow : int
+        Messages read by a learnt layout, and by rosbags' deserializer.
+    """
+
+    def __init__(self, msgtype: str, role: Role, *, index: int = 0, joint: str = "") -> None:
+        kind = _KINDS.get(msgtype)
+        if kind is None or (role == "encoder" and kind == "float64_multi_array"):
+            raise MessageError(f"no {role} adapter for message type {msgtype}")
+        self.msgtype = msgtype
+        self.role = role
+        self.kind = kind
+        self.index = index
+        self.joint = joint
+        self.fast = 0
+        self.slow = 0
+        self._store = jazzy_typestore()
+        self._layouts: dict[int, _Layout | None] = {}
+
+    # ------------------------------------------------------------------ reading
+
+    def read(self, raw: bytes) -> tuple[int, float]:
+        """``(header stamp in ns or 0, value)`` of one message; :class:`MessageError` when
+        the message does not decode or the adapters reject it (as they would the decoded
+        message)."""
+        layout = self._layouts.get(len(raw))
+        if layout is not None:
+            for start, expected in layout.constant:
+                if not raw.startswith(expected, start):
+                    break
+            else:
+                return self._read_fast(raw, layout)
+        return self._read_slow(raw)
+
+    def _read_fast(self, raw: bytes, layout: _Layout) -> tuple[int, float]:
+        (value,) = _unpack_d(raw, layout.value_at)
+        for offset, count in layout.checked:
+            floats = np.frombuffer(raw, "<f8", count, offset)
+            if not np.isfinite(floats).all():
+                return self._read_slow(raw)  # the adapters word the error
+        if not math.isfinite(value):
+            return self._read_slow(raw)
+        stamp = 0
+        if layout.stamp_at >= 0:
+            sec, nanosec = _unpack_stamp(raw, layout.stamp_at)
+            stamp = sec * NS_PER_S + nanosec
+        self.fast += 1
+        return stamp, value
+
+    def _decode(self, raw: bytes) -> tuple[Any, Any]:
+        try:
+            obj = self._store.deserialize_cdr(raw, self.msgtype)
+        except Exception as err:  # rosbags' deserializer: struct, index, unicode errors
+            text = " ".join(str(err).split()) or type(err).__name__
+            raise UndecodableMessage(f"a {self.msgtype} message does not decode: {text}") from err
+        return obj, from_rosbags(obj)
+
+    def _read_slow(self, raw: bytes) -> tuple[int, float]:
+        obj, msg = self._decode(raw)
+        if self.role == "command":
+            kind: Any = self.kind
+            stamp, value = read_command(msg, kind, index=self.index, joint=self.joint)
+        else:
+            enc: EncoderType = "float64" if self.kind == "float64" else "joint_state"
+            stamp, value = read_encoder(msg, enc, joint=self.joint)
+        self.slow += 1
+        if len(raw) not in self._layouts and len(self._layouts) < _MAX_LAYOUTS:
+            self._layouts[len(raw)] = self._learn(raw, obj, msg)
+        return stamp or 0, value
+
+    # ------------------------------------------------------------------ learning
+
+    def _serialize(self, obj: Any) -> bytes:
+        return bytes(self._store.serialize_cdr(obj, self.msgtype))
+
+    def _value_index(self, msg: object) -> int:
+        if self.kind == "float64_multi_array":
+            return self.index
+        if self.kind == "joint_state" and self.joint:
+            return list(msg.name).index(self.joint)  # type: ignore[attr-defined]
+        return 0
+
+    def _learn(self, raw: bytes, obj: Any, msg: object) -> _Layout | None:
+        """The layout of ``raw``, from rosbags' serializer (None: read it slowly always)."""
+        try:
+            if self._serialize(obj) != raw:
+                return None  # not written back byte for byte (endianness, padding bytes)
+            probe = obj
+            variable: list[tuple[int, int]] = []
+            stamp_at = -1
+            if hasattr(obj, "header"):
+                stamp = dataclasses.replace(obj.header.stamp, sec=_STAMP_SEC, nanosec=_STAMP_NSEC)
+                probe = dataclasses.replace(
+                    probe, header=dataclasses.replace(obj.header, stamp=stamp)
+                )
+            arrays: dict[str, tuple[int, int]] = {}
+            for k, name in enumerate(_ARRAYS[self.msgtype]):
+                n = len(getattr(obj, name))
+                if n:
+                    values = _sentinels(n, 1.5e300 * (k + 1))
+                    probe = dataclasses.replace(probe, **{name: values})
+            if self.kind == "float64":
+                probe = dataclasses.replace(probe, data=_sentinels(1, 1.5e300)[0])
+            seen = self._serialize(probe)
+            if len(seen) != len(raw):
+                return None
+            if hasattr(obj, "header"):
+                found = seen.find(struct.pack("<iI", _STAMP_SEC, _STAMP_NSEC))
+                if found < 0:
+                    return None
+                stamp_at = found
+                variable.append((found, found + 8))
+            names = _ARRAYS[self.msgtype] or ("data",)
+            for k, name in enumerate(names):
+                n = 1 if self.kind == "float64" else len(getattr(obj, name))
+                if not n:
+                    continue
+                block = _sentinels(n, 1.5e300 * (k + 1)).astype("<f8").tobytes()
+                found = seen.find(block)
+                if found < 0 or seen.find(block, found + 1) >= 0:
+                    return None
+                arrays[name] = (found, n)
+                variable.append((found, found + 8 * n))
+        except (AttributeError, TypeError, ValueError, struct.error):
+            return None
+        variable.sort()
+        constant: list[tuple[int, bytes]] = []
+        pos = 0
+        for start, end in variable:
+            if start > pos:
+                constant.append((pos, raw[pos:start]))
+            pos = max(pos, end)
+        if pos < len(raw):
+            constant.append((pos, raw[pos:]))
+        main = "data" if self.kind != "joint_state" else "position"
+        offset, count = arrays[main]
+        index = self._value_index(msg)
+        if not 0 <= index < count:
+            return None
+        checked: tuple[tuple[int, int], ...] = ()
+        if self.role == "command" and self.kind != "float64":
+            checked = tuple(arrays.values())  # the adapters want every element finite
+        return _Layout(tuple(constant), offset + 8 * index, stamp_at, checked)
+
+    # ------------------------------------------------------------------ writing
+
+    def patch(self, raw: bytes, value: float) -> bytes:
+        """The bytes of the compensated command: ``raw`` (a command this reader read) with
+        its value replaced by ``value`` (finite), everything else (stamp, other elements)
+        unchanged."""
+        if self.role != "command":
+            raise MessageError("only commands are patched")
+        if not math.isfinite(value):
+            raise MessageError(f"the compensated command is not finite ({value})")
+        layout = self._layouts.get(len(raw))
+        if layout is not None and all(raw.startswith(b, at) for at, b in layout.constant):
+            at = layout.value_at
+            return raw[:at] + _pack_d(float(value)) + raw[at + 8 :]
+        _obj, msg = self._decode(raw)
+        kind = cast(CommandType, self.kind)
+        out = compensated_command(
+            msg,
+            value,
+            kind,
+            index=self.index,
+            joint=self.joint,
+        )
+        return self._serialize(to_rosbags(out, self._store))

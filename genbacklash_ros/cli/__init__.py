@@ -1,0 +1,1 @@
+"""The ``genbacklash`` command line: one module per subcommand group."""

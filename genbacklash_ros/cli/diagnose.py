@@ -1,0 +1,260 @@
+"""``genbacklash diagnose``: find where model and measurement disagree, name and add the effect.
+
+Registered by :mod:`genbacklash_ros.cli.main` through :func:`add_parser`. Exit codes follow the
+command line's: 0 when the diagnosis ran (whether or not it named effects), 2 for bad input.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from genbacklash_core import GenBacklashError
+from genbacklash_core.diagnose import (
+    AugmentedModel,
+    DiagnoseSettings,
+    Diagnosis,
+    StartStructure,
+    diagnose,
+    effect_names,
+)
+from genbacklash_ros.cli.replay import (
+    BATCH_PARAMETERS,
+    CommandParameters,
+    add_bag_input_options,
+    add_node_parameter_options,
+    batch_parameters,
+    load_series,
+    node_parameters,
+)
+
+__all__ = ["add_parser", "cmd_diagnose", "parse_start"]
+
+EXIT_OK = 0
+
+_DESCRIPTION = """\
+Find where a backlash model and the measurements disagree, name the missing effect, add it,
+and show the gap shrink.
+
+DATA is a CSV with header columns u (command) and y (measured position), optional t. The
+first part of the record (1 - --validation) is the estimation segment: the starting model -
+the ideal backlash of the paper's eq. (1), or --start, or the structure the node parameters
+(--params-file, --param) set with model/degree/na/nb - is fitted there. The rest is held out:
+the model is simulated free-run over it and the *gap* is the NRMSE there.
+
+Then, in a loop: the estimation residual is tested (Ljung-Box whiteness, prewhitened input
+cross-correlation, Billings-Voon higher-order correlations, mean and trend, an FIR
+model-error model) and each effect of the catalog looks for its signature:
+
+  {effects}
+
+Nominated effects are added to the model and refitted; the one that lowers the BIC most is
+accepted only if it also lowers the validation gap significantly. The loop stops when no
+signature is found or nothing helps; nothing is named when nothing is missing.
+"""
+
+_EPILOG = """\
+examples:
+  genbacklash diagnose run.csv
+  genbacklash diagnose run.csv --json
+  genbacklash diagnose run.csv --start degree=3 --report diag/
+  genbacklash identify run.csv --degree 3 --json > start.json
+  genbacklash diagnose run.csv --start start.json --validation 0.25
+  genbacklash diagnose run.csv --param degree=3 --param model=cascade
+  genbacklash diagnose run.mcap --command /cmd --encoder /enc --params-file config/params.yaml
+
+--json prints {"steps": [{"effect", "evidence", "gap_before", "gap_after"}, ...],
+"gap_initial", "gap_final", "model"}; model is the identify JSON plus delay, offset, drift and
+saturation. Exit status 0 when the diagnosis ran, 2 for bad input.
+"""
+
+
+def _fraction(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(f"must be a number, got {text!r}") from err
+    if not 0.0 < value < 1.0:
+        raise argparse.ArgumentTypeError(f"must be in (0, 1), got {value}")
+    return value
+
+
+def parse_start(text: str) -> StartStructure | AugmentedModel:
+    """``degree=N[,na=R,nb=P]`` or the path of an identify/diagnose JSON file.
+
+    >>> parse_start("degree=3,na=2,nb=1")
+    StartStructure(degree=3, na=2, nb=1)
+    """
+    if "=" in text and not Path(text).exists():
+        values: dict[str, int] = {}
+        for item in text.split(","):
+            key, _, value = item.partition("=")
+            key = key.strip().lower()
+            if key not in ("degree", "na", "nb"):
+                raise GenBacklashError(
+                    f"--start: unknown key {key!r}; use degree=N[,na=R,nb=P] or a JSON file"
+                )
+            try:
+                values[key] = int(value)
+            except ValueError as err:
+                raise GenBacklashError(
+                    f"--start: {key} must be a whole number, got {value!r}"
+                ) from err
+        return StartStructure(**values)
+    path = Path(text)
+    if not path.is_file():
+        raise GenBacklashError(
+            f"--start: {text} is neither degree=N[,na=R,nb=P] nor an existing JSON file"
+        )
+    try:
+        data: Any = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise GenBacklashError(f"--start: cannot read {path} as JSON: {err}") from err
+    if not isinstance(data, dict):
+        raise GenBacklashError(f"--start: {path} must hold a JSON object")
+    return AugmentedModel.from_dict(data)
+
+
+def _model_lines(result: Diagnosis) -> list[str]:
+    model = result.model
+    names = model.base.parameter_names
+    values = model.base.parameters()
+    lines = [f"  {name:<14}{value:>12.5f}" for name, value in zip(names, values, strict=True)]
+    if model.delay:
+        lines.append(f"  {'delay':<14}{model.delay:>12d}  samples")
+    if model.offset:
+        lines.append(f"  {'offset':<14}{model.offset:>12.5f}")
+    if model.drift is not None:
+        lines.append(f"  {'drift rate':<14}{model.drift.rate:>12.4g}  per {model.drift.basis}")
+    if model.saturation is not None:
+        for side in ("low", "high"):
+            value = getattr(model.saturation, side)
+            if value is not None:
+                lines.append(f"  {'limit ' + side:<14}{value:>12.5f}")
+    return lines
+
+
+def _text(result: Diagnosis) -> str:
+    split = result.split
+    lines = [
+        f"estimation samples 0..{split.n_estimation - 1}, validation "
+        f"{split.n_estimation}..{split.n_samples - 1}",
+        f"starting model: {result.reports[0].describe()}",
+    ]
+    for i, step in enumerate(result.steps, 1):
+        lines.append(
+            f"step {i}: {step.effect} - gap {step.gap_before:.4f} -> {step.gap_after:.4f}\n"
+            f"  {step.evidence}"
+        )
+    if not result.steps:
+        lines.append("no missing effect named")
+    lines.append(f"final gap {result.gap_final:.4f} ({result.reports[-1].describe()})")
+    lines.append(f"stopped: {result.reason}")
+    lines.append(f"final model ({', '.join(result.model.effects) or 'ideal backlash'}):")
+    lines += _model_lines(result)
+    return "\n".join(lines)
+
+
+def _start(
+    args: argparse.Namespace, cli: CommandParameters
+) -> StartStructure | AugmentedModel | None:
+    """``--start``, else the structure the node parameters set (any of model, degree, na, nb
+    in the params file or a --param: the node's structure, its defaults for the rest), else
+    None (the ideal backlash)."""
+    if args.start is not None:
+        clash = [name for name in BATCH_PARAMETERS if name in cli.overrides]
+        if clash:
+            raise GenBacklashError(
+                f"--start and --param {', '.join(clash)} both set the starting model; give one"
+            )
+        return parse_start(args.start)
+    if not any(name in cli.given for name in BATCH_PARAMETERS):
+        return None
+    structure = cli.params.structure()
+    return StartStructure(structure.degree, structure.na, structure.nb)
+
+
+def cmd_diagnose(args: argparse.Namespace) -> int:
+    """Run the diagnosis for parsed arguments; print text or JSON; write the report."""
+    cli = node_parameters(args, batch_parameters(args.data))
+    start = _start(args, cli)
+    series = load_series(args, cli.params)
+    settings = DiagnoseSettings(validation=args.validation)
+    result = diagnose(
+        series.u,
+        series.y,
+        start=start,
+        settings=settings,
+        nonfinite="drop" if args.drop_nonfinite else "raise",
+        breaks=series.breaks,
+    )
+    if args.json:
+        print(json.dumps(result.to_dict()))
+    else:
+        print(_text(result))
+    if args.report:
+        from genbacklash_ros.reports.diagnose import write_report
+
+        for path in write_report(result, series.u, series.y, args.report):
+            print(f"wrote {path}", file=sys.stderr)
+    return EXIT_OK
+
+
+def add_parser(subparsers: Any) -> argparse.ArgumentParser:
+    """Register ``diagnose`` on the ``genbacklash`` subcommand parsers."""
+    parser: argparse.ArgumentParser = subparsers.add_parser(
+        "diagnose",
+        help="find the effect the backlash model misses, add it, show the gap shrink",
+        description=_DESCRIPTION.format(effects="\n  ".join(effect_names())),
+        epilog=_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument(
+        "data",
+        metavar="DATA",
+        help="CSV file with columns u,y[,t], or a bag (rosbag2 directory or .mcap) with "
+        "--command and --encoder",
+    )
+    add_bag_input_options(parser, required=False)
+    parser.add_argument(
+        "--json",
+        action="store_true",
+        help="print one JSON object (the documented contract) instead of text",
+    )
+    parser.add_argument(
+        "--report",
+        metavar="DIR",
+        help="write plots (measured vs simulated per step, correlations with bounds, the gap "
+        "per step, where the gap sits) and summary.md / report.html into DIR",
+    )
+    parser.add_argument(
+        "--start",
+        metavar="MODEL",
+        help="starting model: degree=N[,na=R,nb=P] to identify that structure, or a JSON "
+        "file written by 'identify --json' or 'diagnose --json' (default: the ideal "
+        "backlash, degree=1)",
+    )
+    parser.add_argument(
+        "--validation",
+        type=_fraction,
+        default=0.3,
+        metavar="FRACTION",
+        help="fraction of the record held out at its end for the gap (default 0.3)",
+    )
+    parser.add_argument(
+        "--drop-nonfinite",
+        action="store_true",
+        help="drop NaN/inf samples instead of stopping with an error",
+    )
+    add_node_parameter_options(
+        parser,
+        used="diagnose uses model, degree, na, nb as the starting structure when any of them "
+        "is set and --start is not (the node's defaults for the rest), and, for a bag, joint, "
+        "command_index; the others are validated, then ignored (a note on stderr names those "
+        "set to other than their defaults).",
+    )
+    parser.set_defaults(func=cmd_diagnose)
+    return parser

@@ -1,0 +1,397 @@
+"""The ``genbacklash`` command line (GUIDE §4).
+
+Exit codes: 0 success; 2 bad input or options (a one-line reason on stderr); 3 the identifier
+ran but did not converge (the result, with its reason, is still printed).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from genbacklash_core import (
+    Cascade,
+    GenBacklashError,
+    GeneralBacklash,
+    IdentificationResult,
+    __version__,
+    identify_backlash,
+    identify_cascade,
+    paper_example,
+)
+from genbacklash_core.data import NonFinitePolicy
+from genbacklash_ros.bags.csvio import Series, write_series_csv
+from genbacklash_ros.cli import diagnose as diagnose_cli
+from genbacklash_ros.cli import excite as excite_cli
+from genbacklash_ros.cli import node as node_cli  # imports no middleware
+from genbacklash_ros.cli import replay as replay_cli
+
+__all__ = ["main"]
+
+EXIT_OK = 0
+EXIT_BAD_INPUT = 2
+EXIT_NOT_CONVERGED = 3
+EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE, what a shell reports for a writer killed by it
+
+
+class _Progress:
+    """A tqdm bar over the iterations on stderr (silent when stderr is not a terminal)."""
+
+    def __init__(self, total: int, enabled: bool) -> None:
+        self._bar = None
+        if enabled:
+            from tqdm import tqdm
+
+            self._bar = tqdm(total=total, desc="iterations", unit="it", leave=False, disable=None)
+
+    def __call__(self, iteration: int, parameters: np.ndarray) -> None:
+        if self._bar is not None:
+            self._bar.update(1)
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.close()
+
+
+def _identify(
+    series: Series,
+    *,
+    model: str,
+    degree: int,
+    na: int = 2,
+    nb: int = 2,
+    sign: float | None = None,
+    refine: bool = True,
+    max_iterations: int = 30,
+    nonfinite: NonFinitePolicy = "raise",
+    show_progress: bool = True,
+) -> IdentificationResult:
+    """Run the identifier chosen by ``model`` with a progress bar over the iterations."""
+    progress = _Progress(max_iterations, show_progress)
+    try:
+        if model == "cascade":
+            return identify_cascade(
+                series.u,
+                series.y,
+                degree,
+                na,
+                nb,
+                sign=sign,
+                refine=refine,
+                max_iterations=max_iterations,
+                nonfinite=nonfinite,
+                callback=progress,
+                breaks=series.breaks,
+            )
+        return identify_backlash(
+            series.u,
+            series.y,
+            degree,
+            sign=sign,
+            refine=refine,
+            max_iterations=max_iterations,
+            nonfinite=nonfinite,
+            callback=progress,
+            breaks=series.breaks,
+        )
+    finally:
+        progress.close()
+
+
+def _parameter_table(
+    result: IdentificationResult, truth: GeneralBacklash | Cascade | None = None
+) -> str:
+    names = result.model.parameter_names
+    estimate = result.model.parameters()
+    header = f"{'parameter':<12}{'estimate':>12}"
+    true_values = None
+    if truth is not None:
+        true_values = truth.parameters()
+        header += f"{'truth':>12}{'error':>12}"
+    lines = [header, "-" * len(header)]
+    for i, name in enumerate(names):
+        row = f"{name:<12}{estimate[i]:>12.5f}"
+        if true_values is not None:
+            row += f"{true_values[i]:>12.5f}{estimate[i] - true_values[i]:>+12.5f}"
+        lines.append(row)
+    return "\n".join(lines)
+
+
+def _summary(result: IdentificationResult) -> str:
+    status = "converged" if result.converged else "NOT converged"
+    return (
+        f"{status} after {result.iterations} iterations; free-run NRMSE "
+        f"{result.fit.nrmse:.4f}\n{result.reason}"
+    )
+
+
+def _cmd_identify(args: argparse.Namespace) -> int:
+    params = replay_cli.node_parameters(args, replay_cli.batch_parameters(args.data)).params
+    series = replay_cli.load_series(args, params)
+    result = _identify(
+        series,
+        model=params.model if args.model is None else args.model,
+        degree=params.degree if args.degree is None else args.degree,
+        na=params.na if args.na is None else args.na,
+        nb=params.nb if args.nb is None else args.nb,
+        sign=None if args.sign == "auto" else float(args.sign),
+        refine=not args.no_refine,
+        max_iterations=args.max_iterations,
+        nonfinite="drop" if args.drop_nonfinite else "raise",
+        show_progress=not args.json,
+    )
+    if args.json:
+        print(json.dumps(result.to_dict()))
+    else:
+        print(_parameter_table(result))
+        print(_summary(result))
+    if args.plot:
+        from genbacklash_ros.reports.plots import save_identification_plots
+
+        for path in save_identification_plots(result, args.plot, series.u, series.y):
+            print(f"wrote {path}", file=sys.stderr)
+    return EXIT_OK if result.converged else EXIT_NOT_CONVERGED
+
+
+def _cmd_simulate(args: argparse.Namespace) -> int:
+    if args.bag or args.scenario:
+        return replay_cli.simulate_bag(args)
+    if args.example is None or not args.output:
+        raise GenBacklashError("give --example N and -o FILE.csv (or --bag DIR for a bag)")
+    example = paper_example(args.example)
+    data = example.generate(args.seed, n_samples=args.samples, snr=args.snr)
+    write_series_csv(args.output, Series(u=data.u, y=data.y))
+    print(
+        f"wrote {args.output}: Example {example.number}, {data.u.size} samples, |u| < "
+        f"{example.u_max}, SNR {args.snr or example.snr}",
+        file=sys.stderr,
+    )
+    return EXIT_OK
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    example = paper_example(args.example)
+    data = example.generate(args.seed)
+    cascade = isinstance(example.model, Cascade)
+    print(
+        f"Paper Example {example.number}: {'cascade' if cascade else 'general backlash'}, "
+        f"N = {example.n_samples}, |u| < {example.u_max}, SNR {example.snr}, seed {args.seed}\n"
+    )
+    series = Series(u=data.u, y=data.y)
+    result = _identify(series, model="cascade" if cascade else "backlash", degree=3)
+    print(_parameter_table(result, example.model))
+    print(_summary(result))
+    from genbacklash_ros.reports.plots import save_identification_plots
+
+    out = Path(args.out)
+    write_series_csv(out / "data.csv", series)
+    for path in save_identification_plots(result, out, data.u, data.y, example.model):
+        print(f"wrote {path}")
+    (out / "result.json").write_text(json.dumps(result.to_dict(), indent=2) + "\n")
+    print(f"wrote {out / 'result.json'} and {out / 'data.csv'}")
+    return EXIT_OK if result.converged else EXIT_NOT_CONVERGED
+
+
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
+    return value
+
+
+def _non_negative_int(text: str) -> int:
+    value = int(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
+    return value
+
+
+def _positive_float(text: str) -> float:
+    value = float(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {value}")
+    return value
+
+
+_BATCH_USES = (
+    "{command} uses model, degree, na, nb and, for a bag, joint, command_index; the others "
+    "are validated, then ignored (a note on stderr names those set to other than their "
+    "defaults). Bags are read with header stamps, one sample per encoder message (the node's "
+    "default stamp_source and sample_period)."
+)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser (exposed for tests and documentation)."""
+    parser = argparse.ArgumentParser(
+        prog="genbacklash",
+        description=(
+            "Identify and cancel general backlash (gear play with curved branches) from "
+            "actuator commands and encoder readings."
+        ),
+        epilog="Run 'genbacklash COMMAND --help' for the options of a command.",
+    )
+    parser.add_argument("--version", action="version", version=f"genbacklash {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    ident = sub.add_parser(
+        "identify",
+        help="identify a general backlash (or backlash + linear dynamics) from data",
+        description=(
+            "Identify a general backlash from a CSV with header columns u (command) and y "
+            "(measured position), optional t. The paper's iteration (Voeroes, §3-4) runs from "
+            "m_1 = +/-1, c = 0.001, then an output-error refinement brings it to maximum-"
+            "likelihood accuracy. Exit status 3 when it did not converge."
+        ),
+    )
+    ident.add_argument(
+        "data",
+        metavar="DATA",
+        help="CSV file with columns u,y[,t], or a rosbag2 directory / .mcap file (then give "
+        "--command and --encoder: one sample per encoder message, the command held)",
+    )
+    replay_cli.add_bag_input_options(ident, required=False)
+    ident.add_argument(
+        "--model",
+        choices=("backlash", "cascade"),
+        default=None,
+        help="backlash alone (y is the backlash output) or backlash followed by linear "
+        "dynamics (default: backlash)",
+    )
+    ident.add_argument(
+        "--degree",
+        type=_positive_int,
+        default=None,
+        help="polynomial degree of each branch; 1 = ideal backlash (default 3)",
+    )
+    ident.add_argument(
+        "--na",
+        type=_positive_int,
+        default=None,
+        help="cascade: number of input terms r of the linear block, a_1=1 included (default 2)",
+    )
+    ident.add_argument(
+        "--nb",
+        type=_non_negative_int,
+        default=None,
+        help="cascade: number of output terms p of the linear block (default 2)",
+    )
+    ident.add_argument(
+        "--sign",
+        choices=("auto", "+1", "-1"),
+        default="auto",
+        help="increasing (+1) or decreasing (-1) branches; auto detects it",
+    )
+    ident.add_argument(
+        "--no-refine",
+        action="store_true",
+        help="skip the output-error refinement (plain paper iteration)",
+    )
+    ident.add_argument(
+        "--max-iterations", type=_positive_int, default=30, help="iteration limit (default 30)"
+    )
+    ident.add_argument(
+        "--drop-nonfinite",
+        action="store_true",
+        help="drop NaN/inf samples instead of stopping with an error",
+    )
+    ident.add_argument(
+        "--json",
+        action="store_true",
+        help="print one JSON object (the documented contract) instead of a table",
+    )
+    ident.add_argument(
+        "--plot", metavar="DIR", help="also write characteristic.png and history.png into DIR"
+    )
+    replay_cli.add_node_parameter_options(ident, used=_BATCH_USES.format(command="identify"))
+    ident.set_defaults(func=_cmd_identify)
+
+    sim = sub.add_parser(
+        "simulate",
+        help="write synthetic data of the paper's examples",
+        description=(
+            "Simulate one of the paper's four examples (uniform random input, white output "
+            "noise at the paper's SNR = std(output)/std(noise)) and write a CSV with columns u,y "
+            "(-o), or a rosbag2 MCAP bag (--bag) of it or of the --scenario drivetrain."
+        ),
+    )
+    sim.add_argument(
+        "--example",
+        type=int,
+        choices=(1, 2, 3, 4),
+        default=None,
+        help="1, 2: general backlash (increasing, decreasing); 3, 4: cascade",
+    )
+    sim.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    sim.add_argument(
+        "--samples",
+        type=_positive_int,
+        default=None,
+        help="number of samples (default: the paper's N)",
+    )
+    sim.add_argument(
+        "--snr",
+        type=_positive_float,
+        default=None,
+        help="signal-to-noise ratio (default: the paper's)",
+    )
+    sim.add_argument("-o", "--output", metavar="FILE.csv", help="output CSV")
+    replay_cli.add_simulate_bag_options(sim)
+    sim.set_defaults(func=_cmd_simulate)
+
+    demo = sub.add_parser(
+        "demo",
+        help="simulate a paper example, identify it, print truth vs estimate, save plots",
+        description=(
+            "The bundled main job: simulate the paper's Example 3 (or --example), identify it, "
+            "print a truth-vs-estimate table and write characteristic.png, history.png, "
+            "result.json and data.csv into --out."
+        ),
+    )
+    demo.add_argument(
+        "--example",
+        type=int,
+        choices=(1, 2, 3, 4),
+        default=3,
+        help="paper example (default 3: cascade)",
+    )
+    demo.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    demo.add_argument(
+        "--out", default="demo_output", metavar="DIR", help="output directory (default demo_output)"
+    )
+    demo.set_defaults(func=_cmd_demo)
+    diagnose_cli.add_parser(sub)
+    replay_cli.add_parser(sub)
+    node_cli.add_parser(sub)
+    excite_cli.add_parser(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``genbacklash`` console script."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        code: int = args.func(args)
+    except GenBacklashError as err:
+        print(f"genbacklash {args.command}: error: {err}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print(f"genbacklash {args.command}: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        # the reader of stdout went away (`genbacklash identify ... | head -1`): stop quietly,
+        # and point stdout at /dev/null so that the interpreter's final flush cannot fail too
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_BROKEN_PIPE
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())

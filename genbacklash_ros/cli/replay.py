@@ -1,0 +1,601 @@
+"""``genbacklash replay`` (and the bag options of ``simulate`` and ``identify``).
+
+Registered by :mod:`genbacklash_ros.cli.main` through :func:`add_parser`. Exit codes follow the
+command line's: 0 when the whole bag was replayed, 2 for bad input -- including a bag found
+corrupt or truncated part-way (the output written so far is closed and stays readable).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import sys
+from collections.abc import Collection, Sequence
+from pathlib import Path
+from typing import Any, NamedTuple
+
+from genbacklash_core import GenBacklashError
+from genbacklash_core.scenarios import PHASE_KINDS
+from genbacklash_ros.bags.bagio import BagError, read_aligned
+from genbacklash_ros.bags.csvio import Series, read_series_csv
+from genbacklash_ros.bags.replay import OUTPUT_TOPICS, ReplayResult, replay
+from genbacklash_ros.bags.simbags import COMMAND_TOPIC, ENCODER_TOPIC, SimulatedBag
+from genbacklash_ros.node.parameters import (
+    PARAMETER_SPECS,
+    NodeParameters,
+    command_line_parameters,
+    parameter_table,
+    parse_param_overrides,
+)
+
+__all__ = [
+    "BATCH_PARAMETERS",
+    "CommandParameters",
+    "add_bag_input_options",
+    "add_node_parameter_options",
+    "add_parser",
+    "add_simulate_bag_options",
+    "batch_parameters",
+    "cmd_replay",
+    "is_bag",
+    "load_bag_series",
+    "node_parameters",
+    "simulate_bag",
+]
+
+EXIT_OK = 0
+EXIT_BAD_INPUT = 2
+
+_DESCRIPTION = f"""\
+Replay a recorded bag through the backlash_identifier node's pipeline, offline.
+
+BAG is a rosbag2 directory (metadata.yaml + .mcap) or a bare .mcap file. The messages of
+--command and --encoder are fed in log-time order to the same pipeline the live node runs
+(the log time is the receive time), with the node's parameters: the defaults, then
+--params-file, then --param NAME=VALUE and the options --model --degree --na --nb --method
+--joint --command-index (an option and a --param for the same parameter must agree). The
+message types come from the bag; a replay identifies from the recorded command and writes no
+checkpoint. --list-params prints every parameter with its range. OUT is a new rosbag2 MCAP
+directory with the two input topics plus what the node publishes:
+{OUTPUT_TOPICS["estimate"]}, {OUTPUT_TOPICS["compensated_command"]} (one per command) and
+{OUTPUT_TOPICS["diagnostics"]}; rosbags, mcap-ros2-support and Foxglove read it.
+
+Prints the final estimate (or --json) and writes an HTML report with plots when --report is
+given. A progress bar runs on stderr. A bag found corrupt or truncated part-way stops the
+replay there: OUT keeps what was written (closed properly), the reason goes to stderr and
+the exit status is 2.
+"""
+
+_EPILOG = """\
+examples:
+  genbacklash replay bags/drivetrain --command /command --encoder /encoder -o out --report rep
+  genbacklash replay run.mcap --command /cmd --encoder /joint_states --joint knee \\
+      --model cascade --na 2 --nb 2 -o out --json
+  genbacklash replay run --command /cmd --encoder /enc --params-file config/params.yaml -o out
+  genbacklash replay run --command /cmd --encoder /enc -o out --param method=recursive \\
+      --param forgetting=0.999 --param gate_low=0.3
+"""
+
+
+def add_bag_input_options(parser: argparse.ArgumentParser, *, required: bool) -> None:
+    """``--command TOPIC --encoder TOPIC [--joint NAME] [--command-index I]``.
+
+    Stored as ``command_topic``, ``encoder_topic``, ``joint``, ``command_index`` (``command``
+    is the sub-command's name).
+    """
+    parser.add_argument(
+        "--command",
+        metavar="TOPIC",
+        dest="command_topic",
+        required=required,
+        help="bag input: command topic (std_msgs/Float64, std_msgs/Float64MultiArray or "
+        "sensor_msgs/JointState)",
+    )
+    parser.add_argument(
+        "--encoder",
+        metavar="TOPIC",
+        dest="encoder_topic",
+        required=required,
+        help="bag input: encoder topic (sensor_msgs/JointState or std_msgs/Float64)",
+    )
+    parser.add_argument(
+        "--joint",
+        metavar="NAME",
+        default=None,
+        help="bag input: joint name in JointState messages (default: the first joint)",
+    )
+    parser.add_argument(
+        "--command-index",
+        metavar="I",
+        type=int,
+        default=None,
+        help="bag input: element of a Float64MultiArray command (default 0)",
+    )
+
+
+def load_bag_series(args: argparse.Namespace, params: NodeParameters | None = None) -> Series:
+    """The aligned (u, y) samples of a bag given by ``args.data`` and the bag options.
+
+    One sample per encoder message; the command held (the pipeline's alignment) and the
+    sample rule's ``breaks``. ``joint`` and ``command_index`` come from the options, else
+    from ``params``.
+    """
+    if not args.command_topic or not args.encoder_topic:
+        raise BagError(
+            f"{args.data} is a bag: say which topics to use with --command TOPIC and "
+            "--encoder TOPIC"
+        )
+    joint = args.joint if args.joint is not None else params.joint if params else ""
+    index = args.command_index
+    if index is None:
+        index = params.command_index if params else 0
+    series = read_aligned(
+        args.data, args.command_topic, args.encoder_topic, joint=joint, command_index=index
+    )
+    if series.skipped:
+        print(
+            f"skipped {series.skipped} encoder samples before the first command",
+            file=sys.stderr,
+        )
+    return Series(u=series.u, y=series.y, breaks=series.breaks)
+
+
+BAG_SUFFIXES = (".mcap", ".db3")
+
+
+def is_bag(data: str | Path) -> bool:
+    """Whether ``data`` is read as a bag (a directory, ``.mcap`` or ``.db3``), not a CSV."""
+    file = Path(data)
+    return file.is_dir() or file.suffix.lower() in BAG_SUFFIXES
+
+
+def load_series(args: argparse.Namespace, params: NodeParameters | None = None) -> Series:
+    """The (u, y) data of ``args.data``: a CSV file, or a bag with the bag options.
+
+    Shared by ``identify`` and ``diagnose``; ``params`` supply ``joint`` and
+    ``command_index`` where the options do not.
+    """
+    file = Path(args.data)
+    if is_bag(file):
+        return load_bag_series(args, params)
+    if not file.exists():
+        raise GenBacklashError(f"{file} does not exist")
+    return read_series_csv(file)
+
+
+# --------------------------------------------------------------------------- node parameters
+
+# what identify and diagnose use of the node's parameters (the rest is validated, then ignored)
+BATCH_PARAMETERS = ("model", "degree", "na", "nb")
+_BAG_PARAMETERS = ("joint", "command_index")
+# set by the replay itself (genbacklash_ros.bags.replay): the bag's message types, the recorded
+# command, no checkpoint
+_SET_BY_REPLAY = ("command_type", "encoder_type", "compensation_in_loop", "checkpoint_file")
+
+
+def batch_parameters(data: str | Path) -> tuple[str, ...]:
+    """The node parameters ``identify`` / ``diagnose`` use for ``data`` (a CSV or a bag)."""
+    return BATCH_PARAMETERS + (_BAG_PARAMETERS if is_bag(data) else ())
+
+
+class _ListParams(argparse.Action):
+    """``--list-params``: print the parameter table and exit 0 (like ``--help``)."""
+
+    def __init__(self, option_strings: Sequence[str], dest: str, **kwargs: Any) -> None:
+        kwargs.update(nargs=0, default=argparse.SUPPRESS)
+        super().__init__(option_strings, argparse.SUPPRESS, **kwargs)
+
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        values: Any,
+        option_string: str | None = None,
+    ) -> None:
+        try:
+            print(parameter_table(), flush=True)
+        except BrokenPipeError:  # `--list-params | head`: stop quietly, as main() does
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            parser.exit(141)
+        parser.exit(0)
+
+
+def add_node_parameter_options(
+    parser: argparse.ArgumentParser, *, used: str, params_file: bool = True
+) -> None:
+    """``[--params-file FILE] --param NAME=VALUE ... --list-params``; ``used`` says (for the
+    help) which parameters the command uses."""
+    if params_file:
+        parser.add_argument(
+            "--params-file",
+            metavar="FILE",
+            help="the node's ROS 2 parameters YAML (backlash_identifier or /** section), "
+            "validated as by 'genbacklash node'; options and --param override it",
+        )
+    parser.add_argument(
+        "--param",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="set a node parameter, repeatable, e.g. --param degree=2 --param "
+        "method=recursive; VALUE is read as in a params file (2, recursive, false, 0.3, .inf) "
+        "and validated the same way; it overrides --params-file, and an option for the same "
+        f"parameter must agree with it. {used} --list-params prints every parameter",
+    )
+    parser.add_argument(
+        "--list-params",
+        action=_ListParams,
+        help="print the node's parameters (type, default, range, unit, meaning) and exit",
+    )
+
+
+class CommandParameters(NamedTuple):
+    """The node parameters of one command line (see :func:`node_parameters`)."""
+
+    params: NodeParameters
+    given: dict[str, object]
+    overrides: dict[str, object]
+
+
+def node_parameters(args: argparse.Namespace, used: Collection[str]) -> CommandParameters:
+    """Defaults < ``--params-file`` < ``--param`` (validated as a params file is), checked
+    against the command's options of the same names (``--degree`` ...: they must agree with
+    ``--param``).
+
+    Parameters set (by the file or ``--param``) to other than their defaults that the command
+    does not use (not in ``used``) are named in one note on stderr.
+    """
+    overrides = parse_param_overrides(args.param)
+    options = {s.name: getattr(args, s.name, None) for s in PARAMETER_SPECS}
+    params, given = command_line_parameters(args.params_file, overrides, options)
+    defaults = {s.name: s.default for s in PARAMETER_SPECS}
+    unused = [
+        name
+        for name, value in given.items()
+        if name not in used and (name not in defaults or value != defaults[name])
+    ]
+    if unused:
+        print(
+            f"genbacklash {args.command}: note: {', '.join(unused)} not used by "
+            f"{args.command} (validated, ignored)",
+            file=sys.stderr,
+        )
+    return CommandParameters(params, given, overrides)
+
+
+# --------------------------------------------------------------------------- simulate
+
+
+OPERATION_SCENARIOS = PHASE_KINDS
+"""``--scenario`` values that simulate a drivetrain in normal operation (issue 12)."""
+
+_SCENARIO_HELP = """\
+Bag scenarios (--bag DIR). 'drivetrain' is the paper-style random input: a new uniform
+command in (-2, 2) every 1-10 ms, Example 1's branches, white noise at SNR 25. The others
+are a drivetrain in normal operation (genbacklash_core.scenarios): 100 Hz position commands
+held by the servo, a 1 kHz encoder quantised to 4096 counts/rev, stamped at its jittered
+sampling instants, some readings lost; a few degrees of play with mildly curved branches.
+'operation': point-to-point moves with dwells and jogs; 'one_way': a slow traverse in one
+direction (one branch only); 'pick_and_place': the same two targets again and again;
+'sine_sweep': a sine over most of the travel, 0.05 -> 0.5 Hz. --phases chains them. Every
+bag stores its truth (models at start and end, dead zones over time) in its metadata
+(custom_data 'genbacklash.truth'), which 'replay --report' draws.
+"""
+
+
+def add_simulate_bag_options(parser: argparse.ArgumentParser) -> None:
+    """The bag options of ``simulate``: ``--bag DIR``, ``--scenario``, ``--phases``,
+    ``--duration``, ``--wear``, ``--loss``, ``--noise``, ``--straight``."""
+    parser.add_argument(
+        "--bag",
+        metavar="DIR",
+        help=f"write a rosbag2 MCAP bag (a new directory): {COMMAND_TOPIC} "
+        f"(std_msgs/Float64MultiArray, element 0 the drivetrain) and {ENCODER_TOPIC} "
+        "(sensor_msgs/JointState, joint drive_joint) at 1 kHz; with --example, one command "
+        "per sample",
+    )
+    group = parser.add_argument_group("bag scenarios", _SCENARIO_HELP)
+    group.add_argument(
+        "--scenario",
+        choices=("drivetrain", *OPERATION_SCENARIOS),
+        help="what the drivetrain does (needs --bag): drivetrain (paper-style random input), "
+        "operation, one_way, pick_and_place, sine_sweep",
+    )
+    group.add_argument(
+        "--phases",
+        metavar="KIND:SECONDS[,...]",
+        help="chain operation scenarios, run one after the other, e.g. "
+        "'operation:30,one_way:120,operation:30' (needs --bag; instead of --scenario and "
+        "--duration)",
+    )
+    group.add_argument(
+        "--duration",
+        type=float,
+        metavar="SECONDS",
+        default=None,
+        help="record length in seconds (default: 60 for the operation scenarios, 12 for "
+        "drivetrain)",
+    )
+    group.add_argument(
+        "--wear",
+        type=float,
+        metavar="FRACTION",
+        default=None,
+        help="growth of both dead zones c_L, c_R over the record, linear in time "
+        "(0.2: 20%% wider at the end; default 0.2)",
+    )
+    group.add_argument(
+        "--loss",
+        type=float,
+        metavar="P",
+        default=None,
+        help="operation scenarios: probability that an encoder reading is lost (absent from "
+        "the bag), in [0, 0.95] (default 0.02)",
+    )
+    group.add_argument(
+        "--noise",
+        type=float,
+        metavar="RAD",
+        default=None,
+        help="operation scenarios: standard deviation of white encoder noise before "
+        "quantisation, radians (default 0: quantisation only)",
+    )
+    group.add_argument(
+        "--straight",
+        action="store_true",
+        help="operation scenarios: straight branches (the ideal backlash, same play) instead "
+        "of mildly curved ones",
+    )
+
+
+_PHASES_FORM = "expected KIND:SECONDS[,KIND:SECONDS...] with KIND one of " + ", ".join(
+    OPERATION_SCENARIOS
+)
+
+
+def parse_phases(text: str) -> tuple[tuple[str, float], ...]:
+    """``"operation:30,one_way:120"`` -> ``(("operation", 30.0), ("one_way", 120.0))``.
+
+    Raises :class:`GenBacklashError` (one line) for anything else.
+    """
+    import math
+
+    phases: list[tuple[str, float]] = []
+    for item in text.split(","):
+        kind, sep, seconds = item.strip().partition(":")
+        if not sep:
+            raise GenBacklashError(
+                f"bad --phases {text!r}: {item.strip()!r} has no ':SECONDS'; {_PHASES_FORM}"
+            )
+        kind = kind.strip()
+        if kind not in OPERATION_SCENARIOS:
+            raise GenBacklashError(f"bad --phases {text!r}: unknown phase {kind!r}; {_PHASES_FORM}")
+        try:
+            value = float(seconds)
+        except ValueError:
+            value = math.nan
+        if not (math.isfinite(value) and value > 0):
+            raise GenBacklashError(
+                f"bad --phases {text!r}: the {kind} phase needs a length in seconds > 0, got "
+                f"{seconds.strip()!r}"
+            )
+        phases.append((kind, value))
+    return tuple(phases)
+
+
+def _write_operation_bag(args: argparse.Namespace) -> SimulatedBag:
+    """An operation scenario (``--scenario operation|...`` or ``--phases``) as a bag."""
+    import math
+
+    from genbacklash_ros.bags.simbags import operation_settings, write_operation_bag
+
+    if args.snr is not None or args.samples is not None:
+        raise GenBacklashError(
+            "--snr and --samples apply to --example and --scenario drivetrain; the operation "
+            "scenarios take --duration and --noise"
+        )
+    if args.phases:
+        if args.duration is not None:
+            raise GenBacklashError("--phases sets the length of the record: drop --duration")
+        phases = parse_phases(args.phases)
+    else:
+        duration = 60.0 if args.duration is None else args.duration
+        if not (math.isfinite(duration) and duration > 0):
+            raise GenBacklashError(f"--duration must be > 0 seconds, got {duration:g}")
+        phases = ((args.scenario, float(duration)),)
+    wear = 0.2 if args.wear is None else args.wear
+    loss = 0.02 if args.loss is None else args.loss
+    noise = 0.0 if args.noise is None else args.noise
+    if not 0.0 <= wear <= 10.0:
+        raise GenBacklashError(f"--wear must lie in [0, 10], got {wear:g}")
+    if not 0.0 <= loss <= 0.95:
+        raise GenBacklashError(f"--loss must lie in [0, 0.95], got {loss:g}")
+    if not (math.isfinite(noise) and noise >= 0.0):
+        raise GenBacklashError(f"--noise must be >= 0 radians, got {noise:g}")
+    settings = operation_settings(phases, wear=wear, loss=loss, noise=noise, straight=args.straight)
+    return write_operation_bag(args.bag, settings, args.seed)
+
+
+def simulate_bag(args: argparse.Namespace) -> int:
+    """Write the bag ``simulate`` asked for (``--bag`` with ``--example``, ``--scenario`` or
+    ``--phases``)."""
+    import math
+
+    from genbacklash_ros.bags.simbags import write_drivetrain_bag, write_example_bag
+
+    phases = getattr(args, "phases", None)
+    what = "--phases" if phases else "--scenario"
+    if not args.bag:
+        raise GenBacklashError(f"{what} writes a bag: give --bag DIR")
+    if args.output:
+        raise GenBacklashError("give either -o FILE.csv or --bag DIR, not both")
+    if args.example is not None and (args.scenario or phases):
+        raise GenBacklashError(f"give either --example or {what}, not both")
+    if args.scenario and phases:
+        raise GenBacklashError("give either --scenario or --phases, not both")
+    operation = bool(phases) or args.scenario in OPERATION_SCENARIOS
+    if not operation:
+        extra = [
+            name
+            for name, given in (
+                ("--loss", args.loss is not None),
+                ("--noise", args.noise is not None),
+                ("--straight", args.straight),
+            )
+            if given
+        ]
+        if extra:
+            raise GenBacklashError(
+                f"{', '.join(extra)} appl{'ies' if len(extra) == 1 else 'y'} to the operation "
+                f"scenarios (--scenario "
+                f"{'|'.join(OPERATION_SCENARIOS)} or --phases)"
+            )
+    made: SimulatedBag
+    if operation:
+        made = _write_operation_bag(args)
+    elif args.scenario == "drivetrain":
+        duration = 12.0 if args.duration is None else args.duration
+        wear = 0.2 if args.wear is None else args.wear
+        if not (math.isfinite(duration) and duration > 0) or not 0 <= wear <= 10:
+            raise GenBacklashError("--duration must be > 0 and --wear in [0, 10]")
+        made = write_drivetrain_bag(
+            args.bag, seed=args.seed, duration=duration, wear=wear, snr=args.snr or 25.0
+        )
+    elif args.example is not None:
+        if args.duration is not None or args.wear is not None:
+            raise GenBacklashError(
+                "--duration and --wear apply to --scenario and --phases; --example takes --samples"
+            )
+        made = write_example_bag(
+            args.bag, args.example, seed=args.seed, n_samples=args.samples, snr=args.snr
+        )
+    else:
+        raise GenBacklashError(
+            "say what to simulate: --example N, --scenario "
+            f"{'|'.join(('drivetrain', *OPERATION_SCENARIOS))} or --phases KIND:SECONDS,..."
+        )
+    topics = ", ".join(f"{t} ({m}, {n})" for t, (m, n) in made.counts.items())
+    print(f"wrote {made.path}: {made.description}; {topics}", file=sys.stderr)
+    return EXIT_OK
+
+
+# --------------------------------------------------------------------------- replay
+
+
+def _summary(result: ReplayResult) -> str:
+    est = result.estimate
+    lines = [f"{'parameter':<12}{'estimate':>12}{'2 sigma':>12}", "-" * 36]
+    std = est.std()
+    for name, value, sigma in zip(est.names, est.parameters, std, strict=True):
+        lines.append(f"{name:<12}{value:>12.5f}{2 * sigma:>12.5f}")
+    stats = result.stats
+    dropped = {k: n for k, n in stats.dropped.items() if n}
+    rate = result.messages_in / result.seconds if result.seconds > 0 else 0.0
+    lines.append(
+        f"state {est.state.value} (confidence {est.confidence:.2f}); {est.reason}".rstrip("; ")
+    )
+    lines.append(
+        f"{result.messages_in} messages in ({rate:,.0f}/s), {result.messages_out} written to "
+        f"{result.output}; {stats.compensated} compensated commands"
+        + (f"; dropped {dropped}" if dropped else "")
+    )
+    return "\n".join(lines)
+
+
+def _remove_old_output(path: Path) -> None:
+    """Delete a previous output bag (a rosbag2 directory or an .mcap file), nothing else."""
+    if path.is_dir() and (path / "metadata.yaml").is_file():
+        shutil.rmtree(path)
+    elif path.is_file() and path.suffix == ".mcap":
+        path.unlink()
+    elif path.exists():
+        raise BagError(f"--overwrite: {path} exists but is not a bag; not removing it")
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    """Run ``genbacklash replay``."""
+    used = [s.name for s in PARAMETER_SPECS if s.name not in _SET_BY_REPLAY]
+    params = node_parameters(args, used).params
+    if args.overwrite:
+        _remove_old_output(Path(args.output))
+    result = replay(
+        args.bag,
+        args.output,
+        command_topic=args.command_topic,
+        encoder_topic=args.encoder_topic,
+        params=params,
+        joint=args.joint,
+        command_index=args.command_index,
+        model=args.model,
+        degree=args.degree,
+        na=args.na,
+        nb=args.nb,
+        method=args.method,
+        progress=not args.no_progress,
+    )
+    if args.json:
+        print(json.dumps(result.to_dict()))
+    else:
+        print(_summary(result))
+    if args.report:
+        from genbacklash_ros.reports.replay import write_report
+
+        index = write_report(result, args.report)
+        print(f"wrote {index}", file=sys.stderr)
+    if result.error:
+        print(
+            f"genbacklash replay: error: {result.error}; kept {result.output} (a valid bag "
+            f"of the {result.messages_in} messages read)",
+            file=sys.stderr,
+        )
+        return EXIT_BAD_INPUT
+    return EXIT_OK
+
+
+def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Register ``replay`` on the ``genbacklash`` command line."""
+    parser = subparsers.add_parser(
+        "replay",
+        help="replay a bag through the node: estimate, compensated commands, report",
+        description=_DESCRIPTION,
+        epilog=_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("bag", metavar="BAG", help="rosbag2 directory or .mcap file")
+    add_bag_input_options(parser, required=True)
+    parser.add_argument(
+        "-o", "--output", required=True, metavar="OUT", help="output bag directory (new)"
+    )
+    parser.add_argument(
+        "--overwrite", action="store_true", help="replace OUT if it is a bag from an earlier run"
+    )
+    parser.add_argument("--report", metavar="DIR", help="write PNG plots and index.html into DIR")
+    parser.add_argument(
+        "--params-file",
+        metavar="FILE",
+        help="ROS 2 parameters YAML for backlash_identifier (--param and the options below "
+        "override it)",
+    )
+    add_node_parameter_options(
+        parser,
+        used="All parameters apply except command_type, encoder_type (from the bag), "
+        "compensation_in_loop (false) and checkpoint_file (none).",
+        params_file=False,
+    )
+    parser.add_argument("--model", choices=("backlash", "cascade"), default=None)
+    parser.add_argument("--degree", type=int, default=None, help="branch polynomial degree")
+    parser.add_argument("--na", type=int, default=None, help="cascade: x terms r (a_1 = 1)")
+    parser.add_argument("--nb", type=int, default=None, help="cascade: y terms p")
+    parser.add_argument(
+        "--method",
+        choices=("windowed", "recursive"),
+        default=None,
+        help="online identifier (default: windowed)",
+    )
+    parser.add_argument(
+        "--json", action="store_true", help="print the final estimate as one JSON object"
+    )
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.set_defaults(func=cmd_replay)

@@ -1,0 +1,669 @@
+"""Whether the command and encoder streams can be trusted: the node's faults.
+
+:class:`StreamHealth` holds what :class:`~genbacklash_ros.node.pipeline.BacklashPipeline` knows
+about the health of its input streams -- the active faults and their reports, the encoder's
+rate, equal readings, the residual scale of the model's one-step predictions, the resync
+after a gap, command saturation, runs of messages from a clock that jumped back -- and the
+rules below. The pipeline keeps alignment, feeding, compensation and the outputs: it calls
+:class:`StreamHealth` once per accepted message, once per batch it feeds, for each drop and
+for each report, and gives it what it needs of its own state as arguments and callbacks. All
+times are integer nanoseconds of data time unless said otherwise.
+
+Faults
+------
+Nothing raises and no non-finite number is published, whatever arrives. On top of that the
+pipeline watches for signs that the measurements (or their times) cannot be trusted. Each
+such sign starts a *fault*: while any fault is active the compensated command is the command
+itself (pass-through, still within ``u_min``/``u_max`` and ``max_rate``), and the next
+``/diagnostics`` report is WARN (ERROR for a silent or stuck encoder) and says why. A fault
+clears ``FAULT_HOLD_NS`` (0.5 s) of data time after its last sign; the estimate never needs
+to be reset, so compensation resumes at once with the current estimate.
+
+* **Rejected messages** -- invalid (non-finite values, empty or mismatched JointState arrays,
+  a joint that is not there, a wrong type), duplicate or out-of-order messages, and
+  identifier errors: dropped and counted as before; each also starts a fault.
+* **Encoder silent** -- a command is received more than ``max(SILENCE_MIN_NS,
+  SILENCE_PERIODS * period)`` (0.1 s at 1 kHz; 1 s while the period is unknown) after the last
+  accepted encoder reading was (receive times: an offset between the streams' stamps does not
+  count), or an encoder reading comes that long after the previous one (ERROR, with the number
+  and the reason of the encoder messages rejected meanwhile).
+* **Clock jumped forward** -- an encoder gap with no command inside it either: both streams
+  jumped (reported instead of the silence, WARN). Samples on both sides are kept: the
+  command held across the gap is what the drivetrain held.
+* **Clock jumped back** -- ``REANCHOR_COUNT`` (3) consecutive messages of one stream, rising
+  among themselves but each more than ``REANCHOR_BACK_NS`` (0.1 s) before the stream's last
+  time: the pending samples are fed, both streams restart from the new time (the last
+  command is held into it) and so do the periodic outputs, instead of dropping every message
+  until the clock catches up. Smaller steps back are dropped as out of order until it does.
+* **Encoder losing messages** -- over windows of at least ``LOSS_WINDOW_NS`` (0.25 s) and 50
+  readings, the encoder's period is learnt while its intervals are regular (90 % within 25 %
+  of their median); in an irregular window more than ``MAX_LOSS`` (20 %) of the readings the
+  learnt period predicts are missing (gaps longer than the silence limit excluded).
+* **Encoder spikes** -- once the estimate of a general backlash has converged (it stays
+  trusted while it converges again or lacks excitation, until the identifier restarts or
+  diverges), each sample is predicted one step ahead from the previous accepted reading and
+  its command (the clamp of eq. 20); a reading more than ``SPIKE_SIGMAS`` (8) residual
+  scales from its prediction is not fed to the identifier (``encoder_spike`` drops), the
+  prediction standing in for it in the next prediction. The scale is a running average
+  (weight 0.2 per batch) of the batches' upper quartile of the absolute prediction errors /
+  1.15 (a normal sigma, robust to a quarter of outliers; at least 1e-3 of the readings'
+  magnitude). When more than ``SPIKE_MAX_SHARE`` (20 %) of a batch would be rejected the
+  model, not the encoder, is taken to be off and the batch is fed whole.
+* **Encoder stuck** -- with a trusted estimate of a general backlash (as for spikes), the
+  reading has not changed for ``STUCK_NS`` (50 ms) although the model says the command in
+  force ``STUCK_INPUT_NS`` (20 ms) before the reading has moved the load by more than
+  ``STUCK_SIGMAS`` (5) residual scales (ERROR); a reading taken as a move starts, before
+  the drivetrain answered the new command, is not stuck. Equal
+  readings wait (up to ``STILL_HOLD_NS``, 1 s) before they are fed, and those of a stuck
+  encoder are not fed at all (``encoder_stuck`` drops) until the reading changes.
+* **Command saturated** -- every command for ``SATURATION_NS`` (0.2 s) at or beyond
+  ``u_min``/``u_max`` (only with finite limits): the inverse cannot be applied there.
+
+After a gap in the fed samples (silence, lost readings, a stuck encoder), no regression row
+may span it: with a trusted estimate of a general backlash, samples are held back
+(``encoder_after_gap`` drops) until one is predicted from the last sample before the gap
+(the load was pushed onto a branch, which fixes its position whatever happened in the gap),
+``RESYNC_NS`` (0.5 s) at most. Spike, stuck and gap checks need a model of the backlash
+itself: for a cascade only the other checks run.
+
+Examples
+--------
+>>> from genbacklash_core import CompensatorOptions
+>>> from genbacklash_ros.node.messages import DiagnosticStatus
+>>> drops = []
+>>> health = StreamHealth(
+...     estimate=lambda: None,  # only asked for once readings stand still
+...     drop=lambda key, reason, count: drops.append((key, count)),
+...     note=lambda text: None,
+...     discard=lambda since: 0,
+... )
+>>> health.check_reading(1_000_000, None, 0.5, None, 1_000_000, [], [])
+False
+>>> health.check_command(2_000_000, 9.0, 2_000_000, CompensatorOptions(u_max=1.0))
+>>> health.check_command(300_000_000, 9.0, 300_000_000, CompensatorOptions(u_max=1.0))
+>>> health.passing_through(400_000_000), health.faults
+(True, {'command_saturated': (1, 800000000)})
+>>> report = health.report(400_000_000)
+>>> report.level == DiagnosticStatus.WARN, report.active
+(True, ('command_saturated',))
+>>> report.parts[1]
+'command saturated at limit u_max = 1 for 0.298 s (last command 9)'
+>>> health.passing_through(800_000_000)
+False
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from collections.abc import Callable
+from typing import NamedTuple
+
+import numpy as np
+
+from genbacklash_core import CompensatorOptions, Estimate, EstimatorState, GeneralBacklash
+from genbacklash_ros.node.messages import DiagnosticStatus
+
+__all__ = [
+    "FAULT_HOLD_NS",
+    "LOSS_WINDOW_NS",
+    "LOSS_WINDOW_READINGS",
+    "MAX_LOSS",
+    "REANCHOR_BACK_NS",
+    "REANCHOR_COUNT",
+    "RESYNC_NS",
+    "SATURATION_NS",
+    "SILENCE_MIN_NS",
+    "SILENCE_PERIODS",
+    "SILENCE_UNKNOWN_NS",
+    "SPIKE_MAX_SHARE",
+    "SPIKE_SIGMAS",
+    "STILL_HOLD_NS",
+    "STUCK_INPUT_NS",
+    "STUCK_NS",
+    "STUCK_SIGMAS",
+    "HealthReport",
+    "StreamHealth",
+]
+
+# faults (see the module notes): pass-through while one is active
+FAULT_HOLD_NS = 500_000_000  # a fault clears this long after its last sign
+SILENCE_MIN_NS = 100_000_000  # encoder silent: no reading for max(this, SILENCE_PERIODS periods)
+SILENCE_PERIODS = 20
+SILENCE_UNKNOWN_NS = 1_000_000_000  # ... or this while the encoder period is not known yet
+LOSS_WINDOW_NS = 250_000_000  # encoder rate checked over windows this long (and 50 readings)
+LOSS_WINDOW_READINGS = 50
+MAX_LOSS = 0.2  # share of the expected readings missing that is a fault
+REANCHOR_COUNT = 3  # consecutive far-back messages of a stream that mean a clock jump back
+REANCHOR_BACK_NS = 100_000_000  # ... each this far before the stream's last time
+SPIKE_SIGMAS = 8.0  # a reading this many residual scales from its prediction is a spike
+SPIKE_MAX_SHARE = 0.2  # more of a batch than this: the model is off, not the encoder
+RESYNC_NS = 500_000_000  # after a gap, samples wait this long at most for a consistent one
+STUCK_NS = 50_000_000  # an unchanged reading this long, while the model says it moves ...
+STUCK_SIGMAS = 5.0  # ... by more than this many residual scales, is a stuck encoder
+STILL_HOLD_NS = 1_000_000_000  # equal readings wait this long at most before being fed
+# a still reading is judged by the command in force this long before it: a reading taken as
+# a move starts (the new command just sent, the load not moved yet) is not a stuck encoder
+STUCK_INPUT_NS = 20_000_000
+SATURATION_NS = 200_000_000  # commands at or beyond a limit this long: saturated
+_SCALE_SMOOTHING = 0.2  # weight of a new batch in the residual scale
+
+
+class HealthReport(NamedTuple):
+    """What a ``/diagnostics`` report says about the faults (:meth:`StreamHealth.report`).
+
+    Attributes
+    ----------
+    passing : bool
+        A fault is active: compensation passes the command through.
+    level : int
+        The highest level of the active faults and of the fault texts (``DiagnosticStatus.OK``
+        when there are none).
+    parts : list of str
+        The sentences for the report's message: the pass-through and its faults, then why
+        each fault started since the last report.
+    active : tuple of str
+        The keys of the active faults (e.g. ``"encoder_silent"``), in the order they started.
+    """
+
+    passing: bool
+    level: int
+    parts: list[str]
+    active: tuple[str, ...]
+
+
+def _held_input(stamp: int, commands: list[int], inputs: list[float]) -> float | None:
+    """The command in force ``STUCK_INPUT_NS`` before ``stamp``: it has had that long to move
+    the load, so a reading short of where it puts the load is stuck (None when not known)."""
+    k = bisect.bisect_right(commands, stamp - STUCK_INPUT_NS) - 1
+    return inputs[k] if k >= 0 else None
+
+
+class StreamHealth:
+    """The faults of a pipeline's command and encoder streams and what detects them.
+
+    Parameters
+    ----------
+    estimate : callable
+        ``estimate()``: the estimate in use now (asked only when an unchanged reading may be
+        stuck, so that a pipeline's lazily updated estimate is read when it was before).
+    drop : callable
+        ``drop(key, reason, count)``: count ``count`` samples dropped for ``key``
+        (``encoder_spike``, ``encoder_stuck``, ``encoder_after_gap``) with the latest reason.
+    note : callable
+        ``note(text)``: the latest problem, each time a fault starts with a text.
+    discard : callable
+        ``discard(since)``: drop the pending (not yet fed) encoder readings after time
+        ``since`` (those of an encoder found stuck) and return how many there were.
+
+    Notes
+    -----
+    Not thread-safe, like the pipeline. The pipeline calls :meth:`check_command` and
+    :meth:`check_reading` for each accepted message, :meth:`jumped_back` for each message not
+    after its stream's last one (then :meth:`reanchored` once it has re-anchored alignment),
+    :meth:`screen` and :meth:`feed_horizon` when it feeds, :meth:`encoder_rejected` and
+    :meth:`fault` when it drops a message, and :meth:`passing_through` and :meth:`report`
+    when it compensates and reports.
+    """
+
+    __slots__ = (
+        "_cmd_back",
+        "_converged",
+        "_discard",
+        "_drop",
+        "_enc_back",
+        "_enc_period",
+        "_enc_reject_reason",
+        "_enc_rejects",
+        "_estimate",
+        "_fault_texts",
+        "_fed_t",
+        "_fed_y",
+        "_gaps",
+        "_gaps_from",
+        "_last_enc_rx",
+        "_note",
+        "_resync_since",
+        "_sat_since",
+        "_scale",
+        "_silence",
+        "_still_since",
+        "_stuck",
+        "_stuck_why",
+        "faults",
+    )
+
+    faults: dict[str, tuple[int, int]]
+    """Active faults: key -> (level, data time the pass-through lasts until). Read only."""
+
+    def __init__(
+        self,
+        *,
+        estimate: Callable[[], Estimate],
+        drop: Callable[[str, str, int], None],
+        note: Callable[[str], None],
+        discard: Callable[[int], int],
+    ) -> None:
+        self._estimate = estimate
+        self._drop = drop
+        self._note = note
+        self._discard = discard
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the faults and what detects them (construction, restart)."""
+        self.faults = {}
+        self._fault_texts: dict[str, tuple[int, str]] = {}  # since the last report
+        self._enc_rejects = 0  # encoder messages rejected since the last accepted one
+        self._last_enc_rx: int | None = None  # receive time of the last accepted reading
+        self._enc_reject_reason = ""
+        self._cmd_back: list[int] = []  # times of consecutive far-back messages
+        self._enc_back: list[int] = []
+        self._enc_period: float | None = None  # learnt while the encoder is regular
+        self._silence = SILENCE_UNKNOWN_NS
+        self._gaps: list[int] = []  # encoder intervals of the current rate window
+        self._gaps_from: int | None = None
+        self._still_since: int | None = None  # time of the first of equal readings
+        self._stuck = False
+        self._stuck_why = ""
+        self._sat_since: int | None = None  # time of the first of saturated commands
+        self._fed_t: int | None = None  # the last sample fed (spike prediction)
+        self._fed_y: float | None = None
+        self._scale: float | None = None  # robust scale of the one-step prediction errors
+        self._resync_since: int | None = None  # time of the first sample after a gap
+        self._converged = False  # the estimate has converged since the identifier started
+
+    # ------------------------------------------------------------------ faults
+
+    def fault(self, key: str, level: int, text: str, at: int | None) -> None:
+        """Start (or prolong) fault ``key``: pass-through until ``FAULT_HOLD_NS`` after ``at``
+        (the data clock; None before the first message); ``text`` goes into the next
+        report ("" when the report says why by itself)."""
+        until = (0 if at is None else at) + FAULT_HOLD_NS
+        old = self.faults.get(key)
+        if old is not None:
+            level, until = max(level, old[0]), max(until, old[1])
+        self.faults[key] = (level, until)
+        if text:
+            self._fault_texts[key] = (level, text)
+            self._note(text)
+
+    def _clear_fault(self, key: str) -> None:
+        self.faults.pop(key, None)
+        self._fault_texts.pop(key, None)
+
+    def passing_through(self, now: int) -> bool:
+        """True while a fault is active at data time ``now`` (forgets those that cleared)."""
+        faults = self.faults
+        for key in [k for k, (_, until) in faults.items() if until <= now]:
+            del faults[key]
+        return bool(faults)
+
+    def report(self, now: int) -> HealthReport:
+        """The faults for a report at data time ``now`` (forgets those that cleared, and the
+        texts: each is reported once)."""
+        faults = self.faults
+        passing = self.passing_through(now)
+        level = DiagnosticStatus.OK
+        parts: list[str] = []
+        if passing:
+            level = max(level, *(lvl for lvl, _ in faults.values()))
+            names = ", ".join(key.replace("_", " ") for key in faults)
+            parts.append(f"compensation passes the command through ({names})")
+        for lvl, text in self._fault_texts.values():
+            level = max(level, lvl)
+            parts.append(text)
+        self._fault_texts.clear()
+        return HealthReport(passing, level, parts, tuple(faults))
+
+    def encoder_rejected(self, count: int, reason: str) -> None:
+        """``count`` encoder messages rejected (invalid, duplicate, out of order) for
+        ``reason``: told with the silence they may explain."""
+        self._enc_rejects += count
+        self._enc_reject_reason = reason
+
+    # ------------------------------------------------------------------ per message
+
+    def check_command(
+        self, stamp: int, value: float, receive_ns: int, options: CompensatorOptions
+    ) -> None:
+        """An accepted command at ``stamp`` (received at ``receive_ns``): encoder silence (on
+        the receive clock: immune to an offset between the streams' stamps) and command
+        saturation against the limits of ``options``."""
+        if self._cmd_back:
+            self._cmd_back.clear()
+        last_rx = self._last_enc_rx
+        if last_rx is not None and receive_ns - last_rx > self._silence:
+            silent = receive_ns - last_rx
+            self.fault("encoder_silent", DiagnosticStatus.ERROR, self._silent_text(silent), stamp)
+        if value >= options.u_max or value <= options.u_min:
+            since = self._sat_since
+            if since is None:
+                self._sat_since = stamp
+            elif stamp - since >= SATURATION_NS:
+                name, limit = (
+                    ("u_max", options.u_max) if value >= options.u_max else ("u_min", options.u_min)
+                )
+                self.fault(
+                    "command_saturated",
+                    DiagnosticStatus.WARN,
+                    f"command saturated at limit {name} = {limit:g} for "
+                    f"{(stamp - since) / 1e9:.3f} s (last command {value:.6g})",
+                    stamp,
+                )
+        elif self._sat_since is not None:
+            self._sat_since = None
+
+    def check_reading(
+        self,
+        stamp: int,
+        last: int | None,
+        value: float,
+        previous: float | None,
+        receive_ns: int,
+        commands: list[int],
+        inputs: list[float],
+    ) -> bool:
+        """An accepted encoder reading: encoder gaps (silence, clock jump forward), message
+        loss and a stuck encoder.
+
+        Parameters
+        ----------
+        stamp : int
+            The reading's time.
+        last : int or None
+            The stream's last accepted time (None for the first reading of a time line).
+        value : float
+            The reading.
+        previous : float or None
+            The stream's last accepted reading.
+        receive_ns : int
+            When the reading was received (the transport's clock).
+        commands, inputs : list
+            The pipeline's pending commands: their times and identifier inputs (read only).
+
+        Returns
+        -------
+        bool
+            True when the reading belongs to a stuck encoder (not to be fed).
+        """
+        if self._enc_back:
+            self._enc_back.clear()
+        if last is not None:
+            gap = stamp - last
+            if gap > self._silence:
+                self._encoder_gap(stamp, last, commands)
+            else:
+                self._gaps.append(gap)
+            start = self._gaps_from
+            if start is None:
+                self._gaps_from = last
+            elif stamp - start >= LOSS_WINDOW_NS and len(self._gaps) >= LOSS_WINDOW_READINGS:
+                self._check_rate(stamp)
+        self._enc_rejects = 0
+        self._last_enc_rx = receive_ns
+        if last is None or value != previous:
+            self._still_since, self._stuck = None, False
+            return False
+        return self._watch_stuck(stamp, last, value, commands, inputs)
+
+    def jumped_back(self, stream: str, stamp: int, last: int) -> int | None:
+        """Whether a message of ``stream`` (``"command"`` or ``"encoder"``) at ``stamp``, not
+        after ``last``, completes a run that shows its clock jumped back: about how far back
+        it jumped when it does (the pipeline then re-anchors, see the module notes), else
+        None (the message is dropped as out of order)."""
+        run = self._cmd_back if stream == "command" else self._enc_back
+        if last - stamp < REANCHOR_BACK_NS:
+            run.clear()
+            return None
+        if run and stamp <= run[-1]:
+            run.clear()
+        run.append(stamp)
+        if len(run) < REANCHOR_COUNT:
+            return None
+        # the first of the run came about one message interval after the last accepted one
+        return last - run[0] + (stamp - run[0]) // (len(run) - 1)
+
+    def reanchored(self, stream: str, stamp: int, last: int, back: int) -> None:
+        """Alignment and the data clock restarted at ``stamp`` after a clock jump back (by
+        about ``back``) seen on ``stream`` after its last time ``last``: restart what watches
+        the streams, hold the active faults from ``stamp`` and report the jump."""
+        self._cmd_back.clear()
+        self._enc_back.clear()
+        self.faults = {k: (lvl, stamp + FAULT_HOLD_NS) for k, (lvl, _) in self.faults.items()}
+        self._gaps, self._gaps_from = [], None
+        self._still_since, self._stuck, self._sat_since = None, False, None
+        self._fed_t = None
+        self.fault(
+            "clock_jump_back",
+            DiagnosticStatus.WARN,
+            f"clock jumped back {back / 1e9:.3f} s ({stream} time {stamp} ns after {last} ns): "
+            "alignment re-anchored",
+            stamp,
+        )
+
+    # ------------------------------------------------------------------ per feed
+
+    def feed_horizon(self, horizon: int, now: int) -> int:
+        """The latest sample time to feed at data time ``now`` instead of ``horizon``: equal
+        readings wait (the encoder may be stuck), ``STILL_HOLD_NS`` at most."""
+        still = self._still_since
+        if still is not None and now - still < STILL_HOLD_NS:
+            return min(horizon, still)
+        return horizon
+
+    def screen(
+        self, times: np.ndarray, us: np.ndarray, ys: np.ndarray, est: Estimate
+    ) -> np.ndarray | None:
+        """Which of the samples (``times``, inputs ``us``, readings ``ys``) to feed: not the
+        spikes nor those held back after a gap (see the module notes), judged with ``est``,
+        the estimate in use; tracks the scale of the one-step prediction errors.
+
+        Returns a boolean mask of the samples to keep, or None to keep them all. The
+        pipeline breaks the chain of consecutive samples at the next kept sample after each
+        one taken out (:func:`~genbacklash_ros.node.sample_rule.keep_breaks`)."""
+        t_prev, y_prev = self._fed_t, self._fed_y
+        self._fed_t, self._fed_y = int(times[-1]), float(ys[-1])
+        model = est.model
+        if not isinstance(model, GeneralBacklash):
+            return None
+        with np.errstate(all="ignore"):
+            left, right = model.left(us), model.right(us)
+            low, high = np.minimum(left, right), np.maximum(left, right)
+        # a gap before a sample (or no sample before it): not predicted from the one before
+        fresh = np.diff(times, prepend=times[0] if t_prev is None else t_prev) > self._silence
+        if t_prev is None or y_prev is None:
+            fresh[0] = True
+        scale = self._scale
+        trusted = self._trusted(est)
+        limit = SPIKE_SIGMAS * scale if trusted and scale is not None else math.inf
+        resync = self._resync_since
+        if resync is None and y_prev is not None and not fresh.any():
+            # the usual case at once: each reading predicted from the one before it
+            previous = np.concatenate(([y_prev], ys[:-1]))
+            with np.errstate(all="ignore"):
+                errs = np.abs(ys - np.minimum(np.maximum(previous, low), high))
+            if not np.any(errs > limit):
+                self._track_scale(errs, ys)
+                return None
+        errors: list[float] = []
+        bad: list[int] = []  # spikes
+        held: list[int] = []  # after a gap, until a sample follows from the one before it
+        worst = (0.0, 0.0, 0.0)
+        x = y_prev
+        for i, (t, y, lo, hi, new) in enumerate(
+            zip(
+                times.tolist(),
+                ys.tolist(),
+                low.tolist(),
+                high.tolist(),
+                fresh.tolist(),
+                strict=True,
+            )
+        ):
+            if x is None or (new and not trusted):
+                x = y
+                continue
+            if new:
+                resync = t
+            predicted = min(max(x, lo), hi)  # the clamp of eq. (20)
+            error = y - predicted
+            if resync is not None:
+                if abs(error) <= limit or t - resync >= RESYNC_NS:
+                    resync, x = None, y  # consistent with the sample before the gap
+                else:
+                    held.append(i)
+            elif abs(error) > limit:
+                bad.append(i)
+                x = predicted  # the prediction stands in for the spike
+                if abs(error) > abs(worst[1]):
+                    worst = (y, error, predicted)
+            else:
+                errors.append(abs(error))
+                x = y
+        self._resync_since = resync
+        self._track_scale(np.array(errors), ys)
+        if len(bad) > SPIKE_MAX_SHARE * ys.size:
+            bad = []  # the model is off rather than the encoder: feed them
+        elif bad:
+            y, error, predicted = worst
+            self._drop(
+                "encoder_spike",
+                f"encoder reading {y:.6g} is {error:+.3g} from the model's prediction "
+                f"{predicted:.6g} (limit {limit:.3g})",
+                len(bad),
+            )
+        if held:
+            self._drop("encoder_after_gap", "sample after a gap not yet consistent", len(held))
+        if not bad and not held:
+            return None
+        if x is not None:
+            self._fed_y = x
+        keep = np.ones(ys.size, dtype=bool)
+        keep[bad] = False
+        keep[held] = False
+        return keep
+
+    # ------------------------------------------------------------------ detection
+
+    def _silent_text(self, silent_ns: int) -> str:
+        text = f"encoder silent for {silent_ns / 1e9:.3f} s"
+        if self._enc_rejects:
+            text += (
+                f" ({self._enc_rejects} encoder messages rejected meanwhile, last: "
+                f"{self._enc_reject_reason})"
+            )
+        return text
+
+    def _encoder_gap(self, stamp: int, last: int, commands: list[int]) -> None:
+        """An encoder gap longer than the silence limit: lost readings or a clock jump
+        (``commands``: the pending commands' times)."""
+        gap = stamp - last
+        margin = min(self._silence, gap // 4)
+        first = bisect.bisect_right(commands, last + margin)
+        inside = bisect.bisect_left(commands, stamp - margin) > first
+        if commands and not inside:  # neither stream has anything in the gap
+            self._clear_fault("encoder_silent")
+            self.fault(
+                "clock_jump_forward",
+                DiagnosticStatus.WARN,
+                f"clock jumped forward {gap / 1e9:.3f} s (no command nor encoder reading in "
+                "between)",
+                stamp,
+            )
+        else:
+            self.fault("encoder_silent", DiagnosticStatus.ERROR, self._silent_text(gap), stamp)
+
+    def _check_rate(self, stamp: int) -> None:
+        """Close a rate window: learn the period when regular, else look for lost readings."""
+        gaps = np.array(self._gaps, dtype=np.float64)
+        self._gaps = []
+        self._gaps_from = stamp
+        median = float(np.median(gaps))
+        if np.mean(np.abs(gaps - median) <= 0.25 * median) >= 0.9:
+            self._enc_period = median
+            self._silence = max(SILENCE_MIN_NS, round(SILENCE_PERIODS * median))
+            return
+        period = self._enc_period
+        if period is None:
+            return
+        span = float(gaps.sum())
+        loss = 1.0 - gaps.size * period / span
+        if loss > MAX_LOSS:
+            self.fault(
+                "encoder_loss",
+                DiagnosticStatus.WARN,
+                f"encoder lost {loss:.0%} of its readings over {span / 1e9:.2f} s (one expected "
+                f"every {period / 1e6:.3g} ms)",
+                stamp,
+            )
+
+    def _watch_stuck(
+        self, stamp: int, last: int, value: float, commands: list[int], inputs: list[float]
+    ) -> bool:
+        """True when the reading ``value`` at ``stamp``, equal to the one at ``last``, belongs
+        to a stuck encoder (not to be fed)."""
+        since = self._still_since
+        if since is None:
+            self._still_since = last
+            return False
+        if stamp - since < STUCK_NS:
+            return False
+        if not self._stuck:
+            why = self._stuck_reason(value, _held_input(stamp, commands, inputs))
+            if not why:
+                return False
+            self._stuck, self._stuck_why = True, why
+            pending = self._discard(since)  # keep the first equal reading
+            if pending:
+                self._drop("encoder_stuck", "encoder reading unchanged", pending)
+        self._drop("encoder_stuck", "encoder reading unchanged", 1)
+        self.fault(
+            "encoder_stuck",
+            DiagnosticStatus.ERROR,
+            f"encoder stuck at {value:.6g} for {(stamp - since) / 1e9:.3f} s{self._stuck_why}",
+            stamp,
+        )
+        return True
+
+    def _trusted(self, est: Estimate) -> bool:
+        """Whether ``est`` may judge the readings (spikes, stuck, gaps): the identifier has
+        converged since it last (re)started, and a residual scale is known."""
+        state = est.state
+        if state is EstimatorState.CONVERGED:
+            self._converged = True
+        elif state in (EstimatorState.WARMING_UP, EstimatorState.DIVERGED):
+            self._converged = False
+        return self._converged and self._scale is not None
+
+    def _stuck_reason(self, value: float, held: float | None) -> str:
+        """Why an unchanged reading ``value`` is stuck ("" when the model allows it), ``held``
+        being the command in force ``STUCK_INPUT_NS`` before the reading."""
+        est = self._estimate()
+        model = est.model
+        scale = self._scale
+        trusted = self._trusted(est)
+        if not trusted or scale is None or not isinstance(model, GeneralBacklash):
+            return ""
+        if held is None:
+            return ""
+        u = held
+        with np.errstate(all="ignore"):
+            left, right = float(model.left([u])[0]), float(model.right([u])[0])
+        move = max(min(left, right) - value, value - max(left, right))
+        if not (math.isfinite(move) and move > max(STUCK_SIGMAS * scale, 1e-3 * abs(value))):
+            return ""
+        return f" although the model moves the load by {move:.3g} at the command {u:.6g}"
+
+    def _track_scale(self, errors: np.ndarray, ys: np.ndarray) -> None:
+        """Blend a batch's absolute prediction errors into the residual scale (their upper
+        quartile / 1.15, a normal sigma; at least 1e-3 of the readings' magnitude)."""
+        errors = errors[np.isfinite(errors)]  # an overflowing branch gives NaN or inf
+        if errors.size == 0:
+            return
+        k = (errors.size - 1) * 3 // 4
+        floor = 1e-3 * float(np.max(np.abs(ys)))
+        batch = max(float(np.partition(errors, k)[k]) / 1.15, floor, 1e-300)
+        if batch < math.inf:
+            scale = self._scale
+            self._scale = batch if scale is None else scale + _SCALE_SMOOTHING * (batch - scale)

@@ -1,0 +1,734 @@
+"""The node's parameters: one table of specifications, a validated frozen record, params YAML.
+
+:data:`PARAMETER_SPECS` lists every parameter of the ``backlash_identifier`` node with its
+type, default, description, unit and allowed range or choices: the rclpy node turns it into
+``ParameterDescriptor`` s, the DDS transport and replay read the same values from a standard
+ROS 2 parameters YAML (:func:`load_params_file`), and the README renders it as the reference
+(:func:`parameter_table`). :class:`NodeParameters` holds one validated set;
+:meth:`NodeParameters.replace` is what a set-parameters callback calls (the new set, or a
+:class:`~genbacklash_core.GenBacklashError` whose message is the reason to reject).
+
+Examples
+--------
+>>> params = NodeParameters.from_mapping({"degree": 2, "method": "recursive"})
+>>> params.degree, params.method, params.window
+(2, 'recursive', 1500)
+>>> params.replace(degree=12)
+Traceback (most recent call last):
+...
+genbacklash_core.errors.GenBacklashError: parameter 'degree' must lie in [1, 9], got 12
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import fnmatch
+import math
+from collections.abc import Iterable, Iterator, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal, TypeAlias
+
+import yaml
+
+from genbacklash_core import (
+    CompensatorOptions,
+    GenBacklashError,
+    OnlineIdentifier,
+    RecursiveIdentifier,
+    RecursiveSettings,
+    Structure,
+    WindowedIdentifier,
+    WindowedSettings,
+)
+from genbacklash_ros.node.messages import COMMAND_TYPES, ENCODER_TYPES, CommandType, EncoderType
+
+__all__ = [
+    "NODE_NAME",
+    "PARAMETER_SPECS",
+    "NodeParameters",
+    "ParameterSpec",
+    "command_line_parameters",
+    "load_params_file",
+    "parameter_table",
+    "parse_param_overrides",
+    "read_params_file",
+]
+
+NODE_NAME = "backlash_identifier"
+
+ParameterType: TypeAlias = Literal["string", "integer", "double", "bool"]
+ParameterValue: TypeAlias = str | int | float | bool
+
+# parameters every ROS 2 node has; a params file may set them, the transports handle them
+_STANDARD = ("use_sim_time",)
+_STANDARD_PREFIXES = ("qos_overrides.",)
+
+_WINDOWED = WindowedSettings()
+_RECURSIVE = RecursiveSettings()
+_COMPENSATOR = CompensatorOptions()
+
+
+@dataclass(frozen=True)
+class ParameterSpec:
+    """One node parameter: what the descriptor, the validation and the README say.
+
+    Attributes
+    ----------
+    name : str
+    type : {"string", "integer", "double", "bool"}
+        The ROS 2 parameter type.
+    default : str, int, float or bool
+    description : str
+    min, max : float or None
+        Inclusive range of a number (None: unbounded on that side).
+    choices : tuple of str
+        Allowed values of a string (empty: any string).
+    unit : str
+    restarts : bool
+        Changing it at run time restarts identification (a new identifier).
+    """
+
+    name: str
+    type: ParameterType
+    default: ParameterValue
+    description: str
+    min: float | None = None
+    max: float | None = None
+    choices: tuple[str, ...] = ()
+    unit: str = ""
+    restarts: bool = False
+
+    def check(self, value: object) -> ParameterValue:
+        """``value`` converted to this parameter's type, or the reason it is not allowed."""
+        name = f"parameter {self.name!r}"
+        if self.type == "bool":
+            if not isinstance(value, bool):
+                raise GenBacklashError(f"{name} must be true or false, got {value!r}")
+            return value
+        if self.type == "string":
+            if not isinstance(value, str):
+                raise GenBacklashError(f"{name} must be a string, got {value!r}")
+            if self.choices and value not in self.choices:
+                allowed = ", ".join(repr(c) for c in self.choices)
+                raise GenBacklashError(f"{name} must be one of {allowed}, got {value!r}")
+            return value
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            kind = "a whole number" if self.type == "integer" else "a number"
+            raise GenBacklashError(f"{name} must be {kind}, got {value!r}")
+        if self.type == "integer":
+            if not isinstance(value, int):
+                raise GenBacklashError(f"{name} must be a whole number, got {value!r}")
+            number: int | float = value
+        else:
+            number = float(value)
+            if math.isnan(number):
+                raise GenBacklashError(f"{name} must be a number, got NaN")
+        low = -math.inf if self.min is None else self.min
+        high = math.inf if self.max is None else self.max
+        if not low <= number <= high:
+            allowed = f"[{_show(low)}, {_show(high)}]"
+            raise GenBacklashError(f"{name} must lie in {allowed}, got {value!r}")
+        return number
+
+    @property
+    def range_text(self) -> str:
+        """The allowed values as text (for the README and descriptors)."""
+        if self.choices:
+            return ", ".join(self.choices)
+        if self.type == "bool":
+            return "true, false"
+        if self.min is None and self.max is None:
+            return "any"
+        low = "-inf" if self.min is None else _show(self.min)
+        high = "inf" if self.max is None else _show(self.max)
+        return f"[{low}, {high}]"
+
+
+def _show(value: float) -> str:
+    if math.isinf(value):
+        return "inf" if value > 0 else "-inf"
+    return f"{value:g}"
+
+
+PARAMETER_SPECS: tuple[ParameterSpec, ...] = (
+    ParameterSpec(
+        "model",
+        "string",
+        "backlash",
+        "Model structure: a general backlash alone, or followed by linear dynamics.",
+        choices=("backlash", "cascade"),
+        restarts=True,
+    ),
+    ParameterSpec("degree", "integer", 3, "Polynomial degree of each branch.", 1, 9, restarts=True),
+    ParameterSpec(
+        "na",
+        "integer",
+        2,
+        "Cascade only: order r of the linear block's x terms (a_1 = 1).",
+        1,
+        10,
+        restarts=True,
+    ),
+    ParameterSpec(
+        "nb",
+        "integer",
+        2,
+        "Cascade only: order p of the linear block's y terms.",
+        0,
+        10,
+        restarts=True,
+    ),
+    ParameterSpec(
+        "method",
+        "string",
+        "windowed",
+        "Online identifier: warm-started iterations over a sliding window, or recursive "
+        "least squares with per-branch forgetting.",
+        choices=("windowed", "recursive"),
+        restarts=True,
+    ),
+    ParameterSpec(
+        "window",
+        "integer",
+        _WINDOWED.window,
+        "Windowed method: regression rows remembered (a backlash alone: pairs of consecutive "
+        "readings whose input moved, forgotten only where new rows cover the same input "
+        "region; a cascade: samples). More: more accurate; fewer: tracks wear faster.",
+        20,
+        10_000_000,
+        unit="rows",
+        restarts=True,
+    ),
+    ParameterSpec(
+        "forgetting",
+        "double",
+        _RECURSIVE.forgetting,
+        "Recursive method: each branch remembers its newest 1 / (1 - forgetting) regression "
+        "rows (pairs of consecutive readings whose input moved), and every input region a "
+        "few rows however old.",
+        0.5,
+        1.0,
+        restarts=True,
+    ),
+    ParameterSpec(
+        "joint",
+        "string",
+        "",
+        "Joint name in JointState messages (command and encoder); empty: the first joint.",
+    ),
+    ParameterSpec(
+        "command_index",
+        "integer",
+        0,
+        "Float64MultiArray command: index of the identified joint's element.",
+        0,
+        65_535,
+    ),
+    ParameterSpec(
+        "command_type",
+        "string",
+        "float64_multi_array",
+        "Message type of the command topic (std_msgs/Float64, std_msgs/Float64MultiArray, "
+        "sensor_msgs/JointState); compensated_command has the same type.",
+        choices=COMMAND_TYPES,
+    ),
+    ParameterSpec(
+        "encoder_type",
+        "string",
+        "joint_state",
+        "Message type of the encoder topic (sensor_msgs/JointState or std_msgs/Float64).",
+        choices=ENCODER_TYPES,
+    ),
+    ParameterSpec(
+        "compensate",
+        "bool",
+        True,
+        "Publish the inverse-backlash compensated command (false: the command passes through).",
+    ),
+    ParameterSpec(
+        "compensation_in_loop",
+        "bool",
+        False,
+        "The compensated command drives the drivetrain, so identify from it; false (and in "
+        "replay): identify from the raw command.",
+        restarts=True,
+    ),
+    ParameterSpec(
+        "u_min", "double", -math.inf, "Lower limit of the compensated command.", unit="command"
+    ),
+    ParameterSpec(
+        "u_max", "double", math.inf, "Upper limit of the compensated command.", unit="command"
+    ),
+    ParameterSpec(
+        "max_rate",
+        "double",
+        math.inf,
+        "Largest change of the compensated command between two command messages.",
+        1e-12,
+        None,
+        unit="command/message",
+    ),
+    ParameterSpec(
+        "gate_low",
+        "double",
+        _COMPENSATOR.gate_low,
+        "Estimate confidence at or below which the command passes through uncorrected.",
+        0.0,
+        1.0,
+    ),
+    ParameterSpec(
+        "gate_high",
+        "double",
+        _COMPENSATOR.gate_high,
+        "Estimate confidence from which the full correction is applied (fades in between).",
+        0.0,
+        1.0,
+    ),
+    ParameterSpec(
+        "checkpoint_file",
+        "string",
+        "",
+        "JSON file the estimate is saved to (atomically) and warm-started from; empty: none.",
+    ),
+    ParameterSpec(
+        "checkpoint_period",
+        "double",
+        10.0,
+        "Data time between two checkpoints.",
+        0.1,
+        86_400.0,
+        unit="s",
+    ),
+    ParameterSpec(
+        "publish_rate",
+        "double",
+        10.0,
+        "Rate of ~/estimate, on the data's clock.",
+        0.01,
+        1000.0,
+        unit="Hz",
+    ),
+    ParameterSpec(
+        "sample_period",
+        "double",
+        0.0,
+        "Identification sample period on a fixed time grid; 0: one sample per encoder message.",
+        0.0,
+        10.0,
+        unit="s",
+        restarts=True,
+    ),
+    ParameterSpec(
+        "stamp_source",
+        "string",
+        "header",
+        "Time of a message: its header stamp (receive time for messages without one or with "
+        "a zero stamp), or always the receive time.",
+        choices=("header", "receive"),
+        restarts=True,
+    ),
+)
+
+_SPECS: dict[str, ParameterSpec] = {spec.name: spec for spec in PARAMETER_SPECS}
+
+
+@dataclass(frozen=True)
+class NodeParameters:
+    """The validated parameters of the ``backlash_identifier`` node (see :data:`PARAMETER_SPECS`).
+
+    Every field is checked against its spec in ``__post_init__`` (a
+    :class:`~genbacklash_core.GenBacklashError` names the parameter and the allowed range),
+    then the cross-checks: ``u_min < u_max`` and ``gate_low <= gate_high``.
+
+    Examples
+    --------
+    >>> NodeParameters(gate_low=0.8, gate_high=0.5)  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    genbacklash_core.errors.GenBacklashError: parameter 'gate_low' (0.8) must not exceed ...
+    >>> NodeParameters(model="cascade").structure()
+    Structure(degree=3, na=2, nb=2, sign=1.0)
+    """
+
+    model: Literal["backlash", "cascade"] = "backlash"
+    degree: int = 3
+    na: int = 2
+    nb: int = 2
+    method: Literal["windowed", "recursive"] = "windowed"
+    window: int = _WINDOWED.window
+    forgetting: float = _RECURSIVE.forgetting
+    joint: str = ""
+    command_index: int = 0
+    command_type: CommandType = "float64_multi_array"
+    encoder_type: EncoderType = "joint_state"
+    compensate: bool = True
+    compensation_in_loop: bool = False
+    u_min: float = -math.inf
+    u_max: float = math.inf
+    max_rate: float = math.inf
+    gate_low: float = _COMPENSATOR.gate_low
+    gate_high: float = _COMPENSATOR.gate_high
+    checkpoint_file: str = ""
+    checkpoint_period: float = 10.0
+    publish_rate: float = 10.0
+    sample_period: float = 0.0
+    stamp_source: Literal["header", "receive"] = "header"
+
+    def __post_init__(self) -> None:
+        for spec in PARAMETER_SPECS:
+            object.__setattr__(self, spec.name, spec.check(getattr(self, spec.name)))
+        if not self.u_min < self.u_max:
+            raise GenBacklashError(
+                f"parameter 'u_min' ({self.u_min:g}) must be below 'u_max' ({self.u_max:g})"
+            )
+        if self.gate_low > self.gate_high:
+            raise GenBacklashError(
+                f"parameter 'gate_low' ({self.gate_low:g}) must not exceed "
+                f"'gate_high' ({self.gate_high:g})"
+            )
+
+    @classmethod
+    def from_mapping(cls, values: Mapping[str, object]) -> NodeParameters:
+        """Parameters from a name -> value mapping; unset ones keep their defaults.
+
+        Unknown names are an error that lists them (a typo must not pass silently).
+        """
+        unknown = sorted(str(k) for k in values if k not in _SPECS)
+        if unknown:
+            raise GenBacklashError(
+                f"unknown parameter(s) {', '.join(repr(k) for k in unknown)}; known: "
+                f"{', '.join(_SPECS)}"
+            )
+        return cls(**values)  # type: ignore[arg-type]
+
+    def replace(self, **changes: object) -> NodeParameters:
+        """A validated copy with ``changes`` applied (for a set-parameters callback).
+
+        >>> NodeParameters().replace(publish_rate=0.0)  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        genbacklash_core.errors.GenBacklashError: parameter 'publish_rate' must lie in [0.01, ...
+        """
+        merged: dict[str, object] = dict(self.to_mapping())
+        unknown = [k for k in changes if k not in _SPECS]
+        if unknown:
+            return NodeParameters.from_mapping(changes)  # raises, naming them
+        merged.update(changes)
+        return NodeParameters.from_mapping(merged)
+
+    def to_mapping(self) -> dict[str, ParameterValue]:
+        """Name -> value, in :data:`PARAMETER_SPECS` order."""
+        return {spec.name: getattr(self, spec.name) for spec in PARAMETER_SPECS}
+
+    def restart_needed(self, other: NodeParameters) -> bool:
+        """True when going from ``self`` to ``other`` changes a parameter that restarts
+        identification (see :attr:`ParameterSpec.restarts`)."""
+        return any(
+            getattr(self, s.name) != getattr(other, s.name) for s in PARAMETER_SPECS if s.restarts
+        )
+
+    def structure(self, sign: float = 1.0) -> Structure:
+        """The model structure these parameters ask for (``na = nb = 0`` for a backlash)."""
+        if self.model == "cascade":
+            return Structure(self.degree, self.na, self.nb, sign)
+        return Structure(self.degree, 0, 0, sign)
+
+    def make_identifier(self, sign: float | None = None) -> OnlineIdentifier:
+        """A fresh online identifier of the chosen ``method`` (non-finite samples dropped).
+
+        ``sign`` is the branch sense when known (e.g. from a checkpoint); None detects it.
+        """
+        structure = self.structure()
+        if self.method == "recursive":
+            return RecursiveIdentifier(
+                structure.degree,
+                structure.na,
+                structure.nb,
+                sign=sign,
+                settings=dataclasses.replace(
+                    _RECURSIVE, forgetting=self.forgetting, nonfinite="drop"
+                ),
+            )
+        return WindowedIdentifier(
+            structure.degree,
+            structure.na,
+            structure.nb,
+            sign=sign,
+            settings=dataclasses.replace(_WINDOWED, window=self.window, nonfinite="drop"),
+        )
+
+    def compensator_options(self) -> CompensatorOptions:
+        """Limits, rate limit and confidence gating of the compensator."""
+        return CompensatorOptions(
+            u_min=self.u_min,
+            u_max=self.u_max,
+            max_rate=self.max_rate,
+            gate_low=self.gate_low,
+            gate_high=self.gate_high,
+        )
+
+    @property
+    def sample_period_ns(self) -> int:
+        """``sample_period`` in integer nanoseconds (0: sample at the encoder stamps)."""
+        return round(self.sample_period * 1e9)
+
+    @property
+    def publish_period_ns(self) -> int:
+        """Period of ``~/estimate`` in integer nanoseconds."""
+        return max(round(1e9 / self.publish_rate), 1)
+
+    @property
+    def checkpoint_period_ns(self) -> int:
+        """``checkpoint_period`` in integer nanoseconds."""
+        return round(self.checkpoint_period * 1e9)
+
+
+# --------------------------------------------------------------------------- params YAML
+
+
+def _flatten(prefix: str, values: Mapping[Any, Any]) -> Iterator[tuple[str, object]]:
+    """``{"a": {"b": 1}}`` -> ``("a.b", 1)``: ROS 2 nests dotted parameter names."""
+    for key, value in values.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, Mapping):
+            yield from _flatten(f"{name}.", value)
+        else:
+            yield name, value
+
+
+def _matches(key: str, node_name: str) -> tuple[bool, bool]:
+    """``(applies, specific)``: whether a top-level YAML key applies to the node, and whether
+    it names the node itself rather than a wildcard.
+
+    ``/**`` and ``**`` apply to every node; ``name``, ``/name``, ``/ns/name`` name it (the
+    namespace is not checked: the file is passed to this node); other ``*`` patterns apply
+    when they match the full name with any namespace.
+    """
+    stripped = key.strip()
+    if stripped in ("/**", "**"):
+        return True, False
+    last = stripped.rsplit("/", 1)[-1]
+    if "*" not in stripped:
+        return last == node_name, True
+    pattern = stripped.lstrip("/")
+    applies = fnmatch.fnmatchcase(node_name, pattern) or fnmatch.fnmatchcase(node_name, last)
+    return applies, False
+
+
+def read_params_file(path: str | Path, node_name: str = NODE_NAME) -> dict[str, object]:
+    """The parameters a ROS 2 params YAML sets for ``node_name``, merged in file order.
+
+    Sections apply when their key is ``/**`` (every node), the node's name (with or without a
+    namespace) or a wildcard matching it; each holds ``ros__parameters`` (nested keys are
+    joined with dots, as ROS does). Later sections override earlier ones. Parameters every
+    node has (``use_sim_time``, ``qos_overrides.*``) are left out. Names from wildcard
+    sections that this node does not know are ignored (they may be meant for other nodes),
+    names in the node's own section are kept, so that :func:`load_params_file` reports them.
+    """
+    file = Path(path)
+    try:
+        text = file.read_text(encoding="utf-8")
+    except OSError as err:
+        raise GenBacklashError(f"cannot read params file {file}: {err.strerror or err}") from err
+    except UnicodeDecodeError as err:
+        raise GenBacklashError(f"params file {file} is not UTF-8 text: {err}") from err
+    try:
+        document = yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        where = getattr(err, "problem_mark", None)
+        line = f" (line {where.line + 1})" if where is not None else ""
+        raise GenBacklashError(f"params file {file} is not valid YAML{line}: {err}") from err
+    if document is None:
+        return {}
+    if not isinstance(document, Mapping):
+        raise GenBacklashError(
+            f"params file {file} must map node names to 'ros__parameters', got "
+            f"{type(document).__name__}"
+        )
+    merged: dict[str, object] = {}
+    for key, section in document.items():
+        applies, specific = _matches(str(key), node_name)
+        if not applies:
+            continue
+        if not isinstance(section, Mapping) or "ros__parameters" not in section:
+            raise GenBacklashError(
+                f"params file {file}: section {key!r} must hold a 'ros__parameters' mapping"
+            )
+        params = section["ros__parameters"]
+        if params is None:
+            continue
+        if not isinstance(params, Mapping):
+            raise GenBacklashError(
+                f"params file {file}: {key!r} ros__parameters must be a mapping of names"
+            )
+        for name, value in _flatten("", params):
+            if name in _STANDARD or name.startswith(_STANDARD_PREFIXES):
+                continue
+            if specific or name in _SPECS:
+                merged[name] = value
+    return merged
+
+
+def load_params_file(path: str | Path, node_name: str = NODE_NAME) -> NodeParameters:
+    """:class:`NodeParameters` from a standard ROS 2 params YAML (see :func:`read_params_file`).
+
+    Unknown names in the node's own section and invalid values are errors naming the file.
+    """
+    return _params_from_file(path, read_params_file(path, node_name))
+
+
+def _params_from_file(path: str | Path, values: Mapping[str, object]) -> NodeParameters:
+    try:
+        return NodeParameters.from_mapping(values)
+    except GenBacklashError as err:
+        raise GenBacklashError(f"params file {Path(path)}: {err}") from err
+
+
+# --------------------------------------------------------------------------- command line
+
+
+def _is_standard(name: str) -> bool:
+    return name in _STANDARD or name.startswith(_STANDARD_PREFIXES)
+
+
+def _unknown_name(name: str) -> str:
+    close = difflib.get_close_matches(name, list(_SPECS), n=3, cutoff=0.6)
+    hint = f"close matches: {', '.join(close)}" if close else "no close match"
+    return f"--param: unknown parameter {name!r} ({hint}); --list-params prints all names"
+
+
+def _yaml_value(item: str, text: str) -> object:
+    """``text`` read as the YAML scalar a params file would hold; empty: the empty string."""
+    if not text.strip():
+        return ""
+    try:
+        value: object = yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        problem = getattr(err, "problem", None) or str(err).splitlines()[0]
+        raise GenBacklashError(f"--param {item}: the value is not valid YAML ({problem})") from err
+    return value
+
+
+def parse_param_overrides(items: Iterable[str]) -> dict[str, object]:
+    """``NAME=VALUE`` items of ``--param`` -> ``{name: value}``, values not yet validated.
+
+    VALUE is read as a YAML scalar, as a params file holds it (``2``, ``recursive``,
+    ``false``, ``0.3``, ``.inf``); an empty VALUE is the empty string. Unknown names are an
+    error listing the close matches; the standard ``use_sim_time`` / ``qos_overrides.*`` are
+    accepted, as in a params file. Giving one name twice with different values is an error.
+
+    >>> parse_param_overrides(["degree=2", "method=recursive", "compensate=false"])
+    {'degree': 2, 'method': 'recursive', 'compensate': False}
+    >>> parse_param_overrides(["degre=2"])  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    genbacklash_core.errors.GenBacklashError: --param: unknown parameter 'degre' (close ...
+    """
+    values: dict[str, object] = {}
+    for item in items:
+        name, sep, text = item.partition("=")
+        name = name.strip()
+        if not sep or not name:
+            raise GenBacklashError(
+                f"--param takes NAME=VALUE (e.g. --param degree=2), got {item!r}"
+            )
+        if name not in _SPECS and not _is_standard(name):
+            raise GenBacklashError(_unknown_name(name))
+        value = _yaml_value(item, text)
+        if name in values and (type(values[name]), values[name]) != (type(value), value):
+            raise GenBacklashError(
+                f"--param {name} is given twice with different values "
+                f"({values[name]!r} and {value!r}); give it once"
+            )
+        values[name] = value
+    return values
+
+
+def _option_name(name: str) -> str:
+    return "--" + name.replace("_", "-")
+
+
+def _as_typed(value: object) -> str:
+    """A value as it is written on a command line (``''`` for the empty string)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str) and (not value or value != value.strip()):
+        return repr(value)
+    return str(value)
+
+
+def command_line_parameters(
+    params_file: str | Path | None,
+    overrides: Mapping[str, object],
+    options: Mapping[str, object] | None = None,
+) -> tuple[NodeParameters, dict[str, object]]:
+    """The node parameters a command line asks for, and the names it sets.
+
+    Precedence: defaults < ``params_file`` < ``overrides`` (``--param``, from
+    :func:`parse_param_overrides`). ``options`` are a command's own options for parameters of
+    the same name (``--degree``, ``--joint``, ...; None: not given): the command applies them
+    over the params file itself, and one given both ways must agree with ``--param`` (an error
+    otherwise, never a silent choice). The file and the overrides are validated by
+    :meth:`NodeParameters.from_mapping`, with the params file's error text (prefixed by the
+    file, or by ``--param``).
+
+    Returns
+    -------
+    params : NodeParameters
+        Defaults, updated by the params file, then by ``--param``.
+    given : dict
+        Name -> value of every parameter the params file or ``--param`` sets (after
+        ``--param``; standard ROS ones such as ``use_sim_time`` included, unvalidated).
+    """
+    file_values = read_params_file(params_file) if params_file else {}
+    if params_file:
+        _params_from_file(params_file, file_values)
+    own = {k: v for k, v in overrides.items() if k in _SPECS}
+    try:
+        params = NodeParameters.from_mapping({**file_values, **own})
+    except GenBacklashError as err:
+        raise GenBacklashError(f"--param: {err}") from err
+    for name, value in (options or {}).items():
+        if value is None or name not in own:
+            continue
+        chosen = getattr(params, name)
+        if chosen != value or isinstance(chosen, bool) != isinstance(value, bool):
+            raise GenBacklashError(
+                f"{_option_name(name)} {_as_typed(value)} and --param "
+                f"{name}={_as_typed(chosen)} disagree; give {name} once"
+            )
+    given: dict[str, object] = {**file_values, **overrides}
+    for name in given:
+        if name in _SPECS:
+            given[name] = getattr(params, name)
+    return params, given
+
+
+def parameter_table() -> str:
+    """The parameter reference as a Markdown table (for the README).
+
+    >>> print(parameter_table().splitlines()[0])
+    | name | type | default | range | unit | description |
+    """
+    lines = [
+        "| name | type | default | range | unit | description |",
+        "|---|---|---|---|---|---|",
+    ]
+    for spec in PARAMETER_SPECS:
+        default = spec.default
+        if isinstance(default, bool):
+            shown = "true" if default else "false"
+        elif isinstance(default, float):
+            shown = _show(default)
+        elif isinstance(default, str):
+            shown = f"`{default!r}`" if default == "" else f"`{default}`"
+        else:
+            shown = str(default)
+        note = " Restarts identification." if spec.restarts else ""
+        lines.append(
+            f"| `{spec.name}` | {spec.type} | {shown} | {spec.range_text} | {spec.unit} | "
+            f"{spec.description}{note} |"
+        )
+    return "\n".join(lines)

@@ -1,0 +1,179 @@
+"""The sample rule where the node and the batch path form their samples.
+
+The rule itself is :func:`genbacklash_core.samples.sample_breaks`: a sample *follows* the one
+before it when the difference of the encoder stamps they hold, in units of the encoder's
+nominal period, rounds to exactly one. A lost reading, a gap or a clock that jumped back
+breaks the chain, and so does every sample taken out between two that are fed. This module
+applies that rule, in one place, to what :class:`~genbacklash_ros.node.pipeline.BacklashPipeline`
+feeds its identifier and to what :func:`~genbacklash_ros.bags.bagio.align` gives batch
+``identify`` and ``diagnose`` on bags (and :func:`~genbacklash_ros.bags.csvio.read_series_csv`
+on a CSV with a ``t`` column):
+
+* :func:`link_breaks` -- the breaks of samples holding the encoder readings stamped
+  ``stamps``, linked to the sample fed before them (``previous_ns``), with ``marks`` for
+  readings that follow one taken out (a rejected message, a stuck encoder's readings);
+* :func:`keep_breaks` -- the breaks of the samples left after some are taken out (spikes,
+  samples before the first command): a kept sample breaks when any sample before it, since
+  the previous kept one, was taken out;
+* :class:`EncoderPeriod` -- the nominal period the node learns from the stream: the median
+  of the last :data:`PERIOD_WINDOW` positive stamp differences. The batch path takes the
+  median over the whole record (:func:`~genbacklash_core.samples.nominal_period`), the same
+  estimator. A median is immune to jitter and to a minority of lost readings; when more than
+  half of the readings are lost the period reads as a multiple of the true one and single
+  losses are no longer seen (the node's ``encoder_loss`` fault is up long before that).
+
+Examples
+--------
+>>> link_breaks([10, 20, 40, 50], 10.0).tolist()
+[True, False, True, False]
+>>> link_breaks([60, 70], 10.0, previous_ns=50).tolist()
+[False, False]
+>>> keep_breaks(np.array([True, False, False, False]), np.array([True, True, False, True]))
+(array([ True, False,  True]), False)
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+import numpy.typing as npt
+
+from genbacklash_core.samples import nominal_period, sample_breaks
+
+__all__ = [
+    "PERIOD_WINDOW",
+    "EncoderPeriod",
+    "keep_breaks",
+    "link_breaks",
+    "record_period",
+    "time_breaks",
+]
+
+BoolArray = npt.NDArray[np.bool_]
+
+PERIOD_WINDOW = 255  # stamp differences behind the node's period estimate (0.26 s at 1 kHz)
+
+
+def link_breaks(
+    stamps: npt.ArrayLike,
+    period_ns: float | None,
+    *,
+    previous_ns: int | None = None,
+    marks: npt.ArrayLike | None = None,
+) -> BoolArray:
+    """``breaks[k]``: sample ``k`` does not follow the sample before it.
+
+    Parameters
+    ----------
+    stamps : array_like of int, shape (N,)
+        The stamps of the encoder readings the samples hold (integer ns).
+    period_ns : float or None
+        The encoder's nominal period; None while it is not known (no sample is then
+        vouched for: all break).
+    previous_ns : int, optional
+        The stamp of the sample fed just before ``stamps[0]`` (None: none, or unknown:
+        ``stamps[0]`` breaks).
+    marks : array_like of bool, shape (N,), optional
+        Readings that follow one taken out: they break whatever their stamps say.
+    """
+    t = np.asarray(stamps, dtype=np.int64)
+    if t.size == 0:
+        return np.zeros(0, dtype=bool)
+    if period_ns is None:
+        out = np.ones(t.size, dtype=bool)
+    elif previous_ns is None:
+        out = sample_breaks(t - t[0], period_ns)  # relative: exact in float64
+    else:
+        linked = np.concatenate(([previous_ns], t)) - previous_ns
+        out = sample_breaks(linked, period_ns)[1:]
+    if marks is not None:
+        out |= np.asarray(marks, dtype=bool)
+    return out
+
+
+def keep_breaks(breaks: BoolArray, keep: BoolArray) -> tuple[BoolArray, bool]:
+    """The breaks of the samples ``keep`` leaves, and whether the last sample was taken out.
+
+    A kept sample breaks where it broke already or where a sample before it (since the
+    previous kept one, or from the start of ``breaks``) was taken out: no row pairs two
+    samples with a removed one between them. When the last sample is taken out the next
+    sample fed after these breaks too (the caller's concern: the second value).
+    """
+    index = np.flatnonzero(keep)
+    out = np.asarray(breaks, dtype=bool)[index]
+    if index.size:
+        out |= np.diff(index, prepend=-1) > 1
+    tail = bool(keep.size) and not bool(keep[-1])
+    return out, tail
+
+
+def record_period(stamps: npt.ArrayLike) -> float | None:
+    """The nominal period of a whole record (the batch path's estimate): the median of its
+    positive stamp differences (:func:`~genbacklash_core.samples.nominal_period`); None with
+    fewer than two increasing stamps.
+
+    >>> record_period([0, 10, 20, 40, 50]), record_period([5])
+    (10.0, None)
+    """
+    t = np.asarray(stamps)
+    if t.ndim != 1 or t.size < 2:
+        return None
+    if np.issubdtype(t.dtype, np.integer):
+        t = t - t[0]  # integer ns since the epoch do not fit a float64 exactly
+    rel = np.asarray(t, dtype=np.float64)
+    if not np.any(np.diff(rel) > 0):
+        return None
+    return nominal_period(rel)
+
+
+def time_breaks(t: npt.ArrayLike) -> BoolArray | None:
+    """The breaks of a record stamped ``t`` (any one unit: seconds, integer ns), the period
+    being :func:`record_period`; None when ``t`` holds fewer than two increasing stamps
+    (nothing to tell). Missing (NaN) or non-increasing stamps break.
+
+    >>> time_breaks([0.0, 0.001, 0.002, 0.004, 0.005]).tolist()
+    [True, False, False, True, False]
+    """
+    tt = np.asarray(t, dtype=np.float64)
+    period = record_period(tt)
+    if period is None:
+        return None
+    return sample_breaks(tt - tt[np.isfinite(tt)][0], period)
+
+
+class EncoderPeriod:
+    """The encoder's nominal period learnt from its stream (the node's estimate).
+
+    The median of the last ``window`` positive differences of accepted encoder stamps.
+
+    >>> period = EncoderPeriod()
+    >>> for step in (1000, 1010, 2000, 990):
+    ...     period.add(step)
+    >>> period.value
+    1005.0
+    """
+
+    __slots__ = ("_cached", "_steps")
+
+    def __init__(self, window: int = PERIOD_WINDOW) -> None:
+        self._steps: deque[int] = deque(maxlen=window)
+        self._cached: float | None = None
+
+    def add(self, step_ns: int) -> None:
+        """One difference of consecutive accepted stamps (ignored unless positive)."""
+        if step_ns > 0:
+            self._steps.append(step_ns)
+            self._cached = None
+
+    def reset(self) -> None:
+        """Forget the differences (a restart)."""
+        self._steps.clear()
+        self._cached = None
+
+    @property
+    def value(self) -> float | None:
+        """The period in ns (None before the first difference)."""
+        if self._cached is None and self._steps:
+            self._cached = float(np.median(np.fromiter(self._steps, np.int64, len(self._steps))))
+        return self._cached

@@ -1,0 +1,1 @@
+"""The node's transports: rclpy (ROS 2) and plain DDS (cyclonedds)."""

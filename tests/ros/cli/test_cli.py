@@ -1,0 +1,167 @@
+"""The genbacklash command line: contracts, exit codes and messages."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from genbacklash_core import paper_example
+from genbacklash_ros.bags.csvio import Series, read_series_csv, write_series_csv
+from genbacklash_ros.cli.main import (
+    EXIT_BAD_INPUT,
+    EXIT_BROKEN_PIPE,
+    EXIT_NOT_CONVERGED,
+    EXIT_OK,
+    build_parser,
+    main,
+)
+
+
+def _simulate(tmp_path: Path, example: int, seed: int = 0) -> Path:
+    out = tmp_path / f"ex{example}.csv"
+    assert main(["simulate", "--example", str(example), "--seed", str(seed), "-o", str(out)]) == 0
+    return out
+
+
+def test_simulate_writes_the_papers_setting(tmp_path: Path) -> None:
+    series = read_series_csv(_simulate(tmp_path, 1, seed=4))
+    expected = paper_example(1).generate(4)
+    assert series.u.size == 800
+    assert np.array_equal(series.u, expected.u)
+    assert np.array_equal(series.y, expected.y)
+
+
+def test_simulate_options(tmp_path: Path) -> None:
+    out = tmp_path / "short.csv"
+    assert (
+        main(["simulate", "--example", "3", "--samples", "300", "--snr", "5", "-o", str(out)]) == 0
+    )
+    assert read_series_csv(out).u.size == 300
+
+
+@pytest.mark.parametrize("example", [1, 3])
+def test_identify_json_contract(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], example: int
+) -> None:
+    data = _simulate(tmp_path, example)
+    model = "cascade" if example == 3 else "backlash"
+    assert main(["identify", str(data), "--model", model, "--json"]) == EXIT_OK
+    result = json.loads(capsys.readouterr().out)
+    expected_keys = {"model", "backlash", "iterations", "converged", "fit", "reason"}
+    if model == "cascade":
+        expected_keys.add("linear")
+        assert result["linear"]["a"][0] == 1.0
+        assert len(result["linear"]["a"]) == 2 and len(result["linear"]["b"]) == 2
+    assert set(result) == expected_keys
+    assert result["model"] == model
+    assert set(result["backlash"]) == {"m_left", "c_left", "m_right", "c_right"}
+    truth = paper_example(example).backlash
+    assert abs(result["backlash"]["m_left"][0] - truth.m_left[0]) < 0.03
+    assert abs(result["backlash"]["c_right"] - truth.c_right) < 0.03
+    assert result["converged"] is True
+    assert isinstance(result["iterations"], int)
+    assert 0.0 < result["fit"]["nrmse"] < 0.1
+
+
+def test_identify_table_and_plots(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    data = _simulate(tmp_path, 2)
+    plots = tmp_path / "plots"
+    assert main(["identify", str(data), "--degree", "3", "--plot", str(plots)]) == EXIT_OK
+    out = capsys.readouterr().out
+    assert "m_left_1" in out and "converged after" in out
+    assert (plots / "characteristic.png").stat().st_size > 1000
+    assert (plots / "history.png").stat().st_size > 1000
+
+
+def test_identify_reports_nonfinite_samples(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    ex = paper_example(1).generate(0)
+    u = ex.u.copy()
+    u[[10, 20, 30]] = np.nan
+    path = tmp_path / "nan.csv"
+    write_series_csv(path, Series(u=u, y=ex.y))
+    assert main(["identify", str(path)]) == EXIT_BAD_INPUT
+    err = capsys.readouterr().err
+    assert "3 of 800 samples are NaN or infinite" in err and "10, 20, 30" in err
+    assert main(["identify", str(path), "--drop-nonfinite", "--json"]) == EXIT_OK
+
+
+def test_identify_not_enough_excitation(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "ramp.csv"
+    u = np.linspace(0.0, 1.0, 200)
+    write_series_csv(path, Series(u=u, y=u))
+    assert main(["identify", str(path)]) == EXIT_BAD_INPUT
+    assert "not enough excitation" in capsys.readouterr().err
+
+
+def test_identify_not_converged_exit_code(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    ex = paper_example(3)
+    data = ex.generate(0)
+    delayed = np.concatenate([np.zeros(5), data.y[:-5]])  # a dead time the model lacks
+    path = tmp_path / "delayed.csv"
+    write_series_csv(path, Series(u=data.u, y=delayed))
+    assert main(["identify", str(path), "--model", "cascade", "--json"]) == EXIT_NOT_CONVERGED
+    result = json.loads(capsys.readouterr().out)
+    assert result["converged"] is False
+    assert "singular" in result["reason"]
+
+
+def test_missing_file_and_bag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["identify", str(tmp_path / "none.csv")]) == EXIT_BAD_INPUT
+    assert "does not exist" in capsys.readouterr().err
+    (tmp_path / "x.mcap").write_bytes(b"\x89MCAP0\r\n")
+    assert main(["identify", str(tmp_path / "x.mcap")]) == EXIT_BAD_INPUT
+    assert "--command TOPIC" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("command", ["identify", "simulate", "demo"])
+def test_every_command_has_help(command: str, capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exit_info:
+        build_parser().parse_args([command, "--help"])
+    assert exit_info.value.code == 0
+    assert "usage: genbacklash" in capsys.readouterr().out
+
+
+def test_bad_option_values_are_rejected(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["identify", "d.csv", "--degree", "0"])
+    assert "must be >= 1" in capsys.readouterr().err
+
+
+def test_demo_runs_as_a_console_script(tmp_path: Path) -> None:
+    out = tmp_path / "demo"
+    proc = subprocess.run(
+        [sys.executable, "-m", "genbacklash_ros.cli.main", "demo", "--out", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert "truth" in proc.stdout and "c_right" in proc.stdout
+    for name in ("characteristic.png", "history.png", "result.json", "data.csv"):
+        assert (out / name).exists()
+    assert json.loads((out / "result.json").read_text())["model"] == "cascade"
+
+
+def test_closed_stdout_ends_quietly(tmp_path: Path) -> None:
+    """`genbacklash identify DATA | head -1`: the reader leaves early; no traceback."""
+    data = _simulate(tmp_path, 1)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "genbacklash_ros.cli.main", "identify", str(data)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    assert proc.stdout is not None and proc.stderr is not None
+    proc.stdout.close()  # as `head` does once it has its line, before the table is printed
+    stderr = proc.stderr.read().decode()
+    assert proc.wait(timeout=120) == EXIT_BROKEN_PIPE
+    assert stderr == ""

@@ -1,0 +1,73 @@
+"""``genbacklash node``: options, transport choice, errors before any middleware starts."""
+
+from __future__ import annotations
+
+import importlib.util
+from typing import Any
+
+import pytest
+
+from genbacklash_core import GenBacklashError
+from genbacklash_ros.cli import node as node_cli
+from genbacklash_ros.cli.main import main
+
+
+def test_help_explains_transports(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exit_info:
+        main(["node", "--help"])
+    assert exit_info.value.code == 0
+    out = capsys.readouterr().out
+    for text in ("--transport", "--params-file", "--domain-id", "rclpy", "cyclonedds", "auto"):
+        assert text in out
+
+
+def test_dds_without_cyclonedds_names_the_extra(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    real = importlib.util.find_spec
+
+    def find_spec(name: str, *args: Any) -> Any:
+        return None if name in ("cyclonedds", "rclpy") else real(name, *args)
+
+    monkeypatch.setattr(importlib.util, "find_spec", find_spec)
+    assert main(["node", "--transport", "dds"]) == 2
+    assert "pip install genbacklash[dds]" in capsys.readouterr().err
+    with pytest.raises(GenBacklashError, match="neither rclpy"):
+        node_cli.choose_transport("auto")
+
+
+def test_bad_params_file_is_reported_before_starting(
+    tmp_path: Any, capsys: pytest.CaptureFixture[str]
+) -> None:
+    pytest.importorskip("cyclonedds")
+    bad = tmp_path / "p.yaml"
+    bad.write_text("backlash_identifier:\n  ros__parameters:\n    degree: 42\n")
+    assert main(["node", "--transport", "dds", "--params-file", str(bad)]) == 2
+    assert "degree" in capsys.readouterr().err
+
+
+def test_remap_syntax() -> None:
+    assert node_cli._remaps(["command:=/arm/cmd", "~/estimate:=est"]) == {
+        "command": "/arm/cmd",
+        "estimate": "est",
+    }
+    with pytest.raises(GenBacklashError, match="NAME:=TOPIC"):
+        node_cli._remaps(["command=/x"])
+
+
+def test_domain_id_range(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        main(["node", "--domain-id", "300"])
+    assert "[0, 232]" in capsys.readouterr().err
+
+
+def test_dds_node_runs_for_a_moment_and_stops(tmp_path: Any) -> None:
+    """In-process: a short --duration run publishes stale diagnostics and exits 0."""
+    pytest.importorskip("cyclonedds")
+    from genbacklash_ros.node.parameters import NodeParameters
+    from genbacklash_ros.transports.dds_node import DdsNode
+
+    node = DdsNode(NodeParameters(), domain_id=231)
+    stats = node.spin(1.3)
+    assert stats.stale_reports >= 1
+    assert stats.published["diagnostics"] >= 1

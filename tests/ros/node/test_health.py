@@ -1,0 +1,140 @@
+"""StreamHealth on its own: the fault rules, without a pipeline around them.
+
+The pipeline-level behaviour (pass-through, reports, recovery on real streams) is in
+test_faults.py; these pin the rules' edges with hand-made message sequences.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from genbacklash_core import CompensatorOptions, Estimate
+from genbacklash_core.structure import Structure
+from genbacklash_ros.node.health import (
+    FAULT_HOLD_NS,
+    LOSS_WINDOW_NS,
+    REANCHOR_BACK_NS,
+    REANCHOR_COUNT,
+    SATURATION_NS,
+    SILENCE_UNKNOWN_NS,
+    StreamHealth,
+)
+from genbacklash_ros.node.messages import DiagnosticStatus
+
+MS = 1_000_000
+
+
+class _Sink:
+    """What the pipeline would receive from the health monitor."""
+
+    def __init__(self) -> None:
+        self.drops: list[tuple[str, str, int]] = []
+        self.notes: list[str] = []
+
+    def monitor(self) -> StreamHealth:
+        return StreamHealth(
+            estimate=lambda: Estimate.empty(Structure(3)),  # no model: the stuck check stays off
+            drop=lambda key, reason, count: self.drops.append((key, reason, count)),
+            note=self.notes.append,
+            discard=lambda since: 0,
+        )
+
+
+def _readings(health: StreamHealth, times: list[int], start_value: float = 0.0) -> None:
+    """Regular, changing encoder readings at ``times`` (received when stamped)."""
+    last: int | None = None
+    previous: float | None = None
+    for k, t in enumerate(times):
+        value = start_value + 0.001 * k
+        assert not health.check_reading(t, last, value, previous, t, [0], [0.0])
+        last, previous = t, value
+
+
+def test_a_fault_passes_through_for_the_hold_time_then_clears() -> None:
+    health = _Sink().monitor()
+    assert not health.passing_through(0)
+    health.fault("encoder_spike", DiagnosticStatus.WARN, "a spike", 10 * MS)
+    assert health.passing_through(10 * MS + FAULT_HOLD_NS - 1)
+    report = health.report(10 * MS + FAULT_HOLD_NS - 1)
+    assert report.passing and report.level == DiagnosticStatus.WARN
+    assert report.active == ("encoder_spike",) and "a spike" in report.parts
+    assert health.report(10 * MS + FAULT_HOLD_NS - 1).parts[1:] == []  # each text once
+    assert not health.passing_through(10 * MS + FAULT_HOLD_NS)
+    assert health.report(10 * MS + FAULT_HOLD_NS).level == DiagnosticStatus.OK
+
+
+def test_a_later_sign_prolongs_and_a_higher_level_wins() -> None:
+    health = _Sink().monitor()
+    health.fault("x", DiagnosticStatus.ERROR, "bad", 0)
+    health.fault("x", DiagnosticStatus.WARN, "", 300 * MS)
+    assert health.faults["x"] == (DiagnosticStatus.ERROR, 300 * MS + FAULT_HOLD_NS)
+
+
+def test_a_clock_jump_back_needs_a_run_of_far_back_messages() -> None:
+    health = _Sink().monitor()
+    last = 10_000 * MS
+    back = last - 2 * REANCHOR_BACK_NS
+    # a single message a little back is out of order, never a jump
+    assert health.jumped_back("encoder", last - REANCHOR_BACK_NS + 1, last) is None
+    for k in range(REANCHOR_COUNT - 1):
+        assert health.jumped_back("encoder", back + k * MS, last) is None
+    jump = health.jumped_back("encoder", back + (REANCHOR_COUNT - 1) * MS, last)
+    assert jump is not None and abs(jump - 2 * REANCHOR_BACK_NS) <= 2 * MS
+    # an accepted message in between breaks the run
+    health = _Sink().monitor()
+    assert health.jumped_back("command", back, last) is None
+    health.check_command(last + MS, 0.0, last + MS, CompensatorOptions())
+    for k in range(REANCHOR_COUNT - 1):
+        assert health.jumped_back("command", back + (k + 1) * MS, last) is None
+
+
+def test_encoder_silence_is_seen_from_a_command_on_the_receive_clock() -> None:
+    sink = _Sink()
+    health = sink.monitor()
+    _readings(health, [0, MS])
+    options = CompensatorOptions()
+    health.check_command(MS + SILENCE_UNKNOWN_NS, 0.0, MS + SILENCE_UNKNOWN_NS, options)
+    assert "encoder_silent" not in health.faults  # not yet longer than the limit
+    now = 2 * MS + SILENCE_UNKNOWN_NS
+    health.check_command(now, 0.0, now, options)
+    assert health.faults["encoder_silent"][0] == DiagnosticStatus.ERROR
+    assert any("encoder silent for 1.001 s" in part for part in health.report(now).parts)
+
+
+def test_lost_readings_are_a_fault_once_the_period_is_known() -> None:
+    health = _Sink().monitor()
+    regular = list(range(0, 2 * LOSS_WINDOW_NS, MS))  # 1 kHz: the period is learnt
+    _readings(health, regular)
+    assert not health.faults
+    rng = np.random.default_rng(7)
+    start = regular[-1] + MS
+    times = np.arange(start, start + 2 * LOSS_WINDOW_NS, MS)
+    kept = times[rng.random(times.size) > 0.4].tolist()  # 40 % lost
+    last, previous = regular[-1], 0.0
+    for k, t in enumerate(kept):
+        health.check_reading(t, last, 1.0 + 0.001 * k, previous, t, [0], [0.0])
+        last, previous = t, 1.0 + 0.001 * k
+    assert "encoder_loss" in health.faults
+    assert any("encoder lost" in part for part in health.report(last).parts)
+
+
+def test_a_command_at_its_limit_for_long_enough_is_saturated() -> None:
+    health = _Sink().monitor()
+    options = CompensatorOptions(u_min=-1.0, u_max=1.0)
+    for t in range(0, SATURATION_NS, 10 * MS):
+        health.check_command(t, 1.0, t, options)
+    assert "command_saturated" not in health.faults
+    health.check_command(SATURATION_NS, 1.5, SATURATION_NS, options)
+    assert "command_saturated" in health.faults
+    # a command inside the limits restarts the count
+    health = _Sink().monitor()
+    for t in range(0, SATURATION_NS + 1, 10 * MS):
+        health.check_command(t, 1.0 if t != 100 * MS else 0.5, t, options)
+    assert "command_saturated" not in health.faults
+
+
+def test_reset_forgets_every_fault() -> None:
+    health = _Sink().monitor()
+    health.fault("encoder_stuck", DiagnosticStatus.ERROR, "stuck", 0)
+    health.reset()
+    assert not health.faults and not health.report(0).parts

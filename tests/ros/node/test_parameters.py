@@ -1,0 +1,216 @@
+"""Node parameters: specs, validation with reasons, replace, params YAML."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import pytest
+
+from genbacklash_core import (
+    GenBacklashError,
+    RecursiveIdentifier,
+    Structure,
+    WindowedIdentifier,
+    WindowedSettings,
+)
+from genbacklash_ros.node.parameters import (
+    PARAMETER_SPECS,
+    NodeParameters,
+    load_params_file,
+    parameter_table,
+    read_params_file,
+)
+
+
+def test_specs_match_the_dataclass_fields_and_defaults() -> None:
+    fields = {f.name: f.default for f in dataclasses.fields(NodeParameters)}
+    assert [s.name for s in PARAMETER_SPECS] == list(fields)
+    for spec in PARAMETER_SPECS:
+        assert spec.default == fields[spec.name], spec.name
+        assert spec.description.endswith("."), spec.name
+        spec.check(spec.default)  # every default is allowed
+    assert NodeParameters().window == WindowedSettings().window
+
+
+@pytest.mark.parametrize(
+    ("changes", "match"),
+    [
+        ({"degree": 0}, r"parameter 'degree' must lie in \[1, 9\], got 0"),
+        ({"degree": 10}, r"parameter 'degree' must lie in \[1, 9\], got 10"),
+        ({"degree": 2.0}, "parameter 'degree' must be a whole number, got 2.0"),
+        ({"degree": True}, "parameter 'degree' must be a whole number, got True"),
+        ({"model": "linear"}, "parameter 'model' must be one of 'backlash', 'cascade'"),
+        ({"method": "rls"}, "parameter 'method' must be one of 'windowed', 'recursive'"),
+        ({"window": 5}, r"parameter 'window' must lie in \[20, 1e\+07\], got 5"),
+        ({"forgetting": 1.5}, r"parameter 'forgetting' must lie in \[0.5, 1\], got 1.5"),
+        ({"forgetting": math.nan}, "parameter 'forgetting' must be a number, got NaN"),
+        ({"forgetting": "0.9"}, "parameter 'forgetting' must be a number, got '0.9'"),
+        ({"na": 0}, r"parameter 'na' must lie in \[1, 10\]"),
+        ({"nb": -1}, r"parameter 'nb' must lie in \[0, 10\]"),
+        ({"command_index": -1}, r"parameter 'command_index' must lie in \[0, 65535\]"),
+        ({"command_type": "string"}, "parameter 'command_type' must be one of 'float64'"),
+        ({"encoder_type": "imu"}, "parameter 'encoder_type' must be one of 'joint_state'"),
+        ({"compensate": 1}, "parameter 'compensate' must be true or false, got 1"),
+        ({"joint": 3}, "parameter 'joint' must be a string, got 3"),
+        ({"u_min": 1.0, "u_max": 1.0}, r"parameter 'u_min' \(1\) must be below 'u_max' \(1\)"),
+        ({"max_rate": 0.0}, r"parameter 'max_rate' must lie in \[1e-12, inf\], got 0.0"),
+        ({"gate_low": 0.6}, r"parameter 'gate_low' \(0.6\) must not exceed 'gate_high' \(0.5\)"),
+        ({"gate_high": 1.5}, r"parameter 'gate_high' must lie in \[0, 1\]"),
+        ({"checkpoint_period": 0.0}, r"parameter 'checkpoint_period' must lie in \[0.1, 86400\]"),
+        ({"publish_rate": 0.0}, r"parameter 'publish_rate' must lie in \[0.01, 1000\]"),
+        ({"sample_period": -0.001}, r"parameter 'sample_period' must lie in \[0, 10\]"),
+        ({"stamp_source": "bag"}, "parameter 'stamp_source' must be one of 'header', 'receive'"),
+    ],
+)
+def test_invalid_values_are_rejected_with_the_reason(
+    changes: dict[str, object], match: str
+) -> None:
+    with pytest.raises(GenBacklashError, match=match):
+        NodeParameters.from_mapping(changes)
+    with pytest.raises(GenBacklashError, match=match):
+        NodeParameters().replace(**changes)
+
+
+def test_whole_numbers_are_taken_for_doubles() -> None:
+    params = NodeParameters.from_mapping({"forgetting": 1, "u_max": 2})
+    assert params.forgetting == 1.0 and isinstance(params.forgetting, float)
+    assert params.u_max == 2.0 and isinstance(params.u_max, float)
+
+
+def test_unknown_names_are_listed() -> None:
+    with pytest.raises(GenBacklashError, match=r"unknown parameter\(s\) 'degre', 'windw'"):
+        NodeParameters.from_mapping({"degre": 3, "windw": 10})
+    with pytest.raises(GenBacklashError, match="unknown parameter"):
+        NodeParameters().replace(bogus=1)
+
+
+def test_replace_validates_and_leaves_the_original() -> None:
+    base = NodeParameters()
+    new = base.replace(degree=2, compensate=False)
+    assert (new.degree, new.compensate) == (2, False)
+    assert (base.degree, base.compensate) == (3, True)
+    assert base.restart_needed(new)  # degree restarts identification
+    assert not base.restart_needed(base.replace(compensate=False, u_max=3.0))
+    assert NodeParameters.from_mapping(new.to_mapping()) == new
+
+
+def test_identifier_and_structure() -> None:
+    assert NodeParameters().structure() == Structure(3)
+    assert NodeParameters(model="cascade", na=2, nb=1).structure() == Structure(3, 2, 1)
+    windowed = NodeParameters(window=300).make_identifier()
+    assert isinstance(windowed, WindowedIdentifier)
+    assert windowed.settings.window == 300 and windowed.settings.nonfinite == "drop"
+    recursive = NodeParameters(method="recursive", forgetting=0.999).make_identifier(sign=-1.0)
+    assert isinstance(recursive, RecursiveIdentifier)
+    assert recursive.settings.forgetting == 0.999 and recursive.structure.sign == -1.0
+    options = NodeParameters(u_min=-1.0, u_max=1.0, max_rate=0.1).compensator_options()
+    assert (options.u_min, options.u_max, options.max_rate) == (-1.0, 1.0, 0.1)
+
+
+def test_periods_in_nanoseconds() -> None:
+    params = NodeParameters(sample_period=0.001, publish_rate=3.0, checkpoint_period=2.5)
+    assert params.sample_period_ns == 1_000_000
+    assert params.publish_period_ns == 333_333_333
+    assert params.checkpoint_period_ns == 2_500_000_000
+
+
+def test_parameter_table_lists_every_parameter() -> None:
+    table = parameter_table()
+    for spec in PARAMETER_SPECS:
+        assert f"| `{spec.name}` |" in table
+    assert "| `degree` | integer | 3 | [1, 9] |" in table
+
+
+# --------------------------------------------------------------------------- params YAML
+
+
+def write(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "params.yaml"
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def test_node_section_is_loaded(tmp_path: Path) -> None:
+    path = write(
+        tmp_path,
+        """
+backlash_identifier:
+  ros__parameters:
+    degree: 2
+    method: recursive
+    u_min: -.inf
+    u_max: 1.5
+    joint: knee
+""",
+    )
+    params = load_params_file(path)
+    assert (params.degree, params.method, params.joint) == (2, "recursive", "knee")
+    assert params.u_min == -math.inf and params.u_max == 1.5
+
+
+def test_wildcard_and_namespaced_sections_merge_in_file_order(tmp_path: Path) -> None:
+    path = write(
+        tmp_path,
+        """
+/**:
+  ros__parameters:
+    use_sim_time: true
+    degree: 4
+    publish_rate: 5.0
+    some_other_nodes_parameter: 1
+/robot/backlash_identifier:
+  ros__parameters:
+    degree: 2
+    qos_overrides:
+      /encoder:
+        subscription:
+          depth: 10
+other_node:
+  ros__parameters:
+    degree: 9
+    whatever: 1
+""",
+    )
+    raw = read_params_file(path)
+    assert raw == {"degree": 2, "publish_rate": 5.0}
+    params = load_params_file(path)
+    assert (params.degree, params.publish_rate) == (2, 5.0)
+    other = read_params_file(path, node_name="other_node")
+    assert other == {"degree": 9, "publish_rate": 5.0, "whatever": 1}
+
+
+def test_unknown_name_in_the_nodes_own_section_is_an_error(tmp_path: Path) -> None:
+    path = write(tmp_path, "backlash_identifier:\n  ros__parameters:\n    degre: 2\n")
+    with pytest.raises(GenBacklashError, match=r"params\.yaml: unknown parameter\(s\) 'degre'"):
+        load_params_file(path)
+
+
+def test_invalid_value_in_a_file_names_the_file(tmp_path: Path) -> None:
+    path = write(tmp_path, "backlash_identifier:\n  ros__parameters:\n    degree: 12\n")
+    with pytest.raises(GenBacklashError, match=r"params\.yaml: parameter 'degree' must lie"):
+        load_params_file(path)
+
+
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [
+        ("backlash_identifier: [1, 2", r"is not valid YAML \(line"),
+        ("- 1\n- 2\n", "must map node names to 'ros__parameters', got list"),
+        ("backlash_identifier:\n  degree: 2\n", "must hold a 'ros__parameters' mapping"),
+        ("backlash_identifier:\n  ros__parameters: 3\n", "ros__parameters must be a mapping"),
+    ],
+)
+def test_malformed_files_are_reported(tmp_path: Path, text: str, match: str) -> None:
+    with pytest.raises(GenBacklashError, match=match):
+        load_params_file(write(tmp_path, text))
+
+
+def test_missing_and_empty_files(tmp_path: Path) -> None:
+    with pytest.raises(GenBacklashError, match="cannot read params file"):
+        load_params_file(tmp_path / "absent.yaml")
+    assert load_params_file(write(tmp_path, "")) == NodeParameters()
+    assert load_params_file(write(tmp_path, "other:\n  ros__parameters: {degree: 1}\n")) == (
+        NodeParameters()
+    )

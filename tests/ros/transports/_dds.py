@@ -1,0 +1,105 @@
+"""What the multi-process DDS tests share: the node as a process, a subscriber on its outputs.
+
+cyclonedds is imported inside :class:`Subscriber` only, so that this module (collected for
+doctests, imported by test modules that also hold in-process tests) imports without it.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+
+@dataclass
+class Received:
+    """What the subscriber saw: (monotonic receive ns, message) per output topic."""
+
+    compensated: list[tuple[int, Any]] = field(default_factory=list)
+    estimates: list[tuple[int, Any]] = field(default_factory=list)
+    diagnostics: list[tuple[int, Any]] = field(default_factory=list)
+
+
+class Subscriber:
+    """KEEP_ALL RELIABLE readers on the node's outputs, taken on a thread."""
+
+    def __init__(self, domain: int) -> None:
+        from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState, WaitSet
+        from cyclonedds.domain import DomainParticipant
+        from cyclonedds.qos import Policy, Qos
+        from cyclonedds.sub import DataReader
+        from cyclonedds.topic import Topic
+        from cyclonedds.util import duration
+
+        from genbacklash_ros.transports.dds_types import DiagnosticArray_, Float64MultiArray_
+
+        reliable_all = Qos(
+            Policy.History.KeepAll,
+            Policy.Reliability.Reliable(duration(seconds=1)),
+            Policy.Durability.Volatile,
+        )
+        self._wait = duration(milliseconds=50)
+        self.got = Received()
+        self._stop = threading.Event()
+        self.dp = dp = DomainParticipant(domain)
+        self._readers = {
+            "compensated": DataReader(
+                dp, Topic(dp, "rt/compensated_command", Float64MultiArray_), qos=reliable_all
+            ),
+            "estimates": DataReader(
+                dp,
+                Topic(dp, "rt/backlash_identifier/estimate", Float64MultiArray_),
+                qos=reliable_all,
+            ),
+            "diagnostics": DataReader(
+                dp, Topic(dp, "rt/diagnostics", DiagnosticArray_), qos=reliable_all
+            ),
+        }
+        self._waitset = WaitSet(dp)
+        mask = SampleState.NotRead | ViewState.Any | InstanceState.Any
+        self._conditions = {}
+        for key, reader in self._readers.items():
+            condition = ReadCondition(reader, mask)
+            self._conditions[key] = condition
+            self._waitset.attach(condition)
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            self._waitset.wait(self._wait)
+            now = time.monotonic_ns()
+            for key, reader in self._readers.items():
+                for sample in reader.take(1000, condition=self._conditions[key]):
+                    if sample.sample_info.valid_data:
+                        getattr(self.got, key).append((now, sample))
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(5)
+
+
+def start_node(params: Path, log: Path, domain: int) -> subprocess.Popen[bytes]:
+    """The DDS node as users run it, its stderr in ``log``."""
+    cmd = [sys.executable, "-m", "genbacklash_ros.cli.node", "--transport", "dds"]
+    cmd += ["--params-file", str(params), "--domain-id", str(domain)]
+    return subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=log.open("wb"))
+
+
+def wait_for(predicate: Any, timeout: float) -> bool:
+    """Poll ``predicate`` until it is true or ``timeout`` seconds passed; its last value."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.02)
+    return bool(predicate())
+
+
+def diagnostic_values(diag: Any) -> dict[str, str]:
+    """The key/value pairs of a DiagnosticArray's first status."""
+    return {kv.key: kv.value for kv in diag.status[0].values}
