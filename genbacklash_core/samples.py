@@ -15,6 +15,17 @@ The nominal period is the median stamp difference unless given.
 Identifiers take the rule as a boolean ``breaks`` array: ``breaks[k]`` is True when sample
 ``k`` does *not* follow sample ``k-1`` (the first sample of a record always breaks).
 
+A backlash alone is rate independent: the play operator (eqs. 20-21) driven through a
+*monotone* input path ends where one step from the path's start to its end ends, and an input
+held for several readings leaves the state where its first reading left it. So for a backlash
+alone (not for linear dynamics after it, whose state moves every sample) a few lost readings
+hide nothing when the input over them was monotone -- held, or moving one way: the two
+readings around them are a pair of consecutive *states*. :func:`monotone_paths` tells which
+gaps are so; a caller that knows the input at the lost instants (the node and bag replay know
+every command) lifts those breaks. At ten encoder readings per held command nearly every lost
+reading is such a gap, and the information lost with 30 % of the readings falls from half of
+the rows to a few percent.
+
 Examples
 --------
 >>> import numpy as np
@@ -31,13 +42,18 @@ from ._typing import ArrayLike, BoolArray, FloatArray
 from .errors import GenBacklashError
 
 __all__ = [
+    "MAX_BRIDGED",
     "as_breaks",
     "breaks_to_rows",
+    "bridge_lost",
+    "monotone_paths",
     "nominal_period",
     "restart_points",
     "sample_breaks",
     "segment_lengths",
 ]
+
+MAX_BRIDGED = 20  # lost readings a break may span and still be lifted (bridge_lost)
 
 
 def nominal_period(times_ns: ArrayLike) -> float:
@@ -160,3 +176,90 @@ def segment_lengths(breaks: BoolArray) -> FloatArray:
         )
     ends = np.append(starts[1:], np.asarray(breaks).size)
     return np.asarray(ends - starts, dtype=np.float64)
+
+
+def monotone_paths(values: ArrayLike, start: ArrayLike, stop: ArrayLike) -> BoolArray:
+    """Per pair, whether ``values[start[i]] .. values[stop[i]]`` is monotone (either way).
+
+    The rate independence of the play operator (eqs. 20-21): a backlash driven along a
+    monotone input path (non-decreasing or non-increasing; held values included) from ``a`` to
+    ``b`` ends in the state one step from ``a`` to ``b`` ends in. ``values`` is the input in
+    the order it acted (the held command at every encoder instant, or every command in the
+    order it took effect); ``start`` and ``stop`` index the inputs in force at the two
+    readings around a gap. Empty or reversed ranges (``stop < start``) are not monotone paths.
+
+    Parameters
+    ----------
+    values : array_like, shape (N,)
+        The input sequence.
+    start, stop : array_like of int
+        First and last index of each path (inclusive), in ``0 .. N-1``.
+
+    Returns
+    -------
+    ndarray of bool
+        One flag per path.
+
+    Examples
+    --------
+    >>> u = [0.0, 0.0, 0.5, 1.0, 1.0, 0.2]
+    >>> monotone_paths(u, [0, 0, 2, 3], [1, 4, 5, 2]).tolist()
+    [True, True, False, False]
+    """
+    v = np.asarray(values, dtype=np.float64)
+    i0 = np.asarray(start, dtype=np.intp)
+    i1 = np.asarray(stop, dtype=np.intp)
+    if v.ndim != 1:
+        raise GenBacklashError(f"values must be one-dimensional, got shape {v.shape}")
+    if i0.shape != i1.shape:
+        raise GenBacklashError(f"start and stop differ in shape: {i0.shape} and {i1.shape}")
+    lowest = min(int(i0.min()), int(i1.min())) if i0.size else 0
+    highest = max(int(i0.max()), int(i1.max())) if i0.size else 0
+    if lowest < 0 or highest >= max(v.size, 1):
+        raise GenBacklashError(f"path indices must lie in 0 .. {v.size - 1}")
+    step = np.diff(v)
+    ups = np.concatenate(([0], np.cumsum(step > 0.0)))  # rises among values[0..k]
+    downs = np.concatenate(([0], np.cumsum(step < 0.0)))  # falls among values[0..k]
+    safe0, safe1 = np.minimum(i0, i1), np.maximum(i0, i1)
+    rises = ups[safe1] - ups[safe0]
+    falls = downs[safe1] - downs[safe0]
+    return np.asarray((i1 >= i0) & ((rises == 0) | (falls == 0)), dtype=bool)
+
+
+def bridge_lost(
+    breaks: BoolArray,
+    held: ArrayLike,
+    index: ArrayLike,
+    *,
+    max_missing: int = MAX_BRIDGED,
+) -> BoolArray:
+    """``breaks`` with the breaks lifted that only lost readings caused along a monotone input.
+
+    For a backlash alone (see the module notes). ``held`` is the input at every encoder
+    instant, lost ones included, and ``index[k]`` the instant of sample ``k``. A break at
+    ``k`` is lifted when at most ``max_missing`` instants lie between samples ``k-1`` and
+    ``k`` and ``held`` is monotone from the one to the other (:func:`monotone_paths`). Any
+    other break -- the first sample, a reading taken out, a longer gap -- stays.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> held = np.array([0.0, 0.0, 0.1, 0.1, 0.2, 0.3, 0.5, 0.0])
+    >>> index = np.array([0, 2, 3, 5, 7])  # instants 1, 4 and 6 lost; 0.3 -> 0.5 -> 0 reverses
+    >>> breaks = np.array([True, True, False, True, True])
+    >>> bridge_lost(breaks, held, index, max_missing=3).tolist()
+    [True, False, False, False, True]
+    """
+    b = np.asarray(breaks, dtype=bool).copy()
+    at = np.asarray(index, dtype=np.intp)
+    if at.shape != b.shape:
+        raise GenBacklashError(f"index and breaks differ in shape: {at.shape} and {b.shape}")
+    if b.size < 2:
+        return b
+    k = np.flatnonzero(b[1:]) + 1
+    gap = at[k] - at[k - 1] - 1
+    near = (gap >= 1) & (gap <= max_missing)
+    k = k[near]
+    if k.size:
+        b[k] = ~monotone_paths(held, at[k - 1], at[k])
+    return b

@@ -49,7 +49,7 @@ import numpy as np
 from ._typing import BoolArray, FloatArray, IntArray
 from .backlash import GeneralBacklash
 from .errors import GenBacklashError
-from .samples import sample_breaks
+from .samples import bridge_lost, sample_breaks
 from .simulate import simulate_backlash
 
 __all__ = [
@@ -247,16 +247,20 @@ class OperationRecord:
         """The readings that arrive."""
         return self.y_all[self.received]
 
-    def series(self) -> tuple[FloatArray, FloatArray, BoolArray]:
+    def series(self, *, bridge: bool = False) -> tuple[FloatArray, FloatArray, BoolArray]:
         """``(u, y, breaks)`` as the node sees it: one sample per reading that arrived, the
         input the command held at its stamp, and the sample rule's breaks
-        (:func:`~genbacklash_core.samples.sample_breaks`)."""
+        (:func:`~genbacklash_core.samples.sample_breaks`).
+
+        With ``bridge``, the breaks that lost readings caused along a monotone input are
+        lifted (:func:`~genbacklash_core.samples.bridge_lost`): right for a backlash alone,
+        as the node does with ``model: backlash``; not for linear dynamics after it.
+        """
         period = 1e9 / self.settings.encoder_rate
-        return (
-            self.u_all[self.received],
-            self.y_all[self.received],
-            sample_breaks(self.encoder_t_ns, period),
-        )
+        breaks = sample_breaks(self.encoder_t_ns, period)
+        if bridge:
+            breaks = bridge_lost(breaks, self.u_all, np.flatnonzero(self.received))
+        return self.u_all[self.received], self.y_all[self.received], breaks
 
 
 def worn(model: GeneralBacklash, factor: float) -> GeneralBacklash:
