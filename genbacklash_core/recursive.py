@@ -81,7 +81,7 @@ from .estimate import (
     relative_std_of,
 )
 from .identify import _backlash_columns, _switching
-from .memory import pair_series
+from .memory import BranchCoverage, coverage_of, excitation_advice, pair_series
 from .play import play_operator
 from .samples import as_breaks
 from .simulate import play_bounds
@@ -645,6 +645,35 @@ class RecursiveIdentifier:
         return self._memory
 
     @property
+    def coverage(self) -> BranchCoverage:
+        """How much of the input range each branch's rows cover (the memory and the rows of
+        the current block), for diagnostics and reports."""
+        rows, _ = self._memory.rows()
+        if self._pending:
+            rows = np.concatenate([rows, *(r for r, _ in self._pending)])
+        return coverage_of(rows[:, 0], rows[:, 1], self.settings.bins, self._memory.per_direction)
+
+    def excitation_advice(self) -> str:
+        """What the data have not shown yet, and what motion would show it ("" when the rows
+        cover both branches over the input range seen). A backlash alone only (the cascade's
+        rows are not filed by branch): "" for a cascade.
+
+        >>> ident = RecursiveIdentifier(1)
+        >>> _ = ident.update_many(np.linspace(0.0, 1.0, 400), np.linspace(0.0, 0.9, 400))
+        >>> ident.excitation_advice()
+        'the left branch is not covered yet: move the joint down'
+        """
+        if self._structure.cascade:
+            return ""
+        need = 0 if self._ever_started else max(self._min_rows() - len(self._memory), 0)
+        cover = self.coverage
+        seen = bool(cover.up.sum() + cover.down.sum()) or self._input_high > self._input_low
+        queued = any(np.ptp(u) > 0.0 for u, _, _ in self._queue if u.size)
+        if not seen and queued:
+            return ""  # the samples are not looked at before the first attempt
+        return excitation_advice(cover, moved=seen or queued, rows_needed=need)
+
+    @property
     def from_seed(self) -> bool:
         """True while the estimate still leans on a seed (:meth:`seed`): the memory has not
         refilled a branch since (and no re-initialisation replaced the seed)."""
@@ -683,6 +712,8 @@ class RecursiveIdentifier:
         self._queued = 0
         self._events = 0  # queue flushes (the estimate's excitation and ages change there)
         self._published: tuple[tuple[object, ...], Estimate] | None = None
+        self._advice_key: tuple[int, int, int] | None = None  # what the advice was made for
+        self._advice = ""
         # carried signals
         self._run = 0  # consecutive samples ending at the latest one
         self._u1 = self._y1 = 0.0  # the latest sample (backlash)
@@ -1375,8 +1406,16 @@ class RecursiveIdentifier:
         s = self.settings
         excitation = min(max(self._excitation, 0.0), 1.0)
         if not self._ever_started:
+            reason = self._reason
+            if not structure.cascade:
+                rows = sum(r.shape[0] for r, _ in self._pending)
+                advice_key = (self._events, len(self._memory), rows)
+                if advice_key != self._advice_key:  # rows come at events: one advice per change
+                    self._advice_key, self._advice = advice_key, self.excitation_advice()
+                if self._advice:
+                    reason = f"{reason}: {self._advice}"
             return Estimate.empty(
-                structure, self._samples, excitation, EstimatorState.WARMING_UP, self._reason
+                structure, self._samples, excitation, EstimatorState.WARMING_UP, reason
             )
         theta = self._theta
         sigma2 = self._sigma2 if math.isfinite(self._sigma2) else self._long

@@ -46,7 +46,7 @@ from .identify import (
     identify_backlash,
     identify_cascade,
 )
-from .memory import BranchCoverage, RowMemory
+from .memory import BranchCoverage, RowMemory, excitation_advice
 from .play import play_operator
 from .refine import refine_parameters
 from .samples import as_breaks, breaks_to_rows
@@ -1281,31 +1281,12 @@ class WindowedIdentifier:
         memory = self._memory
         if memory is None:
             return ""
-        if self._samples > 1 and self._rows == 0:
-            return (
-                "the input is constant (or every sample was lost): move the joint back and "
-                "forth over its working range"
-            )
-        cover = memory.coverage()
-        missing = []
-        for branch, move in (("left", "down"), ("right", "up")):
-            if cover.share(branch) == 0.0:
-                missing.append(f"the {branch} branch is not covered yet: move the joint {move}")
-            else:
-                holes = cover.empty_regions(branch)
-                if holes and cover.share(branch) < 0.75:
-                    where = ", ".join(f"[{lo:.3g}, {hi:.3g}]" for lo, hi in holes[:3])
-                    missing.append(
-                        f"the {branch} branch has no data over {where}: move {move} there"
-                    )
-        if not missing and self._p is None:
-            need = self.min_samples - len(memory)
-            if need > 0:
-                missing.append(
-                    f"{need} more moves between readings needed before the first fit (moves "
-                    "that reverse direction across the gap teach the most)"
-                )
-        return "; ".join(missing)
+        need = self.min_samples - len(memory) if self._p is None else 0
+        return excitation_advice(
+            memory.coverage(),
+            moved=not (self._samples > 1 and self._rows == 0),
+            rows_needed=max(need, 0),
+        )
 
     def _quick_confidence(self) -> float:
         """The published confidence from the cached one of the last fit (cheap)."""

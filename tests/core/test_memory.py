@@ -70,3 +70,46 @@ def test_bad_arguments() -> None:
         RowMemory(1)
     with pytest.raises(GenBacklashError, match="bins"):
         RowMemory(10, bins=0)
+
+
+def test_excitation_advice_names_what_is_missing_and_the_motion() -> None:
+    from genbacklash_core.memory import coverage_of, excitation_advice
+
+    up = np.linspace(0.0, 1.0, 101)
+    down = up[::-1]
+    # up only: the left branch (moves down) is missing
+    cover = coverage_of(up[:-1], up[1:], 8, 100)
+    assert excitation_advice(cover, moved=True) == (
+        "the left branch is not covered yet: move the joint down"
+    )
+    # down only over the lower half: the right branch is missing, the left has holes above
+    lower = down[50:]
+    both = coverage_of(np.r_[up[:-1], lower[:-1]], np.r_[up[1:], lower[1:]], 8, 100)
+    text = excitation_advice(both, moved=True)
+    assert "the right branch" not in text
+    assert text.startswith("the left branch has no data over [0.5")
+    assert text.endswith("move down there")
+    # everything covered: nothing to say, unless rows are still needed for the first fit
+    full = coverage_of(np.r_[up[:-1], down[:-1]], np.r_[up[1:], down[1:]], 8, 100)
+    assert excitation_advice(full, moved=True) == ""
+    assert excitation_advice(full, moved=True, rows_needed=7).startswith("7 more moves")
+    assert excitation_advice(full, moved=False).startswith("the input is constant")
+
+
+@pytest.mark.parametrize("kind", ["windowed", "recursive"])
+def test_identifiers_warming_up_say_which_motion_is_missing(kind: str) -> None:
+    """A joint that has only moved one way is told to move the other way; once it has
+    reversed across its range the advice goes."""
+    from genbacklash_core import RecursiveIdentifier, WindowedIdentifier, paper_example
+
+    model = paper_example(1).model
+    ident = WindowedIdentifier(3) if kind == "windowed" else RecursiveIdentifier(3)
+    u_up = np.linspace(-1.5, 1.5, 600)
+    y_up = model.simulate(u_up)
+    est = ident.update_many(u_up, y_up)
+    assert est.state.value == "warming_up"
+    assert "the left branch is not covered yet: move the joint down" in est.reason
+    u = np.tile(np.r_[np.linspace(1.5, -1.5, 300), np.linspace(-1.5, 1.5, 300)], 4)
+    est = ident.update_many(u, model.simulate(u, x0=float(y_up[-1])))
+    assert "not covered" not in est.reason
+    assert "no data over" not in est.reason
