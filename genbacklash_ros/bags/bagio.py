@@ -42,6 +42,7 @@ from typing import Any, Literal, NamedTuple
 import numpy as np
 
 from genbacklash_core import GenBacklashError
+from genbacklash_core.samples import MAX_BRIDGED, monotone_paths
 from genbacklash_ros.bags.rosbags_types import from_rosbags, jazzy_typestore, to_rosbags
 from genbacklash_ros.node.messages import (
     CommandType,
@@ -754,6 +755,7 @@ def align(
     enc_y: np.ndarray,
     *,
     marks: np.ndarray | None = None,
+    bridge: bool = False,
 ) -> AlignedSeries:
     """Zero-order-hold alignment of a command stream to encoder times (batch form).
 
@@ -765,7 +767,10 @@ def align(
     median difference of ``enc_t`` (:func:`~genbacklash_core.samples.nominal_period`), a
     sample breaks where its stamp is not one period, rounded, after the one before, and
     where ``marks`` (one per encoder reading) says a reading was taken out before it (a
-    message the adapters rejected); the first sample kept always breaks.
+    message the adapters rejected); the first sample kept always breaks. With ``bridge`` (for
+    a backlash alone: :func:`~genbacklash_core.samples.bridge_lost`), a break that only lost
+    readings made -- at most :data:`~genbacklash_core.samples.MAX_BRIDGED` of them, none
+    rejected -- is lifted where the commands in force over the gap were monotone.
 
     >>> s = align(np.array([10, 20]), np.array([1.0, 2.0]), np.array([5, 10, 15, 25]),
     ...           np.array([0.1, 0.2, 0.3, 0.4]))
@@ -778,7 +783,13 @@ def align(
     et = np.asarray(enc_t, dtype=np.int64)
     k = np.searchsorted(ct, et, side="right") - 1
     keep = k >= 0
-    breaks, _ = keep_breaks(link_breaks(et, record_period(et), marks=marks), keep)
+    period = record_period(et)
+    linked = link_breaks(et, period)
+    if bridge and period is not None and et.size > 1:
+        linked = _bridged(linked, et, period, k, np.asarray(cmd_u, dtype=np.float64), keep)
+    if marks is not None:
+        linked |= np.asarray(marks, dtype=bool)
+    breaks, _ = keep_breaks(linked, keep)
     return AlignedSeries(
         et[keep],
         np.asarray(cmd_u, dtype=np.float64)[k[keep]],
@@ -786,6 +797,25 @@ def align(
         int(np.count_nonzero(~keep)),
         breaks,
     )
+
+
+def _bridged(
+    breaks: np.ndarray,
+    et: np.ndarray,
+    period: float,
+    k: np.ndarray,
+    cmd_u: np.ndarray,
+    keep: np.ndarray,
+) -> np.ndarray:
+    """``breaks`` with those lifted that at most ``MAX_BRIDGED`` lost readings made along
+    monotone commands (``k``: the command in force at each reading)."""
+    j = np.flatnonzero(breaks[1:] & keep[1:] & keep[:-1]) + 1
+    missing = np.rint(np.diff(et)[j - 1] / period) - 1
+    j = j[(missing >= 1) & (missing <= MAX_BRIDGED)]
+    out = breaks.copy()
+    if j.size:
+        out[j] = ~monotone_paths(cmd_u, k[j - 1], k[j])
+    return out
 
 
 def _increasing(times: list[int], values: list[float]) -> tuple[np.ndarray, np.ndarray]:
@@ -809,8 +839,10 @@ def read_aligned(
     *,
     joint: str = "",
     command_index: int = 0,
+    bridge: bool = False,
 ) -> AlignedSeries:
-    """Read a command and an encoder topic from a bag and align them (see :func:`align`).
+    """Read a command and an encoder topic from a bag and align them (see :func:`align`;
+    ``bridge`` for a backlash alone).
 
     Times are header stamps when the message has a non-zero one, else the log time (the
     pipeline's default ``stamp_source = "header"``). Messages the adapters reject (joint
@@ -863,7 +895,7 @@ def read_aligned(
         seen = np.cumsum(e_m)[unique]
         e_m = np.diff(seen, prepend=0) > 0
         e_t, e_y = e_t[unique], e_y[unique]
-    series = align(c_t, c_u, e_t, e_y, marks=e_m)
+    series = align(c_t, c_u, e_t, e_y, marks=e_m, bridge=bridge)
     if series.t.size == 0:
         raise BagError(f"no encoder reading on {encoder_topic!r} follows the first command")
     return series

@@ -133,10 +133,12 @@ def _summary(result: IdentificationResult) -> str:
 
 def _cmd_identify(args: argparse.Namespace) -> int:
     params = replay_cli.node_parameters(args, replay_cli.batch_parameters(args.data)).params
-    series = replay_cli.load_series(args, params)
+    model = params.model if args.model is None else args.model
+    # a backlash alone is rate independent: lost readings along monotone commands hide nothing
+    series = replay_cli.load_series(args, params, bridge=model == "backlash")
     result = _identify(
         series,
-        model=params.model if args.model is None else args.model,
+        model=model,
         degree=params.degree if args.degree is None else args.degree,
         na=params.na if args.na is None else args.na,
         nb=params.nb if args.nb is None else args.nb,

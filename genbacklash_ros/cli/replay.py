@@ -115,12 +115,15 @@ def add_bag_input_options(parser: argparse.ArgumentParser, *, required: bool) ->
     )
 
 
-def load_bag_series(args: argparse.Namespace, params: NodeParameters | None = None) -> Series:
+def load_bag_series(
+    args: argparse.Namespace, params: NodeParameters | None = None, *, bridge: bool = False
+) -> Series:
     """The aligned (u, y) samples of a bag given by ``args.data`` and the bag options.
 
     One sample per encoder message; the command held (the pipeline's alignment) and the
-    sample rule's ``breaks``. ``joint`` and ``command_index`` come from the options, else
-    from ``params``.
+    sample rule's ``breaks``, with lost readings along monotone commands bridged when
+    ``bridge`` (a backlash alone). ``joint`` and ``command_index`` come from the options,
+    else from ``params``.
     """
     if not args.command_topic or not args.encoder_topic:
         raise BagError(
@@ -132,7 +135,12 @@ def load_bag_series(args: argparse.Namespace, params: NodeParameters | None = No
     if index is None:
         index = params.command_index if params else 0
     series = read_aligned(
-        args.data, args.command_topic, args.encoder_topic, joint=joint, command_index=index
+        args.data,
+        args.command_topic,
+        args.encoder_topic,
+        joint=joint,
+        command_index=index,
+        bridge=bridge,
     )
     if series.skipped:
         print(
@@ -151,7 +159,9 @@ def is_bag(data: str | Path) -> bool:
     return file.is_dir() or file.suffix.lower() in BAG_SUFFIXES
 
 
-def load_series(args: argparse.Namespace, params: NodeParameters | None = None) -> Series:
+def load_series(
+    args: argparse.Namespace, params: NodeParameters | None = None, *, bridge: bool = False
+) -> Series:
     """The (u, y) data of ``args.data``: a CSV file, or a bag with the bag options.
 
     Shared by ``identify`` and ``diagnose``; ``params`` supply ``joint`` and
@@ -159,7 +169,7 @@ def load_series(args: argparse.Namespace, params: NodeParameters | None = None) 
     """
     file = Path(args.data)
     if is_bag(file):
-        return load_bag_series(args, params)
+        return load_bag_series(args, params, bridge=bridge)
     if not file.exists():
         raise GenBacklashError(f"{file} does not exist")
     return read_series_csv(file)

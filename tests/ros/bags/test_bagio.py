@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from genbacklash_core.samples import MAX_BRIDGED
 from genbacklash_ros.bags.bagio import BagError, BagReader, BagWriter, align, read_aligned
 from genbacklash_ros.bags.rosbags_types import jazzy_typestore
 from genbacklash_ros.node.messages import (
@@ -222,3 +223,35 @@ def test_read_aligned(tmp_path: Path) -> None:
     assert np.allclose(s.u, 0.01 * np.arange(50))
     with pytest.raises(BagError, match="not supported"):
         read_aligned(tmp_path / "bag", "/diagnostics", "/enc")
+
+
+def test_align_bridges_lost_readings_only_along_monotone_commands() -> None:
+    """``bridge`` (a backlash alone): a break made by lost readings goes where the commands in
+    force over the gap were monotone; across a reversal, after a rejected reading, or over
+    a long gap it stays."""
+    cmd_t = np.array([0, 30, 60, 90, 120])
+    cmd_u = np.array([0.0, 0.5, 1.0, 0.2, 0.3])
+    enc_t = np.arange(0, 1000, 10)
+    long_gap = 300 + 10 * np.arange(MAX_BRIDGED + 1)  # one reading more than may be bridged
+    lost = np.isin(enc_t, [40, 100, 200, 210, 220, 230, *long_gap])
+    enc_t = enc_t[~lost]
+    enc_y = np.zeros(enc_t.size)
+    strict = align(cmd_t, cmd_u, enc_t, enc_y)
+    bridged = align(cmd_t, cmd_u, enc_t, enc_y, bridge=True)
+    at = {int(t): k for k, t in enumerate(enc_t)}
+    after_long = int(long_gap[-1]) + 10
+    assert all(strict.breaks[at[t]] for t in (50, 110, 240, after_long))
+    assert not bridged.breaks[at[50]]  # 0.5 held over the lost reading at 40
+    assert not bridged.breaks[at[110]]  # 0.2 from 90 on: held over 100 (one fall, 1.0 -> 0.2)
+    assert not bridged.breaks[at[240]]  # 0.3 held over four lost readings
+    assert bridged.breaks[at[after_long]]  # too long a gap
+    reversing = align(
+        np.array([0, 35, 45]),
+        np.array([0.0, 1.0, 0.0]),
+        np.array([0, 10, 20, 30, 50]),
+        np.zeros(5),
+        bridge=True,
+    )
+    assert reversing.breaks.tolist() == [True, False, False, False, True]  # 0 -> 1 -> 0 at 40
+    marked = align(cmd_t, cmd_u, enc_t, enc_y, bridge=True, marks=enc_t == 50)
+    assert marked.breaks[at[50]]  # a reading taken out before it: never bridged
