@@ -25,8 +25,9 @@ previous stage's output and returns its own, and none calls back into the pipeli
   :class:`~genbacklash_ros.node.identify.ThreadWorker` for live transports: a refit never
   delays a compensated command) and the estimate in use;
 * :mod:`~genbacklash_ros.node.compensate` -- the inverse compensator;
-* :mod:`~genbacklash_ros.node.publish` and :mod:`~genbacklash_ros.node.ledger` -- the data
-  clock, and the counters and problems that ``/diagnostics`` reports.
+* :mod:`~genbacklash_ros.node.publish`, :mod:`~genbacklash_ros.node.ledger` and
+  :mod:`~genbacklash_ros.node.silence` -- the data clock, the counters and problems, and the
+  streams' silences that ``/diagnostics`` reports.
 
 Alignment (integer nanoseconds throughout)
 -----------------------------------------
@@ -124,7 +125,6 @@ from types import MappingProxyType
 from typing import Literal, TypeAlias
 
 from genbacklash_core import Estimate, GenBacklashError, OnlineIdentifier
-from genbacklash_ros.node.align import MAX_COMMANDS as _MAX_COMMANDS
 from genbacklash_ros.node.align import Aligner
 from genbacklash_ros.node.checkpoint import Checkpoint, CheckpointError, save_checkpoint, warm_start
 from genbacklash_ros.node.compensate import CompensateStage
@@ -175,6 +175,7 @@ from genbacklash_ros.node.messages import (
 from genbacklash_ros.node.parameters import NodeParameters
 from genbacklash_ros.node.publish import DIAGNOSTICS_PERIOD_NS, Schedule
 from genbacklash_ros.node.screen import Screen
+from genbacklash_ros.node.silence import SilentStreams
 
 __all__ = [
     "COMMAND_WAIT_NS",
@@ -196,7 +197,6 @@ WorkerFactory: TypeAlias = Callable[[OnlineIdentifier], IdentifierWorker]
 COMMAND_WAIT_NS = 100_000_000  # encoder time after which a sample's command counts as held
 BATCH_SAMPLES = 64  # encoder messages per identifier feed
 BATCH_NS = 100_000_000  # data time between identifier feeds at most
-assert _MAX_COMMANDS  # re-exported for the record: the command history's bound
 
 _COMMAND_CLASSES: dict[str, type] = {
     "float64": Float64,
@@ -312,6 +312,7 @@ class BacklashPipeline:
         self._make_worker = worker
         self._ledger = Ledger()
         self._health = StreamHealth()
+        self._silence = SilentStreams()
         self._params = params
         self._configure(params)
         self._clock = Schedule(
@@ -464,6 +465,7 @@ class BacklashPipeline:
         """
         self._take_results()
         align, health = self._align, self._health
+        self._silence.command(int(receive_ns))
         if not math.isfinite(value):
             self._drop("command_invalid", f"command: value {value} is not finite")
             return None
@@ -508,6 +510,7 @@ class BacklashPipeline:
         """An encoder reading already read from its message (header stamp, 0 when none):
         any periodic outputs now due (:meth:`on_encoder` is this plus the adapters)."""
         self._take_results()
+        self._silence.encoder(int(receive_ns))
         if not math.isfinite(value):
             self._drop("encoder_invalid", f"encoder: value {value} is not finite")
             return []
@@ -598,6 +601,10 @@ class BacklashPipeline:
         passing = health.passing
         level = max(level, health.level)
         parts.extend(health.parts)
+        silent = self._silence.report(self._params.command_type, self._params.encoder_type)
+        if silent.parts:
+            level = max(level, silent.level)
+            parts.extend(silent.parts)
         led = self._ledger
         period = led.take_period()
         loud = {k: n for k, n in period.drops.items() if k not in QUIET_DROPS}
@@ -633,6 +640,7 @@ class BacklashPipeline:
             for k, n in led.dropped.items()
             if n or k not in LIVE_ONLY_DROPS
         ]
+        extra += silent.values
         saved = led.last_checkpoint_ns
         extra.append(("last_checkpoint_s", "none" if saved is None else f"{saved / 1e9:.3f}"))
         if self.warm_start_note:
