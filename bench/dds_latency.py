@@ -1,6 +1,7 @@
 """DDS latency: the compensated command back to a separate process at 1 kHz, next to an echo.
 
     python bench/dds_latency.py [--seconds S] [--rate HZ] [--quick]
+                                [--stamps sane|early] [--load] [--worker thread|sync]
 
 Three processes share a DDS domain of their own (an id in 201-231, apart from the tests'):
 the node as users run it (``python -m genbacklash_ros.cli.node --transport dds --params-file
@@ -23,12 +24,22 @@ process, its processing, the hop back. Messages of the warm-up are discarded; a 
 written after the warm-up that never comes back is counted as lost. The echo runs at the
 same time as the node (same ticks, same machine load), so the ratio node / echo is the
 node's own cost on a shared, noisy machine.
+
+Issue 15's failing case: ``--stamps early`` stamps each encoder reading just *before* the
+command that produced it is written, so the node sees a one-sample delay its model lacks and
+every cold start fails; ``--load`` runs a CPU-bound process (a busy loop) beside the three for
+the whole run; ``--worker sync`` runs the node with identification inside the message handler
+(the synchronous worker, as before issue 15 item 4) instead of its own thread, so the two are
+compared under the same conditions. Besides the latency after the warm-up the section gives
+the commands lost over the *whole* run (the cold start is in the warm-up) and the time from
+the first command to the first estimate the node publishes.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import signal
 import subprocess
@@ -227,6 +238,7 @@ class Replies:
     compensated: np.ndarray
     duplicates: int = 0
     diagnostics: list[tuple[int, Any]] = field(default_factory=list)
+    first_estimate_ns: int = -1
 
 
 class ReplyReader:
@@ -250,6 +262,9 @@ class ReplyReader:
             ),
             "ping": DataReader(dp, Topic(dp, PONG_TOPIC, Float64MultiArray_), qos=qos),
             "diagnostics": DataReader(dp, Topic(dp, "rt/diagnostics", DiagnosticArray_), qos=qos),
+            "estimate": DataReader(
+                dp, Topic(dp, "rt/backlash_identifier/estimate", Float64MultiArray_), qos=qos
+            ),
         }
         mask = SampleState.NotRead | ViewState.Any | InstanceState.Any
         self._conditions = {k: ReadCondition(r, mask) for k, r in self.readers.items()}
@@ -281,6 +296,10 @@ class ReplyReader:
                         continue
                     if key == "diagnostics":
                         r.diagnostics.append((now, sample))
+                        continue
+                    if key == "estimate":
+                        if r.first_estimate_ns < 0:
+                            r.first_estimate_ns = now
                         continue
                     k = int(sample.data[1] if key == "command" else sample.data[0])
                     times = r.command_ns if key == "command" else r.ping_ns
@@ -326,7 +345,7 @@ def cpu_seconds(pid: int) -> float:
 
 
 def play(
-    domain_id: int, rate: float, n: int, n_warm: int, pids: dict[str, int]
+    domain_id: int, rate: float, n: int, n_warm: int, pids: dict[str, int], early: bool = False
 ) -> tuple[Played, Replies]:
     """Wait for the matches, then write ``n`` ticks at ``rate`` Hz; the write and reply times.
 
@@ -342,6 +361,8 @@ def play(
         Warm-up ticks: the CPU time of the processes in ``pids`` is measured from there on.
     pids : dict
         Process ids by name (the player itself is added as ``player``).
+    early : bool
+        Stamp each encoder reading before its command is written (issue 15's failing case).
 
     Returns
     -------
@@ -381,9 +402,10 @@ def play(
         if k == n_warm:
             cpu_start = {name: cpu_seconds(pid) for name, pid in pids.items()}
         played.deadline_ns[k] = target
+        stamp_ns = time.time_ns()  # used when early: the reading stamped before its command
         played.command_ns[k] = time.monotonic_ns()
         command.write(Float64MultiArray_(cmd_layout, [u[k], float(k)]))
-        sec, nanosec = divmod(time.time_ns(), 1_000_000_000)
+        sec, nanosec = divmod(stamp_ns if early else time.time_ns(), 1_000_000_000)
         encoder.write(JointState_(Header_(Time_(sec, nanosec), ""), ["j"], [y[k]], [], []))
         played.ping_ns[k] = time.monotonic_ns()
         ping.write(Float64MultiArray_(ping_layout, [float(k)]))
@@ -439,9 +461,31 @@ class Run:
     echo_status: int
     node_log: str
     seconds: float
+    early: bool = False
+    load: bool = False
+    worker: str = "thread"
 
 
-def run(rate: float, warmup_s: float, seconds: float, domain_id: int) -> Run:
+# the node as users run it, with one change for --worker sync: the transport's worker factory
+# replaced by the synchronous one (identification inside the message handler, as before)
+_NODE_SYNC = (
+    "import sys; import genbacklash_ros.transports.dds_node as m; "
+    "from genbacklash_ros.node.identify import SyncWorker; m.live_worker = SyncWorker; "
+    "from genbacklash_ros.cli.node import main; sys.exit(main(sys.argv[1:]))"
+)
+_BUSY = "while True: pass"  # the CPU-bound process beside the node (--load)
+
+
+def run(
+    rate: float,
+    warmup_s: float,
+    seconds: float,
+    domain_id: int,
+    *,
+    early: bool = False,
+    load: bool = False,
+    worker: str = "thread",
+) -> Run:
     """Start the node and the echo, play, stop both; everything measured."""
     n_warm = round(warmup_s * rate)
     n = n_warm + round(seconds * rate)
@@ -451,7 +495,9 @@ def run(rate: float, warmup_s: float, seconds: float, domain_id: int) -> Run:
     with tempfile.TemporaryDirectory(prefix="dds_latency_") as tmp:
         params = _write_params(Path(tmp) / "params.yaml")
         log_path = Path(tmp) / "node.log"
-        node_cmd = [sys.executable, "-m", "genbacklash_ros.cli.node", "--transport", "dds"]
+        node_cmd = [sys.executable, *(["-c", _NODE_SYNC] if worker == "sync" else ["-m"])]
+        node_cmd += ["genbacklash_ros.cli.node"] if worker != "sync" else []
+        node_cmd += ["--transport", "dds"]
         node_cmd += ["--params-file", str(params), "--domain-id", str(domain_id)]
         node_cmd += ["--duration", f"{lifetime:.0f}"]
         echo_cmd = [sys.executable, str(Path(__file__).resolve()), "--role", "echo"]
@@ -459,10 +505,14 @@ def run(rate: float, warmup_s: float, seconds: float, domain_id: int) -> Run:
         with log_path.open("wb") as log:
             node = subprocess.Popen(node_cmd, stdout=subprocess.DEVNULL, stderr=log, env=env)
             echo_proc = subprocess.Popen(echo_cmd, env=env, cwd=ROOT)
+            busy = subprocess.Popen([sys.executable, "-c", _BUSY]) if load else None
             try:
                 pids = {"node": node.pid, "echo": echo_proc.pid}
-                played, replies = play(domain_id, rate, n, n_warm, pids)
+                played, replies = play(domain_id, rate, n, n_warm, pids, early)
             finally:
+                if busy is not None:
+                    busy.kill()
+                    busy.wait()
                 node_status = _stop(node, "the node")
                 echo_status = _stop(echo_proc, "the echo")
         node_log = log_path.read_text(encoding="utf-8", errors="replace")
@@ -474,6 +524,9 @@ def run(rate: float, warmup_s: float, seconds: float, domain_id: int) -> Run:
         echo_status,
         node_log,
         time.perf_counter() - started,
+        early,
+        load,
+        worker,
     )
 
 
@@ -523,6 +576,16 @@ def report(result: Run, rate: float) -> str:
     p, r = result.played, result.replies
     ours = latency_stats(p.command_ns[w:], r.command_ns[w:])
     ref = latency_stats(p.ping_ns[w:], r.ping_ns[w:])
+    whole = latency_stats(p.command_ns, r.command_ns)
+    first_s = (
+        (r.first_estimate_ns - p.command_ns[0]) / 1e9 if r.first_estimate_ns >= 0 else math.inf
+    )
+    setting = (
+        f"Encoder readings stamped {'before' if result.early else 'after'} their commands"
+        f"{' (issue 15: they look delayed by one sample)' if result.early else ''}; "
+        f"{'a CPU-bound process beside it' if result.load else 'no extra load'}; "
+        f"identification {'on its own thread' if result.worker == 'thread' else 'in the handler'}."
+    )
     measured = p.command_ns.size - w
     span_s = (p.command_ns[-1] - p.command_ns[w]) / 1e9
     achieved = (measured - 1) / span_s if span_s > 0 else float("nan")
@@ -572,10 +635,14 @@ def report(result: Run, rate: float) -> str:
         return "met" if ok else "**not met**"
 
     rate_ok = achieved >= 0.98 * rate and ours.lost <= 0.001 * ours.sent
-    intro = __doc__.split("\n", 3)[3].strip()
+    intro = __doc__.split("\n", 4)[4].strip()
     return f"""## DDS latency
 
 {intro} Machine: {machine_description()}. Run time {result.seconds:.0f} s.
+
+{setting} Over the whole run, warm-up included: {whole.lost:,} of {whole.sent:,} commands
+lost ({whole.lost / max(whole.sent, 1):.2%}); first estimate {first_s:.2f} s after the first
+command.
 
 {measured:,} ticks measured after a warm-up of {w:,} ticks ({w / rate:.1f} s); target rate
 {rate:g} Hz, achieved {achieved:.1f} Hz (ticks written more than one period after their
@@ -624,6 +691,19 @@ def parse(argv: Sequence[str] | None = None) -> argparse.Namespace:
     )
     parser.add_argument("--domain-id", type=int, default=None, help="DDS domain (default 201-231)")
     parser.add_argument(
+        "--stamps",
+        choices=("sane", "early"),
+        default="sane",
+        help="early: each reading stamped before its command (issue 15's failing case)",
+    )
+    parser.add_argument("--load", action="store_true", help="a CPU-bound process beside it")
+    parser.add_argument(
+        "--worker",
+        choices=("thread", "sync"),
+        default="thread",
+        help="sync: identification inside the handler (as before issue 15 item 4)",
+    )
+    parser.add_argument(
         "--role", choices=("player", "echo"), default="player", help=argparse.SUPPRESS
     )
     parser.add_argument("--lifetime", type=float, default=600.0, help=argparse.SUPPRESS)
@@ -641,12 +721,27 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 0
     seconds = args.seconds if args.seconds is not None else (4.0 if args.quick else 15.0)
     warmup = args.warmup if args.warmup is not None else (2.0 if args.quick else 3.0)
-    result = run(args.rate, warmup, seconds, domain_id)
+    result = run(
+        args.rate,
+        warmup,
+        seconds,
+        domain_id,
+        early=args.stamps == "early",
+        load=args.load,
+        worker=args.worker,
+    )
     if result.node_status != 0 or "Traceback" in result.node_log:
         print(result.node_log, file=sys.stderr)
     text = report(result, args.rate)
     write_section("dds_latency", text)
+    whole = latency_stats(result.played.command_ns, result.replies.command_ns)
+    first = result.replies.first_estimate_ns
     summary = {
+        "setting": {"stamps": args.stamps, "load": args.load, "worker": args.worker},
+        "whole_run": {"sent": whole.sent, "lost": whole.lost},
+        "first_estimate_s": (first - int(result.played.command_ns[0])) / 1e9
+        if first >= 0
+        else None,
         "node": asdict(
             latency_stats(
                 result.played.command_ns[result.warmup :],

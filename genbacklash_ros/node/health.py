@@ -4,9 +4,12 @@
 about the health of its input streams -- the active faults and their reports, the encoder's
 rate, equal readings, the residual scale of the model's one-step predictions, the resync
 after a gap, command saturation, runs of messages from a clock that jumped back -- and the
-rules below. The pipeline keeps alignment, feeding, compensation and the outputs: it calls
-:class:`StreamHealth` once per accepted message, once per batch it feeds, for each drop and
-for each report, and gives it what it needs of its own state as arguments and callbacks. All
+rules below. Data flow one way: the pipeline hands :class:`StreamHealth` each accepted
+message, each batch it screens, each drop and each report, with what it needs of the other
+stages' state as arguments; :class:`StreamHealth` never calls back. What it finds comes back
+as return values: :class:`Drop` (samples to count as dropped) and :class:`Note` (the text of
+a fault that started: the pipeline's latest problem) events, a :class:`ReadingCheck` (a
+stuck encoder's readings to take out) and a :class:`Screening` (the samples to keep). All
 times are integer nanoseconds of data time unless said otherwise.
 
 Faults
@@ -68,19 +71,16 @@ itself: for a cascade only the other checks run.
 
 Examples
 --------
->>> from genbacklash_core import CompensatorOptions
+>>> from genbacklash_core import CompensatorOptions, Estimate, Structure
 >>> from genbacklash_ros.node.messages import DiagnosticStatus
->>> drops = []
->>> health = StreamHealth(
-...     estimate=lambda: None,  # only asked for once readings stand still
-...     drop=lambda key, reason, count: drops.append((key, count)),
-...     note=lambda text: None,
-...     discard=lambda since: 0,
-... )
->>> health.check_reading(1_000_000, None, 0.5, None, 1_000_000, [], [])
+>>> health = StreamHealth()
+>>> no_model = Estimate.empty(Structure(3))
+>>> health.check_reading(1_000_000, None, 0.5, None, 1_000_000, [], [], no_model).stuck
 False
 >>> health.check_command(2_000_000, 9.0, 2_000_000, CompensatorOptions(u_max=1.0))
+[]
 >>> health.check_command(300_000_000, 9.0, 300_000_000, CompensatorOptions(u_max=1.0))
+[Note(text='command saturated at limit u_max = 1 for 0.298 s (last command 9)')]
 >>> health.passing_through(400_000_000), health.faults
 (True, {'command_saturated': (1, 800000000)})
 >>> report = health.report(400_000_000)
@@ -96,8 +96,8 @@ from __future__ import annotations
 
 import bisect
 import math
-from collections.abc import Callable
-from typing import NamedTuple
+from dataclasses import dataclass
+from typing import NamedTuple, TypeAlias
 
 import numpy as np
 
@@ -122,7 +122,12 @@ __all__ = [
     "STUCK_INPUT_NS",
     "STUCK_NS",
     "STUCK_SIGMAS",
+    "Drop",
+    "HealthEvent",
     "HealthReport",
+    "Note",
+    "ReadingCheck",
+    "Screening",
     "StreamHealth",
 ]
 
@@ -147,6 +152,61 @@ STILL_HOLD_NS = 1_000_000_000  # equal readings wait this long at most before be
 STUCK_INPUT_NS = 20_000_000
 SATURATION_NS = 200_000_000  # commands at or beyond a limit this long: saturated
 _SCALE_SMOOTHING = 0.2  # weight of a new batch in the residual scale
+
+
+@dataclass(frozen=True, slots=True)
+class Drop:
+    """``count`` samples (or messages) dropped for ``key`` (e.g. ``encoder_spike``), the
+    latest ``reason`` in words."""
+
+    key: str
+    reason: str
+    count: int
+
+
+@dataclass(frozen=True, slots=True)
+class Note:
+    """A fault started (or went on) with ``text``: the pipeline's latest problem."""
+
+    text: str
+
+
+HealthEvent: TypeAlias = Drop | Note
+"""What a :class:`StreamHealth` check found, in the order it found it."""
+
+
+class ReadingCheck(NamedTuple):
+    """What :meth:`StreamHealth.check_reading` found about one encoder reading.
+
+    Attributes
+    ----------
+    stuck : bool
+        The reading belongs to a stuck encoder: not to be fed.
+    discard_after : int or None
+        The encoder was just found stuck: take out the pending (not yet fed) readings
+        stamped after this time (the first of the equal readings is kept) and count them as
+        ``encoder_stuck`` drops. None otherwise.
+    events : list of Drop or Note
+    """
+
+    stuck: bool
+    discard_after: int | None
+    events: list[HealthEvent]
+
+
+class Screening(NamedTuple):
+    """What :meth:`StreamHealth.screen` made of a batch of samples.
+
+    Attributes
+    ----------
+    keep : numpy.ndarray of bool or None
+        The samples to feed (None: all of them).
+    events : list of Drop or Note
+        The spikes and the samples held back after a gap, counted as drops.
+    """
+
+    keep: np.ndarray | None
+    events: list[HealthEvent]
 
 
 class HealthReport(NamedTuple):
@@ -182,20 +242,6 @@ def _held_input(stamp: int, commands: list[int], inputs: list[float]) -> float |
 class StreamHealth:
     """The faults of a pipeline's command and encoder streams and what detects them.
 
-    Parameters
-    ----------
-    estimate : callable
-        ``estimate()``: the estimate in use now (asked only when an unchanged reading may be
-        stuck, so that a pipeline's lazily updated estimate is read when it was before).
-    drop : callable
-        ``drop(key, reason, count)``: count ``count`` samples dropped for ``key``
-        (``encoder_spike``, ``encoder_stuck``, ``encoder_after_gap``) with the latest reason.
-    note : callable
-        ``note(text)``: the latest problem, each time a fault starts with a text.
-    discard : callable
-        ``discard(since)``: drop the pending (not yet fed) encoder readings after time
-        ``since`` (those of an encoder found stuck) and return how many there were.
-
     Notes
     -----
     Not thread-safe, like the pipeline. The pipeline calls :meth:`check_command` and
@@ -203,26 +249,23 @@ class StreamHealth:
     after its stream's last one (then :meth:`reanchored` once it has re-anchored alignment),
     :meth:`screen` and :meth:`feed_horizon` when it feeds, :meth:`encoder_rejected` and
     :meth:`fault` when it drops a message, and :meth:`passing_through` and :meth:`report`
-    when it compensates and reports.
+    when it compensates and reports. Each returns what it found; none calls back.
     """
 
     __slots__ = (
         "_cmd_back",
         "_converged",
-        "_discard",
-        "_drop",
         "_enc_back",
         "_enc_period",
         "_enc_reject_reason",
         "_enc_rejects",
-        "_estimate",
+        "_events",
         "_fault_texts",
         "_fed_t",
         "_fed_y",
         "_gaps",
         "_gaps_from",
         "_last_enc_rx",
-        "_note",
         "_resync_since",
         "_sat_since",
         "_scale",
@@ -236,18 +279,8 @@ class StreamHealth:
     faults: dict[str, tuple[int, int]]
     """Active faults: key -> (level, data time the pass-through lasts until). Read only."""
 
-    def __init__(
-        self,
-        *,
-        estimate: Callable[[], Estimate],
-        drop: Callable[[str, str, int], None],
-        note: Callable[[str], None],
-        discard: Callable[[int], int],
-    ) -> None:
-        self._estimate = estimate
-        self._drop = drop
-        self._note = note
-        self._discard = discard
+    def __init__(self) -> None:
+        self._events: list[HealthEvent] = []  # what the current call found (returned)
         self.reset()
 
     def reset(self) -> None:
@@ -275,10 +308,22 @@ class StreamHealth:
 
     # ------------------------------------------------------------------ faults
 
-    def fault(self, key: str, level: int, text: str, at: int | None) -> None:
+    def _found(self) -> list[HealthEvent]:
+        """The events of the current call (and a fresh list for the next one)."""
+        events, self._events = self._events, []
+        return events
+
+    def _drop(self, key: str, reason: str, count: int) -> None:
+        self._events.append(Drop(key, reason, count))
+
+    def fault(self, key: str, level: int, text: str, at: int | None) -> list[HealthEvent]:
         """Start (or prolong) fault ``key``: pass-through until ``FAULT_HOLD_NS`` after ``at``
         (the data clock; None before the first message); ``text`` goes into the next
-        report ("" when the report says why by itself)."""
+        report ("" when the report says why by itself). Returns its :class:`Note`."""
+        self._start(key, level, text, at)
+        return self._found()
+
+    def _start(self, key: str, level: int, text: str, at: int | None) -> None:
         until = (0 if at is None else at) + FAULT_HOLD_NS
         old = self.faults.get(key)
         if old is not None:
@@ -286,7 +331,7 @@ class StreamHealth:
         self.faults[key] = (level, until)
         if text:
             self._fault_texts[key] = (level, text)
-            self._note(text)
+            self._events.append(Note(text))
 
     def _clear_fault(self, key: str) -> None:
         self.faults.pop(key, None)
@@ -326,16 +371,16 @@ class StreamHealth:
 
     def check_command(
         self, stamp: int, value: float, receive_ns: int, options: CompensatorOptions
-    ) -> None:
+    ) -> list[HealthEvent]:
         """An accepted command at ``stamp`` (received at ``receive_ns``): encoder silence (on
         the receive clock: immune to an offset between the streams' stamps) and command
-        saturation against the limits of ``options``."""
+        saturation against the limits of ``options``. Returns the faults' notes."""
         if self._cmd_back:
             self._cmd_back.clear()
         last_rx = self._last_enc_rx
         if last_rx is not None and receive_ns - last_rx > self._silence:
             silent = receive_ns - last_rx
-            self.fault("encoder_silent", DiagnosticStatus.ERROR, self._silent_text(silent), stamp)
+            self._start("encoder_silent", DiagnosticStatus.ERROR, self._silent_text(silent), stamp)
         if value >= options.u_max or value <= options.u_min:
             since = self._sat_since
             if since is None:
@@ -344,7 +389,7 @@ class StreamHealth:
                 name, limit = (
                     ("u_max", options.u_max) if value >= options.u_max else ("u_min", options.u_min)
                 )
-                self.fault(
+                self._start(
                     "command_saturated",
                     DiagnosticStatus.WARN,
                     f"command saturated at limit {name} = {limit:g} for "
@@ -353,6 +398,7 @@ class StreamHealth:
                 )
         elif self._sat_since is not None:
             self._sat_since = None
+        return self._found()
 
     def check_reading(
         self,
@@ -363,7 +409,8 @@ class StreamHealth:
         receive_ns: int,
         commands: list[int],
         inputs: list[float],
-    ) -> bool:
+        estimate: Estimate,
+    ) -> ReadingCheck:
         """An accepted encoder reading: encoder gaps (silence, clock jump forward), message
         loss and a stuck encoder.
 
@@ -381,11 +428,12 @@ class StreamHealth:
             When the reading was received (the transport's clock).
         commands, inputs : list
             The pipeline's pending commands: their times and identifier inputs (read only).
+        estimate : Estimate
+            The estimate in use (judges whether unchanged readings are stuck).
 
         Returns
         -------
-        bool
-            True when the reading belongs to a stuck encoder (not to be fed).
+        ReadingCheck
         """
         if self._enc_back:
             self._enc_back.clear()
@@ -404,8 +452,8 @@ class StreamHealth:
         self._last_enc_rx = receive_ns
         if last is None or value != previous:
             self._still_since, self._stuck = None, False
-            return False
-        return self._watch_stuck(stamp, last, value, commands, inputs)
+            return ReadingCheck(False, None, self._found())
+        return self._watch_stuck(stamp, last, value, commands, inputs, estimate)
 
     def jumped_back(self, stream: str, stamp: int, last: int) -> int | None:
         """Whether a message of ``stream`` (``"command"`` or ``"encoder"``) at ``stamp``, not
@@ -424,7 +472,7 @@ class StreamHealth:
         # the first of the run came about one message interval after the last accepted one
         return last - run[0] + (stamp - run[0]) // (len(run) - 1)
 
-    def reanchored(self, stream: str, stamp: int, last: int, back: int) -> None:
+    def reanchored(self, stream: str, stamp: int, last: int, back: int) -> list[HealthEvent]:
         """Alignment and the data clock restarted at ``stamp`` after a clock jump back (by
         about ``back``) seen on ``stream`` after its last time ``last``: restart what watches
         the streams, hold the active faults from ``stamp`` and report the jump."""
@@ -434,7 +482,7 @@ class StreamHealth:
         self._gaps, self._gaps_from = [], None
         self._still_since, self._stuck, self._sat_since = None, False, None
         self._fed_t = None
-        self.fault(
+        return self.fault(
             "clock_jump_back",
             DiagnosticStatus.WARN,
             f"clock jumped back {back / 1e9:.3f} s ({stream} time {stamp} ns after {last} ns): "
@@ -452,21 +500,19 @@ class StreamHealth:
             return min(horizon, still)
         return horizon
 
-    def screen(
-        self, times: np.ndarray, us: np.ndarray, ys: np.ndarray, est: Estimate
-    ) -> np.ndarray | None:
+    def screen(self, times: np.ndarray, us: np.ndarray, ys: np.ndarray, est: Estimate) -> Screening:
         """Which of the samples (``times``, inputs ``us``, readings ``ys``) to feed: not the
         spikes nor those held back after a gap (see the module notes), judged with ``est``,
         the estimate in use; tracks the scale of the one-step prediction errors.
 
-        Returns a boolean mask of the samples to keep, or None to keep them all. The
-        pipeline breaks the chain of consecutive samples at the next kept sample after each
-        one taken out (:func:`~genbacklash_ros.node.sample_rule.keep_breaks`)."""
+        Returns the mask of the samples to keep (None to keep them all) and the drops. The
+        screen stage breaks the chain of consecutive samples at the next kept sample after
+        each one taken out (:func:`~genbacklash_ros.node.sample_rule.keep_breaks`)."""
         t_prev, y_prev = self._fed_t, self._fed_y
         self._fed_t, self._fed_y = int(times[-1]), float(ys[-1])
         model = est.model
         if not isinstance(model, GeneralBacklash):
-            return None
+            return Screening(None, [])
         with np.errstate(all="ignore"):
             left, right = model.left(us), model.right(us)
             low, high = np.minimum(left, right), np.maximum(left, right)
@@ -485,7 +531,7 @@ class StreamHealth:
                 errs = np.abs(ys - np.minimum(np.maximum(previous, low), high))
             if not np.any(errs > limit):
                 self._track_scale(errs, ys)
-                return None
+                return Screening(None, [])
         errors: list[float] = []
         bad: list[int] = []  # spikes
         held: list[int] = []  # after a gap, until a sample follows from the one before it
@@ -536,13 +582,13 @@ class StreamHealth:
         if held:
             self._drop("encoder_after_gap", "sample after a gap not yet consistent", len(held))
         if not bad and not held:
-            return None
+            return Screening(None, self._found())
         if x is not None:
             self._fed_y = x
         keep = np.ones(ys.size, dtype=bool)
         keep[bad] = False
         keep[held] = False
-        return keep
+        return Screening(keep, self._found())
 
     # ------------------------------------------------------------------ detection
 
@@ -564,7 +610,7 @@ class StreamHealth:
         inside = bisect.bisect_left(commands, stamp - margin) > first
         if commands and not inside:  # neither stream has anything in the gap
             self._clear_fault("encoder_silent")
-            self.fault(
+            self._start(
                 "clock_jump_forward",
                 DiagnosticStatus.WARN,
                 f"clock jumped forward {gap / 1e9:.3f} s (no command nor encoder reading in "
@@ -572,7 +618,7 @@ class StreamHealth:
                 stamp,
             )
         else:
-            self.fault("encoder_silent", DiagnosticStatus.ERROR, self._silent_text(gap), stamp)
+            self._start("encoder_silent", DiagnosticStatus.ERROR, self._silent_text(gap), stamp)
 
     def _check_rate(self, stamp: int) -> None:
         """Close a rate window: learn the period when regular, else look for lost readings."""
@@ -590,7 +636,7 @@ class StreamHealth:
         span = float(gaps.sum())
         loss = 1.0 - gaps.size * period / span
         if loss > MAX_LOSS:
-            self.fault(
+            self._start(
                 "encoder_loss",
                 DiagnosticStatus.WARN,
                 f"encoder lost {loss:.0%} of its readings over {span / 1e9:.2f} s (one expected "
@@ -599,32 +645,37 @@ class StreamHealth:
             )
 
     def _watch_stuck(
-        self, stamp: int, last: int, value: float, commands: list[int], inputs: list[float]
-    ) -> bool:
-        """True when the reading ``value`` at ``stamp``, equal to the one at ``last``, belongs
+        self,
+        stamp: int,
+        last: int,
+        value: float,
+        commands: list[int],
+        inputs: list[float],
+        estimate: Estimate,
+    ) -> ReadingCheck:
+        """Whether the reading ``value`` at ``stamp``, equal to the one at ``last``, belongs
         to a stuck encoder (not to be fed)."""
         since = self._still_since
         if since is None:
             self._still_since = last
-            return False
+            return ReadingCheck(False, None, self._found())
         if stamp - since < STUCK_NS:
-            return False
+            return ReadingCheck(False, None, self._found())
+        discard: int | None = None
         if not self._stuck:
-            why = self._stuck_reason(value, _held_input(stamp, commands, inputs))
+            why = self._stuck_reason(value, _held_input(stamp, commands, inputs), estimate)
             if not why:
-                return False
+                return ReadingCheck(False, None, self._found())
             self._stuck, self._stuck_why = True, why
-            pending = self._discard(since)  # keep the first equal reading
-            if pending:
-                self._drop("encoder_stuck", "encoder reading unchanged", pending)
+            discard = since  # the pending readings after the first equal one go too
         self._drop("encoder_stuck", "encoder reading unchanged", 1)
-        self.fault(
+        self._start(
             "encoder_stuck",
             DiagnosticStatus.ERROR,
             f"encoder stuck at {value:.6g} for {(stamp - since) / 1e9:.3f} s{self._stuck_why}",
             stamp,
         )
-        return True
+        return ReadingCheck(True, discard, self._found())
 
     def _trusted(self, est: Estimate) -> bool:
         """Whether ``est`` may judge the readings (spikes, stuck, gaps): the identifier has
@@ -636,10 +687,10 @@ class StreamHealth:
             self._converged = False
         return self._converged and self._scale is not None
 
-    def _stuck_reason(self, value: float, held: float | None) -> str:
+    def _stuck_reason(self, value: float, held: float | None, est: Estimate) -> str:
         """Why an unchanged reading ``value`` is stuck ("" when the model allows it), ``held``
-        being the command in force ``STUCK_INPUT_NS`` before the reading."""
-        est = self._estimate()
+        being the command in force ``STUCK_INPUT_NS`` before the reading, ``est`` the
+        estimate in use."""
         model = est.model
         scale = self._scale
         trusted = self._trusted(est)

@@ -6,6 +6,29 @@ the compensated command, the estimate, the diagnostics -- so a transport (rclpy,
 replay only converts and publishes. It imports no transport and reads no clock: every decision
 is taken on the data's own time, so a replay of a bag is deterministic and is the node.
 
+Stages
+------
+Data flow one way through small stages, each a module of its own; a stage takes the
+previous stage's output and returns its own, and none calls back into the pipeline::
+
+    command  -> align (time, order) -> health check -> compensate ----------> publish
+    encoder  -> align (time, order) -> health check -> pending readings
+    pending  -> align.take (final samples + commands) -> screen (spikes, gaps, sample rule)
+             -> identify worker (submit; results polled on every message) -> estimate in use
+    data clock -> publish schedule (estimate, diagnostics, checkpoint) -> outputs
+
+* :mod:`~genbacklash_ros.node.align` -- :class:`~genbacklash_ros.node.align.Aligner`;
+* :mod:`~genbacklash_ros.node.health` and :mod:`~genbacklash_ros.node.screen` -- the faults
+  and the samples to keep (events returned, never called back);
+* :mod:`~genbacklash_ros.node.identify` -- the worker that runs the identifier off the message
+  path (:class:`~genbacklash_ros.node.identify.SyncWorker` for replay: deterministic;
+  :class:`~genbacklash_ros.node.identify.ThreadWorker` for live transports: a refit never
+  delays a compensated command) and the estimate in use;
+* :mod:`~genbacklash_ros.node.compensate` -- the inverse compensator;
+* :mod:`~genbacklash_ros.node.publish`, :mod:`~genbacklash_ros.node.ledger` and
+  :mod:`~genbacklash_ros.node.silence` -- the data clock, the counters and problems, and the
+  streams' silences that ``/diagnostics`` reports.
+
 Alignment (integer nanoseconds throughout)
 -----------------------------------------
 * **Time of a message.** With ``stamp_source = "header"`` a message's header stamp, and its
@@ -22,11 +45,14 @@ Alignment (integer nanoseconds throughout)
   known: a command with time ``>= t`` has arrived (so no earlier one can follow, given the
   order rule), or the encoder stream is ``command_wait_ns`` (default 0.1 s) past ``t`` (the
   command is then taken as held). Samples before the first command are skipped and counted.
-* **Batches.** Final samples are fed with ``update_many`` on an encoder message when
+* **Batches.** Final samples are handed to the identify worker on an encoder message when
   ``batch`` encoder messages are pending, when the data clock is ``batch_ns`` past the last
-  feed, or an estimate is due; so the estimate the compensator uses is at most about one
-  batch old. A command message never feeds nor checkpoints: its compensated command costs
-  one compensator step (tens of microseconds), whatever the identifier costs.
+  feed, or an estimate is due. With the synchronous worker (replay) the identifier runs
+  then, so the estimate the compensator uses is at most about one batch old and the same on
+  every run; with the thread worker (live) it runs beside the handlers and its estimate is
+  taken at the next message after it is ready. A command message never feeds nor
+  checkpoints: its compensated command costs one compensator step (tens of microseconds),
+  whatever the identifier costs.
 * **Identifier input.** The raw command, or with ``compensation_in_loop`` the compensated
   command that was sent (what the drivetrain then really gets).
 * **Consecutive samples.** A regression row pairs only samples that are consecutive on the
@@ -91,25 +117,17 @@ Float64(data=0.5)
 
 from __future__ import annotations
 
-import bisect
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
 from typing import Literal, TypeAlias
 
-import numpy as np
-
-from genbacklash_core import (
-    CompensatorOptions,
-    Estimate,
-    EstimatorState,
-    GenBacklashError,
-    InverseBacklash,
-    OnlineIdentifier,
-)
+from genbacklash_core import Estimate, GenBacklashError, OnlineIdentifier
+from genbacklash_ros.node.align import Aligner
 from genbacklash_ros.node.checkpoint import Checkpoint, CheckpointError, save_checkpoint, warm_start
+from genbacklash_ros.node.compensate import CompensateStage
 
 # the fault thresholds live with the rules in health.py; importable from here as before
 from genbacklash_ros.node.health import _SCALE_SMOOTHING as _SCALE_SMOOTHING
@@ -129,7 +147,16 @@ from genbacklash_ros.node.health import SPIKE_SIGMAS as SPIKE_SIGMAS
 from genbacklash_ros.node.health import STILL_HOLD_NS as STILL_HOLD_NS
 from genbacklash_ros.node.health import STUCK_NS as STUCK_NS
 from genbacklash_ros.node.health import STUCK_SIGMAS as STUCK_SIGMAS
-from genbacklash_ros.node.health import StreamHealth
+from genbacklash_ros.node.health import Drop, HealthEvent, StreamHealth
+from genbacklash_ros.node.identify import (
+    EstimateInUse,
+    Identified,
+    IdentifierWorker,
+    Refused,
+    Result,
+    SyncWorker,
+)
+from genbacklash_ros.node.ledger import ENCODER_REJECTS, LIVE_ONLY_DROPS, QUIET_DROPS, Ledger
 from genbacklash_ros.node.messages import (
     CommandMessage,
     DiagnosticArray,
@@ -146,7 +173,9 @@ from genbacklash_ros.node.messages import (
     read_encoder,
 )
 from genbacklash_ros.node.parameters import NodeParameters
-from genbacklash_ros.node.sample_rule import EncoderPeriod, keep_breaks, link_breaks
+from genbacklash_ros.node.publish import DIAGNOSTICS_PERIOD_NS, Schedule
+from genbacklash_ros.node.screen import Screen
+from genbacklash_ros.node.silence import SilentStreams
 
 __all__ = [
     "COMMAND_WAIT_NS",
@@ -157,33 +186,18 @@ __all__ = [
     "Output",
     "PipelineStats",
     "TopicKey",
+    "WorkerFactory",
 ]
 
 TopicKey: TypeAlias = Literal["compensated_command", "estimate", "diagnostics"]
 CheckpointWriter: TypeAlias = Callable[[Path, Checkpoint], object]
+WorkerFactory: TypeAlias = Callable[[OnlineIdentifier], IdentifierWorker]
+"""Makes the identify stage's worker for an identifier (``SyncWorker``, ``ThreadWorker``)."""
 
 COMMAND_WAIT_NS = 100_000_000  # encoder time after which a sample's command counts as held
-DIAGNOSTICS_PERIOD_NS = 1_000_000_000  # /diagnostics at 1 Hz of data time
 BATCH_SAMPLES = 64  # encoder messages per identifier feed
 BATCH_NS = 100_000_000  # data time between identifier feeds at most
-_MAX_COMMANDS = 4096  # command history kept while no encoder data consume it
 
-_DROP_KEYS = (
-    "command_invalid",
-    "command_duplicate",
-    "command_out_of_order",
-    "encoder_invalid",
-    "encoder_duplicate",
-    "encoder_out_of_order",
-    "identifier_error",
-    "before_first_command",
-    "encoder_spike",
-    "encoder_stuck",
-    "encoder_after_gap",
-)
-# expected at start, or reported as a fault of their own: counted, no WARN of their own
-_QUIET_DROPS = frozenset({"before_first_command", "encoder_stuck", "encoder_after_gap"})
-_ENCODER_REJECTS = frozenset({"encoder_invalid", "encoder_duplicate", "encoder_out_of_order"})
 _COMMAND_CLASSES: dict[str, type] = {
     "float64": Float64,
     "float64_multi_array": Float64MultiArray,
@@ -220,8 +234,8 @@ class PipelineStats:
 
     ``dropped`` maps each reason key (``command_invalid``, ``command_duplicate``,
     ``command_out_of_order``, the same for ``encoder_``, ``identifier_error``,
-    ``before_first_command``, ``encoder_spike``, ``encoder_stuck``, ``encoder_after_gap``)
-    to a count; ``last_problem`` is the latest reason text.
+    ``before_first_command``, ``encoder_spike``, ``encoder_stuck``, ``encoder_after_gap``,
+    ``identifier_behind``) to a count; ``last_problem`` is the latest reason text.
     """
 
     commands: int
@@ -232,11 +246,6 @@ class PipelineStats:
     checkpoint_errors: int
     dropped: MappingProxyType[str, int]
     last_problem: str
-
-
-def _next_multiple(now: int, period: int) -> int:
-    """The first multiple of ``period`` after ``now``."""
-    return (now // period + 1) * period
 
 
 def _order_text(stream: str, stamp: int, last: int) -> str:
@@ -261,11 +270,17 @@ class BacklashPipeline:
         Encoder messages per identifier feed at most.
     batch_ns : int
         Data time between identifier feeds at most.
+    worker : callable
+        Makes the identify stage's worker from the identifier:
+        :class:`~genbacklash_ros.node.identify.SyncWorker` (default: replay, tests; the same
+        outputs on every run) or :class:`~genbacklash_ros.node.identify.ThreadWorker` (live
+        transports: identification off the message path). Also a seam for tests.
 
     Notes
     -----
     Not thread-safe: a transport calls it from one thread (or under one lock). Read the
-    module notes for the alignment rules.
+    module notes for the alignment rules. With a thread worker call :meth:`close` (or
+    :meth:`finish`) at the end.
     """
 
     def __init__(
@@ -276,6 +291,7 @@ class BacklashPipeline:
         command_wait_ns: int = COMMAND_WAIT_NS,
         batch: int = BATCH_SAMPLES,
         batch_ns: int = BATCH_NS,
+        worker: WorkerFactory = SyncWorker,
     ) -> None:
         if not isinstance(params, NodeParameters):
             raise GenBacklashError(f"params must be NodeParameters, got {params!r}")
@@ -286,33 +302,25 @@ class BacklashPipeline:
         ):
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
                 raise GenBacklashError(f"{name} must be a whole number >= {low}, got {value!r}")
+        if not callable(worker):
+            raise GenBacklashError(f"worker must make an identifier worker, got {worker!r}")
         self._writer: CheckpointWriter = (
             checkpoint_writer if checkpoint_writer is not None else save_checkpoint
         )
         self._wait = command_wait_ns
         self._batch = batch
-        self._batch_ns = batch_ns
-        # counters
-        self._dropped = dict.fromkeys(_DROP_KEYS, 0)
-        self._period_drops: dict[str, int] = {}
-        self._period_reasons: dict[str, str] = {}
-        self._period_problems: list[str] = []
-        self._last_problem = ""
-        self._commands = 0
-        self._encoders = 0
-        self._samples = 0
-        self._compensated = 0
-        self._checkpoints = 0
-        self._checkpoint_errors = 0
-        self._last_checkpoint_ns: int | None = None
+        self._make_worker = worker
+        self._ledger = Ledger()
+        self._health = StreamHealth()
+        self._silence = SilentStreams()
         self._params = params
-        self._health = StreamHealth(
-            estimate=lambda: self.estimate,
-            drop=self._drop,
-            note=self._note,
-            discard=self._discard_after,
-        )
         self._configure(params)
+        self._clock = Schedule(
+            publish_ns=params.publish_period_ns,
+            checkpoint_ns=self._checkpoint_period(),
+            feed_ns=batch_ns,
+        )
+        self._worker: IdentifierWorker | None = None
         self._start(params)
 
     # ------------------------------------------------------------------ configuration
@@ -320,9 +328,6 @@ class BacklashPipeline:
     def _configure(self, params: NodeParameters) -> None:
         """Settings that change without a restart."""
         self._params = params
-        self._options: CompensatorOptions = params.compensator_options()
-        self._publish_ns = params.publish_period_ns
-        self._checkpoint_ns = params.checkpoint_period_ns
         self._checkpoint_path = Path(params.checkpoint_file) if params.checkpoint_file else None
         self._index = params.command_index
         self._joint = params.joint
@@ -330,45 +335,30 @@ class BacklashPipeline:
         self._command_class = _COMMAND_CLASSES[params.command_type]
         self._encoder_kind = params.encoder_type
 
+    def _checkpoint_period(self) -> int | None:
+        return self._params.checkpoint_period_ns if self._checkpoint_path is not None else None
+
     def _start(self, params: NodeParameters) -> None:
-        """(Re)start identification and alignment: warm start, empty buffers."""
+        """(Re)start identification and alignment: warm start, empty stages."""
         start = warm_start(params)
-        self._identifier: OnlineIdentifier = start.identifier
-        self._prior = start.prior
+        if self._worker is not None:
+            self._worker.close()
+        self._worker = self._make_worker(start.identifier)
+        ident = start.identifier
+        self._use = EstimateInUse(ident.estimate, start.prior, ident.from_seed)
         self._warm_start_note = start.note
         if start.problem:
-            self._problem(start.note)
-        self._use_header = params.stamp_source == "header"
-        self._grid_ns = params.sample_period_ns
+            self._ledger.problem(start.note)
         self._in_loop = params.compensation_in_loop
-        # streams: accepted times and values (commands: what the identifier takes)
-        self._cmd_t: list[int] = []
-        self._cmd_u: list[float] = []
-        self._enc_t: list[int] = []
-        self._enc_y: list[float] = []
-        # the sample rule (see the module notes): pending readings that follow one taken out,
-        # whether the next accepted reading does, the encoder's period, the stamp of the
-        # reading the identifier's last sample holds (None: the next sample breaks)
-        self._enc_mark: list[bool] = []
-        self._mark_next = False
-        self._period = EncoderPeriod()
-        self._fed_last_t: int | None = None
-        self._last_cmd_ns: int | None = None
-        self._last_enc_ns: int | None = None
-        self._next_grid_k: int | None = None
-        self._last_y: float | None = None
-        self._last_sent: float | None = None
-        # compensator: created when the first model is available
-        self._comp: InverseBacklash | None = None
-        self._comp_estimate: Estimate | None = None
-        # the data clock and the periodic schedule (set by the first message)
-        self._now: int | None = None
-        self._next_estimate = 0
-        self._next_diagnostics = 0
-        self._next_checkpoint = 0
-        self._next_feed_ns = 0
+        self._align = Aligner(
+            use_header=params.stamp_source == "header",
+            grid_ns=params.sample_period_ns,
+            wait_ns=self._wait,
+        )
+        self._screen = Screen()
+        self._comp = CompensateStage(params.compensator_options(), compensate=params.compensate)
         self._feed_at_count = self._batch
-        self._next_due = 0
+        self._clock.restart()
 
     def set_params(self, params: NodeParameters) -> None:
         """Apply new parameters (validated already, e.g. by :meth:`NodeParameters.replace`).
@@ -382,22 +372,17 @@ class BacklashPipeline:
         old = self._params
         self._configure(params)
         if old.restart_needed(params):
-            self._start(params)
+            self._start(params)  # the data clock restarts at the next message
             self._health.reset()
+            self._clock.configure(
+                publish_ns=params.publish_period_ns, checkpoint_ns=self._checkpoint_period()
+            )
             return
-        comp = self._comp
-        if comp is not None and old.compensator_options() != params.compensator_options():
-            state = comp.state
-            u0 = min(max(state.u, self._options.u_min), self._options.u_max)
-            try:
-                self._comp = InverseBacklash(comp.model, self._options, state.x, u0)
-            except GenBacklashError as err:
-                self._problem(f"compensator restarted: {err}")
-                self._comp, self._comp_estimate = None, None
-        if not params.compensate:  # re-initialised from the latest measurement when re-enabled
-            self._comp, self._comp_estimate = None, None
-        if self._now is not None:
-            self._schedule(self._now)
+        self._comp.reconfigure(params.compensator_options(), compensate=params.compensate)
+        self._problems(self._comp.problems)
+        self._clock.configure(
+            publish_ns=params.publish_period_ns, checkpoint_ns=self._checkpoint_period()
+        )
 
     # ------------------------------------------------------------------ properties
 
@@ -413,42 +398,35 @@ class BacklashPipeline:
 
     @property
     def identifier(self) -> OnlineIdentifier:
-        """The online identifier (replaced on a restart)."""
-        return self._identifier
+        """The online identifier (replaced on a restart; its worker's to call)."""
+        assert self._worker is not None
+        return self._worker.identifier
 
     @property
     def estimate(self) -> Estimate:
-        """The estimate in use: the identifier's, or the checkpoint's until the identifier's
-        own has converged or is at least as confident."""
-        est = self._identifier.estimate
-        prior = self._prior
-        if prior is None:
-            return est
-        if est.available and (
-            est.state is EstimatorState.CONVERGED or est.confidence >= prior.confidence
-        ):
-            self._prior = None  # the identifier's estimate from now on
-            return est
-        return prior
+        """The estimate in use: the identifier's latest, or the checkpoint's until the
+        identifier's own has converged or is at least as confident."""
+        return self._use.current
 
     @property
     def using_checkpoint(self) -> bool:
         """True while the estimate rests on the checkpoint: the identifier continues from it
         and still leans on it (``from_seed``), or its estimate stands in for the identifier's."""
-        return self.estimate is self._prior or self._identifier.from_seed
+        return self._use.using_checkpoint
 
     @property
     def stats(self) -> PipelineStats:
         """Counters since construction."""
+        led = self._ledger
         return PipelineStats(
-            self._commands,
-            self._encoders,
-            self._samples,
-            self._compensated,
-            self._checkpoints,
-            self._checkpoint_errors,
-            MappingProxyType(dict(self._dropped)),
-            self._last_problem,
+            led.commands,
+            led.encoders,
+            led.samples,
+            led.compensated,
+            led.checkpoints,
+            led.checkpoint_errors,
+            MappingProxyType(dict(led.dropped)),
+            led.last_problem,
         )
 
     # ------------------------------------------------------------------ inputs
@@ -485,31 +463,34 @@ class BacklashPipeline:
         itself (bag replay reads the value straight from the CDR bytes) calls it directly
         and writes the compensated value into its own copy of the message.
         """
-        try:
-            if not math.isfinite(value):
-                raise MessageError(f"value {value} is not finite")
-            stamp = header_ns if self._use_header and header_ns else int(receive_ns)
-            last = self._last_cmd_ns
-            if last is not None and stamp <= last:
-                back = self._health.jumped_back("command", stamp, last)
-                if back is None:
-                    key = "command_duplicate" if stamp == last else "command_out_of_order"
-                    self._drop(key, _order_text("command", stamp, last))
-                    return None
-                self._reanchor("command", stamp, last, back)
-            self._health.check_command(stamp, value, int(receive_ns), self._options)
-            sent = self._compensate(value, stamp)
-        except MessageError as err:
-            self._drop("command_invalid", f"command: {err}")
+        self._take_results()
+        align, health = self._align, self._health
+        self._silence.command(int(receive_ns))
+        if not math.isfinite(value):
+            self._drop("command_invalid", f"command: value {value} is not finite")
             return None
-        self._last_cmd_ns = stamp
-        self._last_sent = sent
-        self._cmd_t.append(stamp)
-        self._cmd_u.append(sent if self._in_loop else value)
-        if len(self._cmd_t) > _MAX_COMMANDS:
-            self._trim_commands()
-        self._commands += 1
-        self._compensated += 1
+        stamp = align.time_of(header_ns, receive_ns)
+        last = align.last_cmd_ns
+        if last is not None and stamp <= last:
+            back = health.jumped_back("command", stamp, last)
+            if back is None:
+                key = "command_duplicate" if stamp == last else "command_out_of_order"
+                self._drop(key, _order_text("command", stamp, last))
+                return None
+            self._reanchor("command", stamp, last, back)
+        self._events(health.check_command(stamp, value, int(receive_ns), self._comp.options))
+        sent = self._comp.command(
+            value,
+            self._use.current,
+            passing=lambda: bool(health.faults) and health.passing_through(stamp),
+            last_y=align.last_y,
+        )
+        if self._comp.problems:
+            self._problems(self._comp.problems)
+        align.add_command(stamp, sent if self._in_loop else value)
+        led = self._ledger
+        led.commands += 1
+        led.compensated += 1
         outputs: list[Output] = []
         self._advance(stamp, outputs, heavy=False)
         return stamp, sent, outputs
@@ -528,36 +509,41 @@ class BacklashPipeline:
     ) -> list[Output]:
         """An encoder reading already read from its message (header stamp, 0 when none):
         any periodic outputs now due (:meth:`on_encoder` is this plus the adapters)."""
+        self._take_results()
+        self._silence.encoder(int(receive_ns))
         if not math.isfinite(value):
             self._drop("encoder_invalid", f"encoder: value {value} is not finite")
             return []
-        stamp = header_ns if self._use_header and header_ns else int(receive_ns)
-        last = self._last_enc_ns
+        align, health = self._align, self._health
+        stamp = align.time_of(header_ns, receive_ns)
+        last = align.last_enc_ns
         if last is not None and stamp <= last:
-            back = self._health.jumped_back("encoder", stamp, last)
+            back = health.jumped_back("encoder", stamp, last)
             if back is None:
                 key = "encoder_duplicate" if stamp == last else "encoder_out_of_order"
                 self._drop(key, _order_text("encoder", stamp, last))
                 return []
             self._reanchor("encoder", stamp, last, back)
             last = None  # re-anchored: this reading starts the new time line
-        stuck = self._health.check_reading(
-            stamp, last, value, self._last_y, int(receive_ns), self._cmd_t, self._cmd_u
+        check = health.check_reading(
+            stamp,
+            last,
+            value,
+            align.last_y,
+            int(receive_ns),
+            align.cmd_t,
+            align.cmd_u,
+            self._use.current,
         )
-        if last is not None:
-            self._period.add(stamp - last)
-        self._last_enc_ns = stamp
-        self._last_y = value
-        if stuck:
-            self._mark_next = True
-        else:
-            self._enc_t.append(stamp)
-            self._enc_y.append(value)
-            self._enc_mark.append(self._mark_next)
-            self._mark_next = False
-        self._encoders += 1
+        if check.discard_after is not None:
+            pending = align.discard_after(check.discard_after)  # keep the first equal one
+            if pending:
+                self._drop("encoder_stuck", "encoder reading unchanged", pending)
+        self._events(check.events)
+        align.add_reading(stamp, value, stuck=check.stuck)
+        self._ledger.encoders += 1
         outputs: list[Output] = []
-        if len(self._enc_t) >= self._feed_at_count:
+        if align.pending >= self._feed_at_count:
             self._feed()
         self._advance(stamp, outputs, heavy=True)
         return outputs
@@ -570,21 +556,23 @@ class BacklashPipeline:
     def finish(self, *, refit: bool = True) -> list[Output]:
         """End of the data (a replay's last message, a node shutting down).
 
-        Feeds every pending sample (their commands taken as held), refits the windowed
-        identifier on its window when ``refit``, and returns the final estimate and
-        diagnostics; checkpoints when a file is set.
+        Feeds every pending sample (their commands taken as held), waits for the identify
+        worker, refits the windowed identifier on its window when ``refit``, and returns the
+        final estimate and diagnostics; checkpoints when a file is set.
         """
         outputs: list[Output] = []
         self._feed(final=True)
-        refit_now = getattr(self._identifier, "refit", None)
-        if refit and callable(refit_now):
-            try:
-                refit_now()
-            except (GenBacklashError, ArithmeticError, np.linalg.LinAlgError) as err:
-                self._drop("identifier_error", f"identifier: {err}")
-        if self._now is None:
+        worker = self._worker
+        assert worker is not None
+        worker.flush()
+        self._take_results()
+        if refit:
+            result = worker.refit()
+            if result is not None:
+                self._take_results([result])
+        now = self._clock.now
+        if now is None:
             return outputs
-        now = self._now
         est = self.estimate
         if est.available:
             outputs.append(Output("estimate", estimate_message(est), now, est))
@@ -592,261 +580,133 @@ class BacklashPipeline:
         outputs.append(self.diagnostics(now))
         return outputs
 
+    def close(self) -> None:
+        """Stop the identify worker (a thread worker's thread ends; idempotent)."""
+        if self._worker is not None:
+            self._worker.close()
+
     def diagnostics(self, stamp_ns: int, *, stale: bool = False) -> Output:
         """A ``diagnostics`` output now (the periodic ones come by themselves); resets the
         per-report drop counts. ``stale`` reports level STALE (e.g. a transport's wall-clock
         watchdog when no data arrive)."""
         est = self.estimate
+        use = self._use
         level = level_of(est.state)
         parts = [f"{est.state.value}: {est.reason}" if est.reason else est.state.value]
-        if self.estimate is self._prior:
+        if use.on_prior:
             parts.insert(0, "using the checkpoint's estimate until the identifier converges")
-        elif self.using_checkpoint:
+        elif use.using_checkpoint:
             parts.insert(0, "continuing from the checkpoint's estimate")
         health = self._health.report(stamp_ns)
         passing = health.passing
         level = max(level, health.level)
         parts.extend(health.parts)
-        loud = {k: n for k, n in self._period_drops.items() if k not in _QUIET_DROPS}
+        silent = self._silence.report(self._params.command_type, self._params.encoder_type)
+        if silent.parts:
+            level = max(level, silent.level)
+            parts.extend(silent.parts)
+        led = self._ledger
+        period = led.take_period()
+        loud = {k: n for k, n in period.drops.items() if k not in QUIET_DROPS}
         if loud:
             level = max(level, DiagnosticStatus.WARN)
             listed = "; ".join(
-                f"{n} {k.replace('_', ' ')} (last: {self._period_reasons[k]})"
-                for k, n in loud.items()
+                f"{n} {k.replace('_', ' ')} (last: {period.reasons[k]})" for k, n in loud.items()
             )
             parts.append(f"dropped since the last report: {listed}")
-        if self._period_problems:
+        if period.problems:
             level = max(level, DiagnosticStatus.WARN)
-            parts.extend(self._period_problems)
+            parts.extend(period.problems)
         if stale:
             level = DiagnosticStatus.STALE
             parts.insert(0, "no data")
-        source = "checkpoint" if self.using_checkpoint else "identifier"
-        own = self._identifier.estimate
+        source = "checkpoint" if use.using_checkpoint else "identifier"
+        own = use.own
         extra = [
             ("estimate_source", source if est.available else "none"),
             ("identifier_state", own.state.value),
             ("identifier_confidence", format(own.confidence, ".3g")),
-            ("compensation_weight", format(0.0 if passing else self._weight(est), ".3g")),
+            ("compensation_weight", format(0.0 if passing else self._comp.weight(est), ".3g")),
             ("faults", ",".join(health.active) or "none"),
-            ("commands", str(self._commands)),
-            ("encoder_messages", str(self._encoders)),
-            ("compensated_commands", str(self._compensated)),
-            ("identifier_samples", str(self._samples)),
-            ("checkpoints", str(self._checkpoints)),
-            ("checkpoint_errors", str(self._checkpoint_errors)),
+            ("commands", str(led.commands)),
+            ("encoder_messages", str(led.encoders)),
+            ("compensated_commands", str(led.compensated)),
+            ("identifier_samples", str(led.samples)),
+            ("checkpoints", str(led.checkpoints)),
+            ("checkpoint_errors", str(led.checkpoint_errors)),
         ]
-        extra += [(f"dropped_{k}", str(n)) for k, n in self._dropped.items()]
-        saved = self._last_checkpoint_ns
+        extra += [
+            (f"dropped_{k}", str(n))
+            for k, n in led.dropped.items()
+            if n or k not in LIVE_ONLY_DROPS
+        ]
+        extra += silent.values
+        saved = led.last_checkpoint_ns
         extra.append(("last_checkpoint_s", "none" if saved is None else f"{saved / 1e9:.3f}"))
         if self.warm_start_note:
             extra.append(("warm_start", self.warm_start_note))
-        self._period_drops = {}
-        self._period_reasons = {}
-        self._period_problems = []
-        hardware = self._params.joint
         message = diagnostic_array(
             stamp_ns,
             est,
             level=level,
             message="; ".join(parts),
-            hardware_id=hardware,
+            hardware_id=self._params.joint,
             extra=extra,
         )
         return Output("diagnostics", message, stamp_ns, est)
 
-    # ------------------------------------------------------------------ compensation
-
-    def _weight(self, est: Estimate) -> float:
-        if not self._params.compensate or est.model is None:
-            return 0.0
-        return self._options.weight(est.confidence)
-
-    def _compensate(self, value: float, stamp: int) -> float:
-        """The command to send at ``stamp`` for the desired ``value`` (always finite).
-
-        While a fault is active the compensator passes ``value`` through (confidence 0: the
-        limits still hold and its modelled load follows what is sent)."""
-        if not self._params.compensate:
-            return value
-        est = self.estimate
-        if est is not self._comp_estimate:
-            self._refresh_compensator(est, value)
-        comp = self._comp
-        if comp is None:
-            return self._limit(value)
-        health = self._health
-        confidence = 0.0 if health.faults and health.passing_through(stamp) else est.confidence
-        sent = comp.step(value, confidence)
-        return sent if math.isfinite(sent) else self._limit(value)
-
-    def _refresh_compensator(self, est: Estimate, value: float | None) -> None:
-        """Give the compensator the model of ``est`` (creating it at the first model).
-
-        Runs after each identifier feed, so that a command rarely pays for the inversion
-        plan of a new model. A model that cannot be inverted keeps the previous one.
-        """
-        self._comp_estimate = est
-        model = est.model
-        if model is None:
-            return
-        comp = self._comp
-        try:
-            if comp is None:
-                # the load where the encoder saw it last (else where it is wanted), the
-                # motor at the last command sent (else mid-gap: the load at rest)
-                opts = self._options
-                x0 = self._last_y if self._last_y is not None else value
-                if x0 is None:
-                    return
-                last = self._last_sent
-                u0 = None if last is None else min(max(last, opts.u_min), opts.u_max)
-                self._comp = InverseBacklash(model, opts, x0, u0)
-            elif model != comp.model:
-                comp.set_model(model)
-        except GenBacklashError as err:
-            self._problem(f"compensator kept its previous model: {err}")
-
-    def _limit(self, value: float) -> float:
-        """Pass-through within the output limits and the rate limit (no model yet)."""
-        opts = self._options
-        u = value
-        last = self._last_sent
-        if last is not None:
-            u = min(max(u, last - opts.max_rate), last + opts.max_rate)
-        return min(max(u, opts.u_min), opts.u_max)
-
-    # ------------------------------------------------------------------ alignment
-
-    def _horizon(self, final: bool) -> int | None:
-        """Latest sample time whose command is known (None: nothing final yet)."""
-        last_enc = self._last_enc_ns
-        if last_enc is None:
-            return None
-        if final:
-            return last_enc
-        horizon = last_enc - self._wait
-        if self._last_cmd_ns is not None and self._last_cmd_ns > horizon:
-            horizon = self._last_cmd_ns
-        return horizon
+    # ------------------------------------------------------------------ the stages
 
     def _feed(self, final: bool = False) -> None:
-        """Feed every final sample to the identifier (see the module notes)."""
-        self._feed_at_count = len(self._enc_t) + self._batch
-        if self._now is not None:
-            self._next_feed_ns = self._now + self._batch_ns
-            self._update_due()
-        horizon = self._horizon(final)
-        if horizon is None or not self._enc_t:
+        """Align the final samples, screen them and hand them to the identify worker."""
+        align = self._align
+        self._feed_at_count = align.pending + self._batch
+        self._clock.fed()
+        horizon = align.horizon(final)
+        now = self._clock.now
+        if horizon is not None and not final and now is not None:
+            horizon = self._health.feed_horizon(horizon, now)  # equal readings wait
+        batch = align.take(horizon)
+        self._feed_at_count = align.pending + self._batch
+        if batch is None:
             return
-        if not final and self._now is not None:  # equal readings wait: the encoder may be stuck
-            horizon = self._health.feed_horizon(horizon, self._now)
-        if self._grid_ns:
-            times, ys, held, marks = self._grid_samples(horizon)
-        else:
-            count = bisect.bisect_right(self._enc_t, horizon)
-            if count == 0:
+        if batch.before_first_command:
+            self._ledger.drop(
+                "before_first_command",
+                "samples before the first command",
+                batch.before_first_command,
+            )
+        if batch.size == 0:
+            return
+        screened = self._screen.run(batch, self._health, self._use.current)
+        self._events(screened.events)
+        if screened.size == 0:
+            return
+        assert self._worker is not None
+        self._worker.submit(screened.us, screened.ys, screened.breaks)
+        self._take_results()
+
+    def _take_results(self, results: Iterable[Result] | None = None) -> None:
+        """Adopt what the identify worker finished: counts, drops, the new estimate."""
+        if results is None:
+            assert self._worker is not None
+            results = self._worker.poll()
+            if not results:
                 return
-            times = held = np.array(self._enc_t[:count], dtype=np.int64)
-            ys = np.array(self._enc_y[:count])
-            marks = np.array(self._enc_mark[:count], dtype=bool)
-            del self._enc_t[:count], self._enc_y[:count], self._enc_mark[:count]
-            self._feed_at_count = len(self._enc_t) + self._batch
-        if times.size == 0:
-            return
-        if not self._cmd_t:
-            self._drop("before_first_command", "samples before the first command", times.size)
-            self._fed_last_t = None
-            return
-        # the sample rule before anything is taken out (see the module notes)
-        period = float(self._grid_ns) if self._grid_ns else self._period.value
-        breaks = link_breaks(held, period, previous_ns=self._fed_last_t, marks=marks)
-        k = np.searchsorted(np.array(self._cmd_t, dtype=np.int64), times, side="right") - 1
-        early = int(np.count_nonzero(k < 0))
-        if early:
-            self._drop("before_first_command", "samples before the first command", early)
-            breaks, _ = keep_breaks(breaks, k >= 0)  # the samples before it were taken out
-            k, ys, times, held = k[early:], ys[early:], times[early:], held[early:]
-        if k.size == 0:
-            self._fed_last_t = None
-            return
-        us = np.array(self._cmd_u)[k]
-        keep = int(k[-1])  # the command holding at the last sample, and later ones
-        if keep:
-            del self._cmd_t[:keep], self._cmd_u[:keep]
-        kept = self._health.screen(times, us, ys, self.estimate)
-        last_t: int | None = int(held[-1])
-        if kept is not None:
-            breaks, tail = keep_breaks(breaks, kept)
-            us, ys, held = us[kept], ys[kept], held[kept]
-            last_t = None if tail or held.size == 0 else int(held[-1])
-        self._fed_last_t = last_t
-        if us.size == 0:
-            return
-        try:
-            self._identifier.update_many(us, ys, breaks=breaks)
-        except (GenBacklashError, ArithmeticError, np.linalg.LinAlgError) as err:
-            self._drop("identifier_error", f"identifier: {err}", int(us.size))
-            self._fed_last_t = None  # what the identifier kept of the batch is unknown
-            return
-        self._samples += int(us.size)
-        if self._params.compensate:
-            est = self.estimate
-            if est is not self._comp_estimate:
-                self._refresh_compensator(est, None)
-
-    def _grid_samples(self, horizon: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Grid times up to ``horizon`` (and the latest encoder time) with the held encoder:
-        ``(times, readings, stamps of the readings held, their marks)``."""
-        period = self._grid_ns
-        enc_t = self._enc_t
-        if self._next_grid_k is None:
-            self._next_grid_k = -(-enc_t[0] // period)  # first grid point at/after the data
-        first = self._next_grid_k
-        last = min(horizon, enc_t[-1]) // period
-        if last < first:
-            none = np.zeros(0, dtype=np.int64)
-            return none, np.zeros(0), none, np.zeros(0, dtype=bool)
-        times = np.arange(first, last + 1, dtype=np.int64) * period
-        stamps = np.array(enc_t, dtype=np.int64)
-        j = np.searchsorted(stamps, times, side="right") - 1
-        ys = np.array(self._enc_y)[j]
-        marks = np.array(self._enc_mark, dtype=bool)[j]
-        self._next_grid_k = last + 1
-        keep = int(j[-1])  # the encoder reading holding at the last grid point, and later
-        if keep:
-            del self._enc_t[:keep], self._enc_y[:keep], self._enc_mark[:keep]
-        self._enc_mark[0] = False  # held already: its mark has broken the chain there
-        self._feed_at_count = len(self._enc_t) + self._batch
-        return times, ys, stamps[j], marks
-
-    def _trim_commands(self) -> None:
-        """Bound the command history when no encoder data consume it.
-
-        Keeps the commands a pending encoder reading may need, and those of the last
-        ``command_wait_ns`` (a reading later than that would be more than the wait late).
-        """
-        oldest = self._cmd_t[-1] - self._wait
-        if self._enc_t:
-            oldest = min(oldest, self._enc_t[0])
-        cut = bisect.bisect_right(self._cmd_t, oldest) - 1  # keep the one holding at oldest
-        if cut > 0:
-            del self._cmd_t[:cut], self._cmd_u[:cut]
-
-    # ------------------------------------------------------------------ the data clock
-
-    def _schedule(self, now: int) -> None:
-        self._next_estimate = _next_multiple(now, self._publish_ns)
-        self._next_diagnostics = _next_multiple(now, DIAGNOSTICS_PERIOD_NS)
-        self._next_checkpoint = _next_multiple(now, self._checkpoint_ns)
-        self._next_feed_ns = now + self._batch_ns
-        self._update_due()
-
-    def _update_due(self) -> None:
-        due = min(self._next_estimate, self._next_diagnostics, self._next_feed_ns)
-        if self._checkpoint_path is not None:
-            due = min(due, self._next_checkpoint)
-        self._next_due = due
+        adopted = None
+        for result in results:
+            if isinstance(result, Identified):
+                self._ledger.samples += result.samples
+                self._use.adopt(result.estimate, result.from_seed)
+                adopted = result
+            elif isinstance(result, Refused):
+                self._drop("identifier_error", result.reason, result.samples)
+            else:
+                self._drop("identifier_behind", result.reason, result.samples)
+        if adopted is not None:
+            self._comp.adopt(self._use.current, self._align.last_y)
+            if self._comp.problems:
+                self._problems(self._comp.problems)
 
     def _advance(self, stamp: int, outputs: list[Output], *, heavy: bool) -> None:
         """Move the data clock to ``stamp``; append the periodic outputs now due.
@@ -854,96 +714,73 @@ class BacklashPipeline:
         Only ``heavy`` calls (encoder messages) feed the identifier and write checkpoints,
         so that a command's compensated command never waits for either.
         """
-        now = self._now
-        if now is None:
-            self._now = stamp
-            self._schedule(stamp)
+        clock = self._clock
+        if not clock.tick(stamp):
             return
-        if stamp > now:
-            self._now = now = stamp
-        if now < self._next_due:
-            return
-        if heavy and (now >= self._next_feed_ns or now >= self._next_estimate):
+        now = clock.now
+        assert now is not None
+        due = clock.due(now)
+        if heavy and (due.feed or due.estimate):
             self._feed()
-        if now >= self._next_estimate:
+        if due.estimate:
             est = self.estimate
             if est.available:
                 outputs.append(Output("estimate", estimate_message(est), now, est))
-            self._next_estimate = _next_multiple(now, self._publish_ns)
-        if heavy and self._checkpoint_path is not None and now >= self._next_checkpoint:
+            clock.estimate_done(now)
+        if heavy and due.checkpoint:
             self._checkpoint(now)
-            self._next_checkpoint = _next_multiple(now, self._checkpoint_ns)
-        if now >= self._next_diagnostics:
+            clock.checkpoint_done(now)
+        if due.diagnostics:
             outputs.append(self.diagnostics(now))
-            self._next_diagnostics = _next_multiple(now, DIAGNOSTICS_PERIOD_NS)
-        self._update_due()
+            clock.diagnostics_done(now)
+        clock.settle()
 
     def _checkpoint(self, now: int) -> None:
         path = self._checkpoint_path
-        est = self._identifier.estimate
+        est = self._use.own
         if path is None or not est.available:
             return
+        led = self._ledger
         try:
             self._writer(path, Checkpoint(est, now))
         except (CheckpointError, OSError) as err:
-            self._checkpoint_errors += 1
+            led.checkpoint_errors += 1
             self._problem(f"checkpoint not saved: {err}")
             return
-        self._checkpoints += 1
-        self._last_checkpoint_ns = now
-
-    # ------------------------------------------------------------------ faults (see health.py)
+        led.checkpoints += 1
+        led.last_checkpoint_ns = now
 
     def _reanchor(self, stream: str, stamp: int, last: int, back: int) -> None:
         """Restart alignment and the data clock at ``stamp`` after a clock jump back (by
         about ``back``) seen on ``stream`` after its last time ``last``."""
         self._feed(final=True)
-        self._enc_t.clear()
-        self._enc_y.clear()
-        self._enc_mark.clear()
-        self._mark_next = False
-        self._fed_last_t = None  # a new time line: its first sample breaks
-        self._next_grid_k = None
-        if self._cmd_u:  # the last command is held into the new time line
-            self._cmd_t, self._cmd_u = [stamp - 1], [self._cmd_u[-1]]
-            self._last_cmd_ns = stamp - 1
-        else:
-            self._cmd_t, self._cmd_u = [], []
-            self._last_cmd_ns = None
-        self._last_enc_ns = None
-        self._now = None  # the next accepted message restarts the schedule
-        self._health.reanchored(stream, stamp, last, back)
-
-    def _discard_after(self, since: int) -> int:
-        """Drop the pending encoder readings after ``since`` (a stuck encoder's, the first
-        equal reading kept); how many there were."""
-        cut = bisect.bisect_right(self._enc_t, since)
-        held = len(self._enc_t) - cut
-        if held:
-            del self._enc_t[cut:], self._enc_y[cut:], self._enc_mark[cut:]
-            self._mark_next = True  # the next reading kept follows those taken out
-        return held
+        self._align.reanchor(stamp)
+        self._clock.restart()  # the next accepted message restarts the schedule
+        self._events(self._health.reanchored(stream, stamp, last, back))
 
     # ------------------------------------------------------------------ problems
 
+    def _events(self, events: list[HealthEvent]) -> None:
+        """Route what the health checks found: drops to the ledger, notes as problems."""
+        for event in events:
+            if isinstance(event, Drop):
+                self._drop(event.key, event.reason, event.count)
+            else:
+                self._ledger.note(event.text)
+
     def _drop(self, key: str, reason: str, count: int = 1) -> None:
         if key == "encoder_invalid":  # a reading taken out: the next one breaks the chain
-            self._mark_next = True
-        self._dropped[key] += count
-        self._period_drops[key] = self._period_drops.get(key, 0) + count
-        self._period_reasons[key] = reason
-        if key in _ENCODER_REJECTS:
+            self._align.reading_taken_out()
+        self._ledger.drop(key, reason, count)
+        if key in ENCODER_REJECTS:
             self._health.encoder_rejected(count, reason)
-        if key not in _QUIET_DROPS:
-            self._last_problem = reason
-            # the drop report says why
-            self._health.fault(key, DiagnosticStatus.WARN, "", self._now)
+        if key not in QUIET_DROPS:  # the drop report says why
+            self._health.fault(key, DiagnosticStatus.WARN, "", self._clock.now)
 
-    def _note(self, text: str) -> None:
-        """``text`` is the latest problem (a fault's reason)."""
-        self._last_problem = text
+    def _problems(self, texts: list[str]) -> None:
+        for text in texts:
+            self._problem(text)
+        texts.clear()
 
     def _problem(self, text: str) -> None:
-        if text not in self._period_problems:
-            self._period_problems.append(text)
-        self._last_problem = text
+        self._ledger.problem(text)

@@ -60,6 +60,7 @@ from cyclonedds.util import duration
 
 from genbacklash_core import GenBacklashError
 from genbacklash_ros.node.checkpoint_writer import BackgroundCheckpointWriter
+from genbacklash_ros.node.identify import live_worker
 from genbacklash_ros.node.messages import (
     DiagnosticArray,
     Float64,
@@ -252,7 +253,9 @@ class DdsNode:
         self._clock = clock
         self._stop = threading.Event()
         self._checkpoints = BackgroundCheckpointWriter()
-        self.pipeline = BacklashPipeline(params, checkpoint_writer=self._checkpoints)
+        self.pipeline = BacklashPipeline(
+            params, checkpoint_writer=self._checkpoints, worker=live_worker
+        )
         self._last_receive = {"command": -1, "encoder": -1}
         self._seq = 0
 
@@ -345,6 +348,7 @@ class DdsNode:
             self._process_available()
             self._publish(self.pipeline.finish())
         finally:
+            self.pipeline.close()
             self._checkpoints.close()
             self.pipeline_stats_log()
         return self.stats

@@ -52,6 +52,7 @@ from std_msgs.msg import MultiArrayDimension as RosMultiArrayDimension
 
 from genbacklash_core import GenBacklashError
 from genbacklash_ros.node.checkpoint_writer import BackgroundCheckpointWriter
+from genbacklash_ros.node.identify import live_worker
 from genbacklash_ros.node.messages import (
     DiagnosticArray,
     Float64,
@@ -202,7 +203,9 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
         self._checkpoints = BackgroundCheckpointWriter(
             on_error=lambda reason: self.get_logger().warning(reason)
         )
-        self._pipeline = BacklashPipeline(self._params, checkpoint_writer=self._checkpoints)
+        self._pipeline = BacklashPipeline(
+            self._params, checkpoint_writer=self._checkpoints, worker=live_worker
+        )
         if self._pipeline.warm_start_note:
             self.get_logger().info(self._pipeline.warm_start_note)
         self.add_on_set_parameters_callback(self._validate_parameters)
@@ -288,6 +291,7 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
             return
         self._finished = True
         outputs = self._pipeline.finish()
+        self._pipeline.close()
         try:
             if rclpy.ok():
                 self._publish(outputs)

@@ -17,6 +17,7 @@ from genbacklash_ros.node.health import (
     REANCHOR_COUNT,
     SATURATION_NS,
     SILENCE_UNKNOWN_NS,
+    Note,
     StreamHealth,
 )
 from genbacklash_ros.node.messages import DiagnosticStatus
@@ -24,20 +25,14 @@ from genbacklash_ros.node.messages import DiagnosticStatus
 MS = 1_000_000
 
 
-class _Sink:
-    """What the pipeline would receive from the health monitor."""
+NO_MODEL = Estimate.empty(Structure(3))  # the stuck check stays off
 
-    def __init__(self) -> None:
-        self.drops: list[tuple[str, str, int]] = []
-        self.notes: list[str] = []
+
+class _Sink:
+    """A health monitor on its own (what it finds comes back as return values)."""
 
     def monitor(self) -> StreamHealth:
-        return StreamHealth(
-            estimate=lambda: Estimate.empty(Structure(3)),  # no model: the stuck check stays off
-            drop=lambda key, reason, count: self.drops.append((key, reason, count)),
-            note=self.notes.append,
-            discard=lambda since: 0,
-        )
+        return StreamHealth()
 
 
 def _readings(health: StreamHealth, times: list[int], start_value: float = 0.0) -> None:
@@ -46,7 +41,7 @@ def _readings(health: StreamHealth, times: list[int], start_value: float = 0.0) 
     previous: float | None = None
     for k, t in enumerate(times):
         value = start_value + 0.001 * k
-        assert not health.check_reading(t, last, value, previous, t, [0], [0.0])
+        assert not health.check_reading(t, last, value, previous, t, [0], [0.0], NO_MODEL).stuck
         last, previous = t, value
 
 
@@ -96,7 +91,8 @@ def test_encoder_silence_is_seen_from_a_command_on_the_receive_clock() -> None:
     health.check_command(MS + SILENCE_UNKNOWN_NS, 0.0, MS + SILENCE_UNKNOWN_NS, options)
     assert "encoder_silent" not in health.faults  # not yet longer than the limit
     now = 2 * MS + SILENCE_UNKNOWN_NS
-    health.check_command(now, 0.0, now, options)
+    events = health.check_command(now, 0.0, now, options)
+    assert events == [Note("encoder silent for 1.001 s")]  # returned, not called back
     assert health.faults["encoder_silent"][0] == DiagnosticStatus.ERROR
     assert any("encoder silent for 1.001 s" in part for part in health.report(now).parts)
 
@@ -112,7 +108,7 @@ def test_lost_readings_are_a_fault_once_the_period_is_known() -> None:
     kept = times[rng.random(times.size) > 0.4].tolist()  # 40 % lost
     last, previous = regular[-1], 0.0
     for k, t in enumerate(kept):
-        health.check_reading(t, last, 1.0 + 0.001 * k, previous, t, [0], [0.0])
+        health.check_reading(t, last, 1.0 + 0.001 * k, previous, t, [0], [0.0], NO_MODEL)
         last, previous = t, 1.0 + 0.001 * k
     assert "encoder_loss" in health.faults
     assert any("encoder lost" in part for part in health.report(last).parts)

@@ -329,7 +329,7 @@ def test_command_history_stays_bounded_without_encoder_data() -> None:
     pipe = BacklashPipeline(NodeParameters(command_type="float64", encoder_type="float64"))
     for k in range(10_000):
         pipe.on_command(Float64(math.sin(k / 50)), (k + 1) * MS)
-    assert len(pipe._cmd_t) <= 4097  # commands of the last 0.1 s, trimmed in bulk
+    assert len(pipe._align.cmd_t) <= 4097  # commands of the last 0.1 s, trimmed in bulk
     pipe.on_encoder(Float64(0.0), 10_000 * MS)
     pipe.finish()
     assert pipe.stats.samples == 1
@@ -716,7 +716,7 @@ def test_readings_of_a_stuck_encoder_taken_out_break_the_chain(
     for i in range(100, 110):  # pending, then found stuck: the last five are taken out
         pipe.on_command(Float64(0.0), (i + 1) * MS)
         pipe.on_encoder(Float64(float(i)), (i + 1) * MS)
-    assert pipe._discard_after(105 * MS) == 5
+    assert pipe._align.discard_after(105 * MS) == 5
     send(pipe, np.arange(111, 121) * MS)  # values 0..9 again: told apart by their order
     pipe.finish()
     assert rec.y.size == 100 + 5 + 10

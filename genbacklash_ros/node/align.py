@@ -1,0 +1,280 @@
+"""The align stage: command and encoder streams in, batches of final samples out.
+
+:class:`Aligner` keeps what the pipeline needs of both streams to form samples (integer
+nanoseconds throughout; the rules are in the notes of :mod:`genbacklash_ros.node.pipeline`):
+
+* the time of each message (header stamp or receive time) and its order within its stream
+  (a message not after its stream's last time is the caller's to judge: a duplicate, out of
+  order, or a clock that jumped back, :meth:`Aligner.reanchor`);
+* the commands, held from their time until the next one (zero-order hold), and the pending
+  encoder readings with the marks of the sample rule (:mod:`genbacklash_ros.node.sample_rule`:
+  a reading that follows one taken out breaks the chain);
+* which samples are *final* (their command is known) and, on request, those samples with
+  their command (:meth:`Aligner.take`), on the encoder's own times or on a fixed grid.
+
+It returns :class:`AlignedBatch` values and counts of samples taken out; it calls nothing
+downstream. Whether a sample is fed is the screen stage's concern
+(:mod:`genbacklash_ros.node.screen`).
+
+Examples
+--------
+>>> align = Aligner(use_header=True, grid_ns=0, wait_ns=100_000_000)
+>>> align.add_command(1_000, 0.5)
+>>> for t, y in ((2_000, 0.1), (3_000, 0.2)):
+...     align.add_reading(t, y, stuck=False)
+>>> batch = align.take(align.horizon(final=True))
+>>> batch.us.tolist(), batch.ys.tolist(), batch.before_first_command
+([0.5, 0.5], [0.1, 0.2], 0)
+"""
+
+from __future__ import annotations
+
+import bisect
+from dataclasses import dataclass
+
+import numpy as np
+
+from genbacklash_ros.node.sample_rule import EncoderPeriod
+
+__all__ = ["MAX_COMMANDS", "AlignedBatch", "Aligner"]
+
+MAX_COMMANDS = 4096  # command history kept while no encoder data consume it
+
+
+@dataclass(frozen=True, slots=True)
+class AlignedBatch:
+    """Final samples with their commands, in time order (what the align stage hands on).
+
+    Attributes
+    ----------
+    times : numpy.ndarray of int64
+        The samples' times.
+    us, ys : numpy.ndarray of float
+        The command holding at each sample (the identifier's input) and the reading.
+    held : numpy.ndarray of int64
+        The stamps of the encoder readings the samples hold (the sample rule's stamps).
+    marks : numpy.ndarray of bool
+        Samples that follow one taken out before them (they break the chain).
+    period : float or None
+        The encoder's nominal period (None while unknown: every sample breaks).
+    linked : bool
+        The first sample may link to the last sample fed before it (False after a
+        re-anchor or after samples were taken out for want of a command).
+    before_first_command : int
+        Samples taken out because no command had come before them (counted quietly).
+    """
+
+    times: np.ndarray
+    us: np.ndarray
+    ys: np.ndarray
+    held: np.ndarray
+    marks: np.ndarray
+    period: float | None
+    linked: bool
+    before_first_command: int = 0
+
+    @property
+    def size(self) -> int:
+        """Number of samples."""
+        return int(self.times.size)
+
+
+class Aligner:
+    """The command and encoder streams, aligned into samples (see the module notes).
+
+    Parameters
+    ----------
+    use_header : bool
+        A message's time is its header stamp (when it has a nonzero one), else its receive
+        time.
+    grid_ns : int
+        Sample on the grid ``k * grid_ns`` (0: one sample per encoder reading).
+    wait_ns : int
+        Encoder time after which a sample's command is taken as held.
+    """
+
+    def __init__(self, *, use_header: bool, grid_ns: int, wait_ns: int) -> None:
+        self._use_header = use_header
+        self._grid_ns = grid_ns
+        self._wait = wait_ns
+        # streams: accepted times and values (commands: what the identifier takes)
+        self.cmd_t: list[int] = []
+        self.cmd_u: list[float] = []
+        self._enc_t: list[int] = []
+        self._enc_y: list[float] = []
+        # pending readings that follow one taken out; whether the next accepted reading does
+        self._enc_mark: list[bool] = []
+        self._mark_next = False
+        self._period = EncoderPeriod()
+        self._linked = False  # the next batch may link to the sample fed before it
+        self.last_cmd_ns: int | None = None
+        self.last_enc_ns: int | None = None
+        self.last_y: float | None = None
+        self._next_grid_k: int | None = None
+
+    # ------------------------------------------------------------------ messages
+
+    def time_of(self, header_ns: int | None, receive_ns: int) -> int:
+        """The time of a message (see the pipeline's notes)."""
+        return header_ns if self._use_header and header_ns else int(receive_ns)
+
+    @property
+    def pending(self) -> int:
+        """Encoder readings not yet taken."""
+        return len(self._enc_t)
+
+    def add_command(self, stamp: int, value: float) -> None:
+        """An accepted command at ``stamp``; ``value`` is what the identifier takes."""
+        self.last_cmd_ns = stamp
+        self.cmd_t.append(stamp)
+        self.cmd_u.append(value)
+        if len(self.cmd_t) > MAX_COMMANDS:
+            self._trim_commands()
+
+    def add_reading(self, stamp: int, value: float, *, stuck: bool) -> None:
+        """An accepted encoder reading at ``stamp`` (a stuck encoder's is not kept: the next
+        kept reading breaks the chain)."""
+        last = self.last_enc_ns
+        if last is not None:
+            self._period.add(stamp - last)
+        self.last_enc_ns = stamp
+        self.last_y = value
+        if stuck:
+            self._mark_next = True
+        else:
+            self._enc_t.append(stamp)
+            self._enc_y.append(value)
+            self._enc_mark.append(self._mark_next)
+            self._mark_next = False
+
+    def reading_taken_out(self) -> None:
+        """A reading was rejected (invalid, not finite): the next one breaks the chain."""
+        self._mark_next = True
+
+    def discard_after(self, since: int) -> int:
+        """Drop the pending readings after ``since`` (a stuck encoder's, the first equal
+        reading kept); how many there were."""
+        cut = bisect.bisect_right(self._enc_t, since)
+        held = len(self._enc_t) - cut
+        if held:
+            del self._enc_t[cut:], self._enc_y[cut:], self._enc_mark[cut:]
+            self._mark_next = True  # the next reading kept follows those taken out
+        return held
+
+    def reanchor(self, stamp: int) -> None:
+        """Restart both streams at ``stamp`` after a clock jump back (take the pending
+        samples first): the last command is held into the new time line."""
+        self._enc_t.clear()
+        self._enc_y.clear()
+        self._enc_mark.clear()
+        self._mark_next = False
+        self._linked = False  # a new time line: its first sample breaks
+        self._next_grid_k = None
+        if self.cmd_u:
+            self.cmd_t, self.cmd_u = [stamp - 1], [self.cmd_u[-1]]
+            self.last_cmd_ns = stamp - 1
+        else:
+            self.cmd_t, self.cmd_u = [], []
+            self.last_cmd_ns = None
+        self.last_enc_ns = None
+
+    # ------------------------------------------------------------------ samples
+
+    def horizon(self, final: bool) -> int | None:
+        """Latest sample time whose command is known (None: nothing final yet); with
+        ``final`` every pending sample (their commands taken as held)."""
+        last_enc = self.last_enc_ns
+        if last_enc is None:
+            return None
+        if final:
+            return last_enc
+        horizon = last_enc - self._wait
+        if self.last_cmd_ns is not None and self.last_cmd_ns > horizon:
+            horizon = self.last_cmd_ns
+        return horizon
+
+    def take(self, horizon: int | None) -> AlignedBatch | None:
+        """The final samples up to ``horizon``, with their commands (None: none)."""
+        if horizon is None or not self._enc_t:
+            return None
+        if self._grid_ns:
+            times, ys, held, marks = self._grid_samples(horizon)
+        else:
+            count = bisect.bisect_right(self._enc_t, horizon)
+            if count == 0:
+                return None
+            times = held = np.array(self._enc_t[:count], dtype=np.int64)
+            ys = np.array(self._enc_y[:count])
+            marks = np.array(self._enc_mark[:count], dtype=bool)
+            del self._enc_t[:count], self._enc_y[:count], self._enc_mark[:count]
+        if times.size == 0:
+            return None
+        period = float(self._grid_ns) if self._grid_ns else self._period.value
+        if not self.cmd_t:
+            self._linked = False
+            return self._empty(period, int(times.size))
+        k = np.searchsorted(np.array(self.cmd_t, dtype=np.int64), times, side="right") - 1
+        early = int(np.count_nonzero(k < 0))  # a prefix: times increase
+        linked = self._linked
+        if early:
+            k, ys, times, held, marks = (
+                k[early:],
+                ys[early:],
+                times[early:],
+                held[early:],
+                marks[early:],
+            )
+            if k.size == 0:
+                self._linked = False
+                return self._empty(period, early)
+            marks = marks.copy()
+            marks[0] = True  # the samples before it were taken out
+        us = np.array(self.cmd_u)[k]
+        keep = int(k[-1])  # the command holding at the last sample, and later ones
+        if keep:
+            del self.cmd_t[:keep], self.cmd_u[:keep]
+        self._linked = True
+        return AlignedBatch(times, us, ys, held, marks, period, linked, early)
+
+    def _empty(self, period: float | None, early: int) -> AlignedBatch:
+        none = np.zeros(0, dtype=np.int64)
+        return AlignedBatch(
+            none, np.zeros(0), np.zeros(0), none, np.zeros(0, dtype=bool), period, False, early
+        )
+
+    def _grid_samples(self, horizon: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Grid times up to ``horizon`` (and the latest encoder time) with the held encoder:
+        ``(times, readings, stamps of the readings held, their marks)``."""
+        period = self._grid_ns
+        enc_t = self._enc_t
+        if self._next_grid_k is None:
+            self._next_grid_k = -(-enc_t[0] // period)  # first grid point at/after the data
+        first = self._next_grid_k
+        last = min(horizon, enc_t[-1]) // period
+        if last < first:
+            none = np.zeros(0, dtype=np.int64)
+            return none, np.zeros(0), none, np.zeros(0, dtype=bool)
+        times = np.arange(first, last + 1, dtype=np.int64) * period
+        stamps = np.array(enc_t, dtype=np.int64)
+        j = np.searchsorted(stamps, times, side="right") - 1
+        ys = np.array(self._enc_y)[j]
+        marks = np.array(self._enc_mark, dtype=bool)[j]
+        self._next_grid_k = last + 1
+        keep = int(j[-1])  # the encoder reading holding at the last grid point, and later
+        if keep:
+            del self._enc_t[:keep], self._enc_y[:keep], self._enc_mark[:keep]
+        self._enc_mark[0] = False  # held already: its mark has broken the chain there
+        return times, ys, stamps[j], marks
+
+    def _trim_commands(self) -> None:
+        """Bound the command history when no encoder data consume it.
+
+        Keeps the commands a pending encoder reading may need, and those of the last
+        ``wait_ns`` (a reading later than that would be more than the wait late).
+        """
+        oldest = self.cmd_t[-1] - self._wait
+        if self._enc_t:
+            oldest = min(oldest, self._enc_t[0])
+        cut = bisect.bisect_right(self.cmd_t, oldest) - 1  # keep the one holding at oldest
+        if cut > 0:
+            del self.cmd_t[:cut], self.cmd_u[:cut]

@@ -1,0 +1,140 @@
+"""The compensate stage: a command and the estimate in use in, the command to send out.
+
+:class:`CompensateStage` owns the :class:`~genbacklash_core.InverseBacklash` of the node. It
+is created at the first model (the load where the encoder saw it last, the motor at the
+last command sent), takes each new model the identify stage adopts (:meth:`adopt`, right
+after the result arrives, so a command rarely pays for the inversion plan of a new model)
+and compensates one command per call (:meth:`command`, one compensator step: tens of
+microseconds). While a fault is active it passes the command through (confidence 0: the
+output and rate limits still hold); without a model it only limits. Whatever it is given,
+what it returns is finite.
+
+Examples
+--------
+>>> from genbacklash_core import CompensatorOptions, Estimate, Structure
+>>> stage = CompensateStage(CompensatorOptions(u_max=1.0), compensate=True)
+>>> stage.command(2.0, Estimate.empty(Structure(3)), passing=lambda: False, last_y=None)
+1.0
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+from genbacklash_core import CompensatorOptions, Estimate, GenBacklashError, InverseBacklash
+
+__all__ = ["CompensateStage"]
+
+
+class CompensateStage:
+    """The node's compensator and its limits (see the module notes).
+
+    Parameters
+    ----------
+    options : CompensatorOptions
+    compensate : bool
+        False: every command is sent as it is (no limits either).
+    """
+
+    def __init__(self, options: CompensatorOptions, *, compensate: bool) -> None:
+        self._options = options
+        self._on = compensate
+        self._comp: InverseBacklash | None = None
+        self._comp_estimate: Estimate | None = None
+        self.last_sent: float | None = None
+        self.problems: list[str] = []  # why a model was not taken (the caller reports them)
+
+    @property
+    def options(self) -> CompensatorOptions:
+        """The options in use."""
+        return self._options
+
+    def weight(self, est: Estimate) -> float:
+        """How much of the inverse is applied at ``est``'s confidence (0 without a model)."""
+        if not self._on or est.model is None:
+            return 0.0
+        return self._options.weight(est.confidence)
+
+    def command(
+        self, value: float, est: Estimate, *, passing: Callable[[], bool], last_y: float | None
+    ) -> float:
+        """The command to send for the desired ``value`` with the estimate ``est``
+        (``passing()``: a fault is active; asked only when a model compensates)."""
+        sent = self._command(value, est, passing, last_y)
+        self.last_sent = sent
+        return sent
+
+    def _command(
+        self, value: float, est: Estimate, passing: Callable[[], bool], last_y: float | None
+    ) -> float:
+        if not self._on:
+            return value
+        if est is not self._comp_estimate:
+            self._refresh(est, value, last_y)
+        comp = self._comp
+        if comp is None:
+            return self._limit(value)
+        confidence = 0.0 if passing() else est.confidence
+        sent = comp.step(value, confidence)
+        return sent if math.isfinite(sent) else self._limit(value)
+
+    def adopt(self, est: Estimate, last_y: float | None) -> None:
+        """A new estimate is in use: prepare the compensator for it now."""
+        if self._on and est is not self._comp_estimate:
+            self._refresh(est, None, last_y)
+
+    def _refresh(self, est: Estimate, value: float | None, last_y: float | None) -> None:
+        """Give the compensator the model of ``est`` (creating it at the first model). A
+        model that cannot be inverted keeps the previous one."""
+        self._comp_estimate = est
+        model = est.model
+        if model is None:
+            return
+        comp = self._comp
+        try:
+            if comp is None:
+                # the load where the encoder saw it last (else where it is wanted), the
+                # motor at the last command sent (else mid-gap: the load at rest)
+                opts = self._options
+                x0 = last_y if last_y is not None else value
+                if x0 is None:
+                    return
+                last = self.last_sent
+                u0 = None if last is None else min(max(last, opts.u_min), opts.u_max)
+                self._comp = InverseBacklash(model, opts, x0, u0)
+            elif model != comp.model:
+                comp.set_model(model)
+        except GenBacklashError as err:
+            self.problems.append(f"compensator kept its previous model: {err}")
+
+    def _limit(self, value: float) -> float:
+        """Pass-through within the output limits and the rate limit (no model yet)."""
+        opts = self._options
+        u = value
+        last = self.last_sent
+        if last is not None:
+            u = min(max(u, last - opts.max_rate), last + opts.max_rate)
+        return min(max(u, opts.u_min), opts.u_max)
+
+    def reconfigure(self, options: CompensatorOptions, *, compensate: bool) -> None:
+        """New options (the compensator keeps its state) or compensation switched."""
+        comp = self._comp
+        old = self._options
+        self._options = options
+        self._on = compensate
+        if comp is not None and old != options:
+            state = comp.state
+            u0 = min(max(state.u, options.u_min), options.u_max)
+            try:
+                self._comp = InverseBacklash(comp.model, options, state.x, u0)
+            except GenBacklashError as err:
+                self.problems.append(f"compensator restarted: {err}")
+                self._comp, self._comp_estimate = None, None
+        if not compensate:  # re-initialised from the latest measurement when re-enabled
+            self._comp, self._comp_estimate = None, None
+
+    def restart(self) -> None:
+        """Forget the compensator and the last command (identification restarted)."""
+        self._comp, self._comp_estimate = None, None
+        self.last_sent = None

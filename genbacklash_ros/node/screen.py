@@ -1,0 +1,89 @@
+"""The screen stage: aligned samples in, the samples to identify from and their breaks out.
+
+:class:`Screen` takes an :class:`~genbacklash_ros.node.align.AlignedBatch`, asks the stream
+health (:meth:`~genbacklash_ros.node.health.StreamHealth.screen`) which samples are spikes
+or held back after a gap, and applies the sample rule
+(:mod:`genbacklash_ros.node.sample_rule`): sample ``k`` breaks the chain of consecutive
+samples when the stamps it and the sample before it hold are not one period apart, when a
+reading was taken out in between, or when it is the first after a re-anchor. The chain
+links from one batch to the next through the stamp of the last sample kept.
+
+The result, a :class:`Screened` batch, is what the identify stage takes; the drops found go
+with it. Nothing here calls back.
+
+Examples
+--------
+>>> import numpy as np
+>>> from genbacklash_core import Estimate, Structure
+>>> from genbacklash_ros.node.align import AlignedBatch
+>>> from genbacklash_ros.node.health import StreamHealth
+>>> t = np.array([10, 20, 40], dtype=np.int64)
+>>> batch = AlignedBatch(t, np.zeros(3), np.ones(3), t, np.zeros(3, bool), 10.0, True)
+>>> out = Screen().run(batch, StreamHealth(), Estimate.empty(Structure(3)))
+>>> out.breaks.tolist(), out.events
+([True, False, True], [])
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from genbacklash_core import Estimate
+from genbacklash_ros.node.align import AlignedBatch
+from genbacklash_ros.node.health import HealthEvent, StreamHealth
+from genbacklash_ros.node.sample_rule import keep_breaks, link_breaks
+
+__all__ = ["Screen", "Screened"]
+
+
+@dataclass(frozen=True, slots=True)
+class Screened:
+    """The samples to identify from (what the screen stage hands on).
+
+    Attributes
+    ----------
+    us, ys : numpy.ndarray
+        Inputs and readings of the samples kept.
+    breaks : numpy.ndarray of bool
+        ``breaks[k]``: sample ``k`` does not follow the sample before it (for ``k = 0``:
+        the last sample handed on before).
+    events : list of Drop or Note
+        Spikes and samples held back after a gap (drops), and the notes of faults.
+    """
+
+    us: np.ndarray
+    ys: np.ndarray
+    breaks: np.ndarray
+    events: list[HealthEvent]
+
+    @property
+    def size(self) -> int:
+        """Number of samples kept."""
+        return int(self.us.size)
+
+
+class Screen:
+    """Screens aligned batches and links them by the sample rule (see the module notes)."""
+
+    __slots__ = ("_last_t",)
+
+    def __init__(self) -> None:
+        self._last_t: int | None = None  # stamp held by the last sample kept (None: breaks)
+
+    def run(self, batch: AlignedBatch, health: StreamHealth, estimate: Estimate) -> Screened:
+        """The samples of ``batch`` to identify from, judged with ``estimate`` (the estimate
+        in use) by ``health``."""
+        previous = self._last_t if batch.linked else None
+        breaks = link_breaks(batch.held, batch.period, previous_ns=previous, marks=batch.marks)
+        us, ys, held = batch.us, batch.ys, batch.held
+        screening = health.screen(batch.times, us, ys, estimate)
+        kept = screening.keep
+        last_t: int | None = int(held[-1])
+        if kept is not None:
+            breaks, tail = keep_breaks(breaks, kept)
+            us, ys, held = us[kept], ys[kept], held[kept]
+            last_t = None if tail or held.size == 0 else int(held[-1])
+        self._last_t = last_t
+        return Screened(us, ys, breaks, screening.events)
