@@ -34,6 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from genbacklash_core.samples import monotone_paths
 from genbacklash_ros.node.sample_rule import EncoderPeriod
 
 __all__ = ["MAX_COMMANDS", "AlignedBatch", "Aligner"]
@@ -62,6 +63,11 @@ class AlignedBatch:
         re-anchor or after samples were taken out for want of a command).
     before_first_command : int
         Samples taken out because no command had come before them (counted quietly).
+    monotone : numpy.ndarray of bool or None
+        ``monotone[k]``: the commands in force from the sample before ``k`` (in this batch,
+        or the last one taken before it when ``linked``) to sample ``k`` were monotone
+        (:func:`~genbacklash_core.samples.monotone_paths`), so lost readings between them
+        may be bridged for a backlash alone. None on a grid (not judged).
     """
 
     times: np.ndarray
@@ -72,6 +78,7 @@ class AlignedBatch:
     period: float | None
     linked: bool
     before_first_command: int = 0
+    monotone: np.ndarray | None = None
 
     @property
     def size(self) -> int:
@@ -111,6 +118,7 @@ class Aligner:
         self.last_enc_ns: int | None = None
         self.last_y: float | None = None
         self._next_grid_k: int | None = None
+        self._last_time: int | None = None  # the time of the last sample taken
 
     # ------------------------------------------------------------------ messages
 
@@ -170,6 +178,7 @@ class Aligner:
         self._mark_next = False
         self._linked = False  # a new time line: its first sample breaks
         self._next_grid_k = None
+        self._last_time = None
         if self.cmd_u:
             self.cmd_t, self.cmd_u = [stamp - 1], [self.cmd_u[-1]]
             self.last_cmd_ns = stamp - 1
@@ -229,12 +238,32 @@ class Aligner:
                 return self._empty(period, early)
             marks = marks.copy()
             marks[0] = True  # the samples before it were taken out
-        us = np.array(self.cmd_u)[k]
+        commands = np.array(self.cmd_u)
+        us = commands[k]
+        monotone = None if self._grid_ns else self._monotone(commands, k, linked)
         keep = int(k[-1])  # the command holding at the last sample, and later ones
         if keep:
             del self.cmd_t[:keep], self.cmd_u[:keep]
         self._linked = True
-        return AlignedBatch(times, us, ys, held, marks, period, linked, early)
+        self._last_time = int(times[-1])
+        return AlignedBatch(times, us, ys, held, marks, period, linked, early, monotone)
+
+    def _monotone(self, commands: np.ndarray, k: np.ndarray, linked: bool) -> np.ndarray:
+        """Per sample, whether the commands in force since the sample before were monotone
+        (the first sample: since the last sample of the batch before, when linked)."""
+        before = np.empty_like(k)
+        before[1:] = k[:-1]
+        last = self._last_time
+        first_known = False
+        if linked and last is not None and self.cmd_t and self.cmd_t[0] <= last:
+            first_known = True
+            before[0] = bisect.bisect_right(self.cmd_t, last) - 1
+        else:
+            before[0] = k[0]
+        out = monotone_paths(commands, before, k)
+        if not first_known:
+            out[0] = False
+        return out
 
     def _empty(self, period: float | None, early: int) -> AlignedBatch:
         none = np.zeros(0, dtype=np.int64)

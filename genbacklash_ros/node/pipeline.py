@@ -73,7 +73,13 @@ Alignment (integer nanoseconds throughout)
   hold, so a grid sample breaks when it holds the same reading as the one before (the
   reading it should hold was lost or is late) or a reading more than a grid period, rounded,
   after it. An encoder slower than the grid thus breaks every chain: set ``sample_period``
-  to the encoder's period or a multiple of it.
+  to the encoder's period or a multiple of it. With ``model: backlash`` (rate independent),
+  a break that only lost readings made -- up to
+  :data:`~genbacklash_core.samples.MAX_BRIDGED`, on the encoder's own times -- is lifted
+  where the commands in force over the gap were monotone
+  (:func:`~genbacklash_ros.node.screen.bridged`, the rule of
+  :func:`~genbacklash_core.samples.bridge_lost`): the readings around it are consecutive
+  states.
 
 Outputs
 -------
@@ -355,7 +361,7 @@ class BacklashPipeline:
             grid_ns=params.sample_period_ns,
             wait_ns=self._wait,
         )
-        self._screen = Screen()
+        self._screen = Screen(bridge=params.model == "backlash")
         self._comp = CompensateStage(params.compensator_options(), compensate=params.compensate)
         self._feed_at_count = self._batch
         self._clock.restart()

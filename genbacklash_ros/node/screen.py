@@ -31,11 +31,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from genbacklash_core import Estimate
+from genbacklash_core.samples import MAX_BRIDGED
 from genbacklash_ros.node.align import AlignedBatch
 from genbacklash_ros.node.health import HealthEvent, StreamHealth
 from genbacklash_ros.node.sample_rule import keep_breaks, link_breaks
 
-__all__ = ["Screen", "Screened"]
+__all__ = ["Screen", "Screened", "bridged"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -64,19 +65,47 @@ class Screened:
         return int(self.us.size)
 
 
+def bridged(
+    breaks: np.ndarray,
+    held: np.ndarray,
+    period: float,
+    previous: int | None,
+    monotone: np.ndarray,
+) -> np.ndarray:
+    """``breaks`` (of stamp gaps only) with those lifted that at most
+    :data:`~genbacklash_core.samples.MAX_BRIDGED` lost readings made where the commands in
+    force were monotone (:func:`~genbacklash_core.samples.bridge_lost`: a backlash alone is
+    rate independent, so the readings around such a gap are consecutive states).
+
+    >>> bridged(np.array([False, True, True]), np.array([10, 30, 60]), 10.0, 0,
+    ...         np.array([True, True, False])).tolist()
+    [False, False, True]
+    """
+    start = np.concatenate(([held[0] if previous is None else previous], held[:-1]))
+    missing = np.rint((held - start) / period) - 1.0
+    lift = breaks & monotone & (missing >= 1.0) & (missing <= MAX_BRIDGED)
+    if previous is None:
+        lift[0] = False
+    return np.asarray(breaks & ~lift, dtype=bool)
+
+
 class Screen:
     """Screens aligned batches and links them by the sample rule (see the module notes)."""
 
-    __slots__ = ("_last_t",)
+    __slots__ = ("_bridge", "_last_t")
 
-    def __init__(self) -> None:
+    def __init__(self, *, bridge: bool = False) -> None:
+        self._bridge = bridge  # a backlash alone: bridge lost readings along monotone commands
         self._last_t: int | None = None  # stamp held by the last sample kept (None: breaks)
 
     def run(self, batch: AlignedBatch, health: StreamHealth, estimate: Estimate) -> Screened:
         """The samples of ``batch`` to identify from, judged with ``estimate`` (the estimate
         in use) by ``health``."""
         previous = self._last_t if batch.linked else None
-        breaks = link_breaks(batch.held, batch.period, previous_ns=previous, marks=batch.marks)
+        breaks = link_breaks(batch.held, batch.period, previous_ns=previous)
+        if self._bridge and batch.monotone is not None and batch.period is not None:
+            breaks = bridged(breaks, batch.held, batch.period, previous, batch.monotone)
+        breaks |= batch.marks
         us, ys, held = batch.us, batch.ys, batch.held
         screening = health.screen(batch.times, us, ys, estimate)
         kept = screening.keep

@@ -11,9 +11,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from genbacklash_core import simulate_backlash
+from genbacklash_core import OnlineIdentifier, simulate_backlash
 from genbacklash_core.scenarios import OperationSettings, operation_record
 from genbacklash_ros.bags.simbags import feed_record
+from genbacklash_ros.node.identify import SyncWorker
 from genbacklash_ros.node.parameters import NodeParameters
 from genbacklash_ros.node.pipeline import BacklashPipeline
 
@@ -39,3 +40,46 @@ def test_compensation_cuts_the_tracking_error_in_operation(method: str) -> None:
     raw = np.sqrt(np.mean((rec.x_all - rec.u_all)[half] ** 2))
     compensated = np.sqrt(np.mean((load - rec.u_all)[half] ** 2))
     assert compensated <= 0.15 * raw, (compensated, raw)  # issue 12: a cut of >= 85 %
+
+
+class _Recorder(SyncWorker):
+    """The synchronous worker, keeping what the pipeline submits."""
+
+    def __init__(self, identifier: OnlineIdentifier) -> None:
+        super().__init__(identifier)
+        self.batches: list[tuple[np.ndarray, np.ndarray]] = []
+
+    def submit(self, us: np.ndarray, ys: np.ndarray, breaks: np.ndarray) -> None:
+        self.batches.append((us.copy(), breaks.copy()))
+        super().submit(us, ys, breaks)
+
+
+@pytest.mark.parametrize("model", ["backlash", "cascade"])
+def test_the_node_bridges_lost_readings_for_a_backlash_alone(model: str) -> None:
+    """The node's sample rule is the core's (``OperationRecord.series``): with 30 % of the
+    readings lost, a backlash alone keeps the rows whose lost readings lie along monotone
+    commands (``bridge_lost``); a cascade keeps the strict rule."""
+    rec = operation_record(OperationSettings(duration=6.0, loss=0.3), 1)
+    workers: list[_Recorder] = []
+
+    def make(identifier: OnlineIdentifier) -> _Recorder:
+        workers.append(_Recorder(identifier))
+        return workers[-1]
+
+    pipe = BacklashPipeline(
+        NodeParameters(command_type="float64", encoder_type="float64", model=model),
+        worker=make,
+    )
+    feed_record(pipe, rec, DELAY_NS)
+    pipe.finish()
+    us = np.concatenate([u for u, _ in workers[-1].batches])
+    breaks = np.concatenate([b for _, b in workers[-1].batches])
+    u, _, expected = rec.series(bridge=model == "backlash")
+    # the node feeds every reading but those before the first command
+    skip = u.size - us.size
+    assert 0 <= skip < 20
+    np.testing.assert_array_equal(us, u[skip:])
+    np.testing.assert_array_equal(breaks[1:], expected[skip + 1 :])
+    moving = np.r_[False, np.diff(us) != 0.0]
+    kept = np.count_nonzero(moving & ~breaks) / np.count_nonzero(moving)
+    assert kept > 0.95 if model == "backlash" else kept < 0.6

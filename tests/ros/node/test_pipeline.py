@@ -5,7 +5,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections import Counter
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -573,13 +573,27 @@ def recording(
     return recorder
 
 
+def smooth(i: int) -> float:
+    """A command that reverses every 22 samples."""
+    return math.sin(i / 7.0)
+
+
+def zigzag(i: int) -> float:
+    """A command that reverses at every sample: no lost reading lies along a monotone path,
+    so none is bridged (the strict sample rule)."""
+    return 0.5 * (-1.0) ** i + 0.001 * i
+
+
 def send(
-    pipe: BacklashPipeline, stamps: Any, lost: set[int] | frozenset[int] = frozenset()
+    pipe: BacklashPipeline,
+    stamps: Any,
+    lost: set[int] | frozenset[int] = frozenset(),
+    command: Callable[[int], float] = smooth,
 ) -> None:
     """Float64 streams (a message's time is its receive time): at each stamp a command,
     then reading ``i`` with the value ``i`` unless ``i`` is lost."""
     for i, t in enumerate(np.asarray(stamps, dtype=np.int64).tolist()):
-        pipe.on_command(Float64(math.sin(i / 7.0)), t)
+        pipe.on_command(Float64(command(i)), t)
         if i not in lost:
             pipe.on_encoder(Float64(float(i)), t)
 
@@ -597,11 +611,32 @@ def test_lost_readings_break_the_chain_exactly_after_each_loss(
     pipe = BacklashPipeline(FLOATS)
     rec = recording(pipe, monkeypatch)
     lost = {40, 41, 100, 163, 300, 301, 302, 303, 450}
-    send(pipe, np.arange(1, 601) * MS, lost)
+    send(pipe, np.arange(1, 601) * MS, lost, zigzag)
     pipe.finish()
     assert rec.y.tolist() == [float(i) for i in range(600) if i not in lost]
     assert np.flatnonzero(rec.breaks).tolist() == after_losses(600, lost)
     assert len(rec.feeds) > 5  # the link from one feed to the next was exercised
+
+
+@pytest.mark.parametrize("model", ["backlash", "cascade"])
+def test_lost_readings_along_monotone_commands_are_bridged_for_a_backlash_alone(
+    monkeypatch: pytest.MonkeyPatch, model: str
+) -> None:
+    """A backlash alone is rate independent: readings lost while the command rose or fell
+    (or held) hide nothing, so the chain goes on; across a reversal it breaks. The cascade
+    keeps the strict rule."""
+    pipe = BacklashPipeline(FLOATS.replace(model=model))
+    rec = recording(pipe, monkeypatch)
+    # sin(i / 7) turns near i = 11, 33, 55, 77, 99, 121: 32 and 33 lost straddle the turn
+    lost = {20, 32, 33, 60, 61, 62, 100}
+    send(pipe, np.arange(1, 201) * MS, lost)
+    pipe.finish()
+    kept = [i for i in range(200) if i not in lost]
+    where = {i: k for k, i in enumerate(kept)}
+    if model == "cascade":
+        assert np.flatnonzero(rec.breaks).tolist() == after_losses(200, lost)
+    else:
+        assert np.flatnonzero(rec.breaks).tolist() == [0, where[34]]
 
 
 @pytest.mark.parametrize("kind", ["intervals", "stamps"])
@@ -627,7 +662,7 @@ def test_each_feed_links_to_the_last_sample_of_the_previous_one(
 ) -> None:
     pipe = BacklashPipeline(FLOATS, batch=10)
     rec = recording(pipe, monkeypatch)
-    send(pipe, np.arange(1, 101) * MS, lost={10})  # the first reading of the second feed
+    send(pipe, np.arange(1, 101) * MS, {10}, zigzag)  # the first reading of the second feed
     pipe.finish()
     links = []
     for (_, y_prev, _), (_, y, b) in itertools.pairwise(rec.feeds):
@@ -668,9 +703,10 @@ def test_rejected_readings_break_but_duplicates_and_late_ones_do_not(
     assert (dropped["encoder_invalid"], dropped["encoder_duplicate"]) == (2, 1)
     assert dropped["encoder_out_of_order"] == 1
     assert rec.y.tolist() == [float(v) for v in values]
-    # the reading after the invalid one, the one after the gap 40 left, the one after the
-    # transport's rejection
-    assert [values[k] for k in np.flatnonzero(rec.breaks)] == [1, 20, 41, 61]
+    # the reading after the invalid one and the one after the transport's rejection; the gap
+    # reading 40 left is bridged (the command rose over it: a backlash alone is rate
+    # independent), which the cascade's strict rule does not do
+    assert [values[k] for k in np.flatnonzero(rec.breaks)] == [1, 20, 61]
 
 
 def test_a_clock_reanchor_breaks_the_chain(monkeypatch: pytest.MonkeyPatch) -> None:
