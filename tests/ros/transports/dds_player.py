@@ -46,6 +46,7 @@ def main() -> int:
         MultiArrayLayout_,
         Time_,
     )
+    from genbacklash_ros.transports.ros_graph import endpoint_qos
 
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--domain-id", type=int, required=True)
@@ -65,8 +66,10 @@ def main() -> int:
         print(json.dumps(summary))
         return 1 if "error" in summary else 0
     dp = DomainParticipant(args.domain_id)
-    command = DataWriter(dp, Topic(dp, "rt/command", Float64MultiArray_), qos=DEFAULT_QOS)
-    encoder = DataWriter(dp, Topic(dp, "rt/encoder", JointState_), qos=SENSOR_QOS)
+    command_qos = endpoint_qos(DEFAULT_QOS, "std_msgs/msg/Float64MultiArray")
+    encoder_qos = endpoint_qos(SENSOR_QOS, "sensor_msgs/msg/JointState")
+    command = DataWriter(dp, Topic(dp, "rt/command", Float64MultiArray_), qos=command_qos)
+    encoder = DataWriter(dp, Topic(dp, "rt/encoder", JointState_), qos=encoder_qos)
     deadline = time.monotonic() + args.match_timeout
     while time.monotonic() < deadline:
         if (

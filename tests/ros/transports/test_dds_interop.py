@@ -32,7 +32,7 @@ import pytest
 
 from genbacklash_core import paper_example
 
-from ._dds import start_node
+from ._dds import Subscriber, diagnostic_values, start_node, wait_for
 
 pytest.importorskip("cyclonedds", reason="cyclonedds is not installed (pip install .[dds])")
 
@@ -225,12 +225,22 @@ def test_the_node_exits_cleanly(interop: Interop) -> None:
     assert "Traceback" not in interop.log
 
 
-def test_node_list_shows_the_namespace(tmp_path: Path) -> None:
-    """``--namespace arm``: ``ros2 node list`` shows ``/arm/backlash_identifier``."""
+def test_namespaced_node_is_listed_and_names_a_wrong_type_publisher(tmp_path: Path) -> None:
+    """``--namespace arm``: ``ros2 node list`` shows ``/arm/backlash_identifier``; and a
+    ``ros2 topic pub`` of std_msgs/Float64 on ``/arm/command`` (the node expects
+    Float64MultiArray) is named in the node's diagnostics with the parameter to change."""
     log = tmp_path / "node.log"
     cmd = [sys.executable, "-m", "genbacklash_ros.cli.node", "--transport", "dds"]
-    cmd += ["--domain-id", str(DOMAIN), "--namespace", "arm", "--duration", "30"]
+    cmd += ["--domain-id", str(DOMAIN), "--namespace", "arm", "--duration", "40"]
     node = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=log.open("wb"))
+    sub = Subscriber(DOMAIN)
+    wrong = subprocess.Popen(
+        ["ros2", "topic", "pub", "-r", "5", "/arm/command", "std_msgs/msg/Float64", "{data: 1.0}"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=_ros_env(),
+    )
     try:
         deadline = time.monotonic() + 20
         listed = _ros2("node", "list", "--no-daemon", "--spin-time", "1.5")
@@ -238,8 +248,24 @@ def test_node_list_shows_the_namespace(tmp_path: Path) -> None:
             listed = _ros2("node", "list", "--no-daemon", "--spin-time", "1.5")
         assert "/arm/backlash_identifier" in listed.stdout.split(), listed.stdout + log.read_text()
         assert TYPE_HASH_WARNING not in listed.stderr
+
+        def wiring() -> str:
+            texts = [diagnostic_values(d).get("wiring", "") for _, d in sub.got.diagnostics]
+            return next((t for t in texts if t), "")
+
+        assert wait_for(lambda: bool(wiring()), 20), log.read_text()
+        text = wiring()
+        print(f"wiring diagnostic: {text}")
+        assert text.startswith("/arm/command has a publisher of std_msgs/msg/Float64,")
+        assert "command_type: float64" in text
+        assert text in log.read_text(), "the mismatch is also logged"
+        wrong.send_signal(signal.SIGINT)
+        wrong.wait(10)
+        assert TYPE_HASH_WARNING not in (wrong.stderr.read() if wrong.stderr else "")
         assert _stop(node, log) == 0, log.read_text()
     finally:
-        if node.poll() is None:
-            node.kill()
-            node.wait(10)
+        sub.close()
+        for process in (wrong, node):
+            if process.poll() is None:
+                process.kill()
+                process.wait(10)
