@@ -47,6 +47,7 @@ __all__ = [
     "PARTICIPANT_USER_DATA",
     "GraphAnnouncer",
     "PublicationWatch",
+    "Subscribed",
     "WiringMismatch",
     "endpoint_qos",
     "gid_bytes",
