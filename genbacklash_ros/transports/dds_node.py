@@ -14,8 +14,9 @@ parameter that selects the type.
 
 Interface (GUIDE §4; every name remappable, see :class:`Topics`)
 -----------------------------------------------------------------
-* subscribes ``command`` (default QoS: KEEP_LAST 10, RELIABLE, VOLATILE) and ``encoder``
-  (sensor-data QoS: KEEP_LAST 5, BEST_EFFORT, VOLATILE);
+* subscribes ``command`` (default QoS: RELIABLE, VOLATILE) and ``encoder`` (sensor-data QoS:
+  BEST_EFFORT, VOLATILE), each reader with a history of :data:`READER_DEPTH` samples rather than
+  ROS 2's 10 and 5, so that a busy loop does not lose messages;
 * publishes ``~/estimate`` (``/backlash_identifier/estimate``), ``compensated_command`` (the
   command's type) and ``/diagnostics``, all with the default QoS.
 
@@ -89,6 +90,7 @@ from genbacklash_ros.transports.ros_graph import (
 
 __all__ = [
     "DEFAULT_QOS",
+    "READER_DEPTH",
     "SENSOR_QOS",
     "DdsNode",
     "NodeStats",
@@ -118,6 +120,20 @@ SENSOR_QOS = Qos(
     Policy.Durability.Volatile,
 )
 """ROS 2's sensor-data QoS (``qos_profile_sensor_data``): KEEP_LAST 5, BEST_EFFORT."""
+
+READER_DEPTH = 2000
+"""History depth of the node's command and encoder readers (4 s at 500 Hz). Cyclone's receive
+thread stores and acknowledges samples into this cache while the Python loop is busy (a refit,
+a loaded machine); with ROS 2's depth of 10 (5 for sensor data) a stall of 20 ms at 500 Hz
+overwrote commands before the loop took them. Depth is local to the reader, not part of QoS
+matching, so ROS 2 peers match as before."""
+
+
+def _deep(qos: Qos) -> Qos:
+    return Qos(*(p for p in qos if not isinstance(p, Policy.History.KeepLast))) + Qos(
+        Policy.History.KeepLast(READER_DEPTH)
+    )
+
 
 ReceiveTime = Literal["source", "take"]
 
@@ -300,12 +316,12 @@ class DdsNode:
         self._command_reader: DataReader[Any] = DataReader(
             dp,
             Topic(dp, dds_topic(t["command"]), command_type),
-            qos=endpoint_qos(DEFAULT_QOS, command_ros),
+            qos=endpoint_qos(_deep(DEFAULT_QOS), command_ros),
         )
         self._encoder_reader: DataReader[Any] = DataReader(
             dp,
             Topic(dp, dds_topic(t["encoder"]), encoder_type),
-            qos=endpoint_qos(SENSOR_QOS, encoder_ros),
+            qos=endpoint_qos(_deep(SENSOR_QOS), encoder_ros),
         )
         self._writers: dict[str, DataWriter[Any]] = {
             "compensated_command": DataWriter(

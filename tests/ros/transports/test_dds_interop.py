@@ -161,8 +161,9 @@ def test_every_rclpy_command_is_answered(interop: Interop) -> None:
     )
     assert s["rate"] >= 0.9 * RATE_HZ, s
     assert s["answered_in_range"] == s["answered"]
-    # reliable both ways on one host: all of them (a loaded CI box may lose a handful)
-    assert s["answered"] >= s["sent"] - 3, f"{s['answered']} of {s['sent']} answered"
+    # reliable both ways, and the node's reader holds what arrives while its loop is busy
+    # (READER_DEPTH): all of them, also on a loaded machine
+    assert s["answered"] == s["sent"], f"{s['answered']} of {s['sent']} answered"
 
 
 def test_the_estimate_reaches_rclpy_near_the_truth(interop: Interop) -> None:
