@@ -4,14 +4,19 @@ The same :class:`~genbacklash_ros.node.pipeline.BacklashPipeline` and
 :class:`~genbacklash_ros.node.parameters.NodeParameters` as the rclpy node, with what ROS 2 puts on
 the wire: topic names ``rt/<name>``, type names ``pkg::msg::dds_::Type_``, ROS 2's CDR
 (:mod:`genbacklash_ros.transports.dds_types`) and ROS 2's QoS. ROS 2 nodes on the same
-``ROS_DOMAIN_ID`` exchange messages with it (``ros2 topic echo /compensated_command`` works);
-it is not listed by ``ros2 node list`` and has no parameter services (parameters come from a
-params file at start).
+``ROS_DOMAIN_ID`` exchange messages with it (``ros2 topic echo /compensated_command`` works).
+It is a ROS 2 graph citizen (:mod:`genbacklash_ros.transports.ros_graph`): its endpoints carry
+their REP-2016 type hashes, and it announces itself on ``ros_discovery_info``, so
+``ros2 node list`` lists it and ``ros2 topic info -v`` names it. It has no parameter services
+(parameters come from a params file at start). Where discovery shows a publisher of another
+type on ``command`` or ``encoder``, ``/diagnostics`` says so (key ``wiring``) and names the
+parameter that selects the type.
 
 Interface (GUIDE §4; every name remappable, see :class:`Topics`)
 -----------------------------------------------------------------
-* subscribes ``command`` (default QoS: KEEP_LAST 10, RELIABLE, VOLATILE) and ``encoder``
-  (sensor-data QoS: KEEP_LAST 5, BEST_EFFORT, VOLATILE);
+* subscribes ``command`` (default QoS: RELIABLE, VOLATILE) and ``encoder`` (sensor-data QoS:
+  BEST_EFFORT, VOLATILE), each reader with a history of :data:`READER_DEPTH` samples rather than
+  ROS 2's 10 and 5, so that a busy loop does not lose messages;
 * publishes ``~/estimate`` (``/backlash_identifier/estimate``), ``compensated_command`` (the
   command's type) and ``/diagnostics``, all with the default QoS.
 
@@ -63,9 +68,11 @@ from genbacklash_ros.node.checkpoint_writer import BackgroundCheckpointWriter
 from genbacklash_ros.node.identify import live_worker
 from genbacklash_ros.node.messages import (
     DiagnosticArray,
+    DiagnosticStatus,
     Float64,
     Float64MultiArray,
     JointState,
+    KeyValue,
     Message,
     MessageError,
 )
@@ -73,15 +80,25 @@ from genbacklash_ros.node.parameters import NODE_NAME, NodeParameters
 from genbacklash_ros.node.pipeline import BacklashPipeline, Output
 from genbacklash_ros.transports.dds_convert import DDS_TYPES, from_dds, to_dds
 from genbacklash_ros.transports.dds_types import dds_topic
+from genbacklash_ros.transports.ros_graph import (
+    PARTICIPANT_USER_DATA,
+    GraphAnnouncer,
+    PublicationWatch,
+    Subscribed,
+    WiringMismatch,
+    endpoint_qos,
+)
 
 __all__ = [
     "DEFAULT_QOS",
+    "READER_DEPTH",
     "SENSOR_QOS",
     "DdsNode",
     "NodeStats",
     "Topics",
     "domain_id_from_env",
     "resolve_topic",
+    "with_wiring",
 ]
 
 _LOG = logging.getLogger("genbacklash.node")
@@ -105,6 +122,20 @@ SENSOR_QOS = Qos(
 )
 """ROS 2's sensor-data QoS (``qos_profile_sensor_data``): KEEP_LAST 5, BEST_EFFORT."""
 
+READER_DEPTH = 2000
+"""History depth of the node's command and encoder readers (4 s at 500 Hz). Cyclone's receive
+thread stores and acknowledges samples into this cache while the Python loop is busy (a refit,
+a loaded machine); with ROS 2's depth of 10 (5 for sensor data) a stall of 20 ms at 500 Hz
+overwrote commands before the loop took them. Depth is local to the reader, not part of QoS
+matching, so ROS 2 peers match as before."""
+
+
+def _deep(qos: Qos) -> Qos:
+    return Qos(*(p for p in qos if not isinstance(p, Policy.History.KeepLast))) + Qos(
+        Policy.History.KeepLast(READER_DEPTH)
+    )
+
+
 ReceiveTime = Literal["source", "take"]
 
 _COMMAND_ROS_TYPES = {
@@ -113,6 +144,24 @@ _COMMAND_ROS_TYPES = {
     "joint_state": JointState.ros_type,
 }
 _ENCODER_ROS_TYPES = {"joint_state": JointState.ros_type, "float64": Float64.ros_type}
+
+
+def with_wiring(
+    diagnostics: DiagnosticArray, mismatches: tuple[WiringMismatch, ...]
+) -> DiagnosticArray:
+    """``diagnostics`` with the wiring mismatches added to its first status: at least WARN,
+    each mismatch's line appended to the message and under the key ``wiring``."""
+    if not mismatches or not diagnostics.status:
+        return diagnostics
+    first, *rest = diagnostics.status
+    lines = [m.text() for m in mismatches]
+    status = replace(
+        first,
+        level=max(first.level, DiagnosticStatus.WARN),
+        message="; ".join([first.message, *lines]) if first.message else "; ".join(lines),
+        values=(*first.values, KeyValue("wiring", "; ".join(lines))),
+    )
+    return replace(diagnostics, status=(status, *rest))
 
 
 @dataclass(frozen=True)
@@ -259,33 +308,58 @@ class DdsNode:
         self._last_receive = {"command": -1, "encoder": -1}
         self._seq = 0
 
-        qos_name = Qos(Policy.EntityName(NODE_NAME))
-        self._participant = DomainParticipant(self.domain_id, qos=qos_name)
+        qos_participant = Qos(Policy.EntityName(NODE_NAME), Policy.Userdata(PARTICIPANT_USER_DATA))
+        self._participant = DomainParticipant(self.domain_id, qos=qos_participant)
         dp = self._participant
-        command_type = DDS_TYPES[_COMMAND_ROS_TYPES[params.command_type]]
-        encoder_type = DDS_TYPES[_ENCODER_ROS_TYPES[params.encoder_type]]
+        command_ros = _COMMAND_ROS_TYPES[params.command_type]
+        encoder_ros = _ENCODER_ROS_TYPES[params.encoder_type]
+        command_type, encoder_type = DDS_TYPES[command_ros], DDS_TYPES[encoder_ros]
+        estimate_ros, diagnostics_ros = Float64MultiArray.ros_type, DiagnosticArray.ros_type
         t = self.topics
         self._command_reader: DataReader[Any] = DataReader(
-            dp, Topic(dp, dds_topic(t["command"]), command_type), qos=DEFAULT_QOS
+            dp,
+            Topic(dp, dds_topic(t["command"]), command_type),
+            qos=endpoint_qos(_deep(DEFAULT_QOS), command_ros),
         )
         self._encoder_reader: DataReader[Any] = DataReader(
-            dp, Topic(dp, dds_topic(t["encoder"]), encoder_type), qos=SENSOR_QOS
+            dp,
+            Topic(dp, dds_topic(t["encoder"]), encoder_type),
+            qos=endpoint_qos(_deep(SENSOR_QOS), encoder_ros),
         )
         self._writers: dict[str, DataWriter[Any]] = {
             "compensated_command": DataWriter(
-                dp, Topic(dp, dds_topic(t["compensated_command"]), command_type), DEFAULT_QOS
+                dp,
+                Topic(dp, dds_topic(t["compensated_command"]), command_type),
+                endpoint_qos(DEFAULT_QOS, command_ros),
             ),
             "estimate": DataWriter(
                 dp,
-                Topic(dp, dds_topic(t["estimate"]), DDS_TYPES[Float64MultiArray.ros_type]),
-                DEFAULT_QOS,
+                Topic(dp, dds_topic(t["estimate"]), DDS_TYPES[estimate_ros]),
+                endpoint_qos(DEFAULT_QOS, estimate_ros),
             ),
             "diagnostics": DataWriter(
                 dp,
-                Topic(dp, dds_topic(t["diagnostics"]), DDS_TYPES[DiagnosticArray.ros_type]),
-                DEFAULT_QOS,
+                Topic(dp, dds_topic(t["diagnostics"]), DDS_TYPES[diagnostics_ros]),
+                endpoint_qos(DEFAULT_QOS, diagnostics_ros),
             ),
         }
+        self._graph = GraphAnnouncer(dp, NODE_NAME, namespace)
+        self._graph.announce((self._command_reader, self._encoder_reader), self._writers.values())
+        self._watch = PublicationWatch(
+            dp,
+            {
+                dds_topic(t["command"]): Subscribed(
+                    command_type.__idl_typename__,
+                    "command_type",
+                    tuple(_COMMAND_ROS_TYPES.items()),
+                ),
+                dds_topic(t["encoder"]): Subscribed(
+                    encoder_type.__idl_typename__,
+                    "encoder_type",
+                    tuple(_ENCODER_ROS_TYPES.items()),
+                ),
+            },
+        )
         mask = SampleState.NotRead | ViewState.Any | InstanceState.Any
         self._command_ready = ReadCondition(self._command_reader, mask)
         self._encoder_ready = ReadCondition(self._encoder_reader, mask)
@@ -339,6 +413,7 @@ class DdsNode:
                     data_since_tick = True
                 now = self._clock()
                 if now >= next_tick:
+                    self.check_wiring()
                     if not data_since_tick:
                         self._publish([self.pipeline.diagnostics(now, stale=True)])
                         self.stats.stale_reports += 1
@@ -347,11 +422,24 @@ class DdsNode:
             # drain what arrived before the stop, then finish
             self._process_available()
             self._publish(self.pipeline.finish())
+            self._graph.withdraw()
         finally:
             self.pipeline.close()
             self._checkpoints.close()
             self.pipeline_stats_log()
         return self.stats
+
+    @property
+    def wiring_mismatches(self) -> tuple[WiringMismatch, ...]:
+        """Publishers of another type on a subscribed topic, as last checked."""
+        return self._watch.mismatches
+
+    def check_wiring(self) -> tuple[WiringMismatch, ...]:
+        """Read what discovery reported about publications (once per wall-clock second in
+        :meth:`spin`); log each new mismatch once. Returns the current mismatches."""
+        for mismatch in self._watch.poll():
+            _LOG.warning("%s", mismatch.text())
+        return self._watch.mismatches
 
     def pipeline_stats_log(self) -> None:
         """Log the counters (at shutdown)."""
@@ -424,8 +512,11 @@ class DdsNode:
     def _publish(self, outputs: list[Output]) -> None:
         for output in outputs:
             writer = self._writers[output.topic]
+            message = output.message
+            if output.topic == "diagnostics" and isinstance(message, DiagnosticArray):
+                message = with_wiring(message, self._watch.mismatches)
             try:
-                writer.write(to_dds(output.message))
+                writer.write(to_dds(message))
             except MessageError as err:  # never stop the loop for one message
                 _LOG.warning("not published on %s: %s", output.topic, err)
                 continue

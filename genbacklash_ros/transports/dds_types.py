@@ -19,18 +19,22 @@ Examples
 from dataclasses import dataclass, field
 
 from cyclonedds.idl import IdlStruct
-from cyclonedds.idl.types import float64, int32, sequence, uint8, uint32
+from cyclonedds.idl.types import array, bounded_str, float64, int32, sequence, uint8, uint32
 
 __all__ = [
+    "GID_SIZE",
     "DiagnosticArray_",
     "DiagnosticStatus_",
     "Float64MultiArray_",
     "Float64_",
+    "Gid_",
     "Header_",
     "JointState_",
     "KeyValue_",
     "MultiArrayDimension_",
     "MultiArrayLayout_",
+    "NodeEntitiesInfo_",
+    "ParticipantEntitiesInfo_",
     "Time_",
     "dds_topic",
 ]
@@ -109,3 +113,34 @@ class DiagnosticStatus_(IdlStruct, typename="diagnostic_msgs::msg::dds_::Diagnos
 class DiagnosticArray_(IdlStruct, typename="diagnostic_msgs::msg::dds_::DiagnosticArray_"):
     header: Header_ = field(default_factory=Header_)
     status: sequence[DiagnosticStatus_] = field(default_factory=list)
+
+
+# ---- the ROS 2 graph (rmw_dds_common/msg, Jazzy): what rmw publishes on ``ros_discovery_info``
+
+GID_SIZE = 16
+"""Bytes of a Jazzy ``rmw_gid_t`` (``RMW_GID_STORAGE_SIZE``; Humble had 24): a DDS GUID."""
+
+
+def _zero_gid() -> list[int]:
+    return [0] * GID_SIZE
+
+
+@dataclass
+class Gid_(IdlStruct, typename="rmw_dds_common::msg::dds_::Gid_"):
+    data: array[uint8, GID_SIZE] = field(default_factory=_zero_gid)  # `char[16] data`
+
+
+@dataclass
+class NodeEntitiesInfo_(IdlStruct, typename="rmw_dds_common::msg::dds_::NodeEntitiesInfo_"):
+    node_namespace: bounded_str[256] = "/"
+    node_name: bounded_str[256] = ""
+    reader_gid_seq: sequence[Gid_] = field(default_factory=list)
+    writer_gid_seq: sequence[Gid_] = field(default_factory=list)
+
+
+@dataclass
+class ParticipantEntitiesInfo_(
+    IdlStruct, typename="rmw_dds_common::msg::dds_::ParticipantEntitiesInfo_"
+):
+    gid: Gid_ = field(default_factory=Gid_)
+    node_entities_info_seq: sequence[NodeEntitiesInfo_] = field(default_factory=list)

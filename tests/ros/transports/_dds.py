@@ -36,27 +36,31 @@ class Subscriber:
         from cyclonedds.util import duration
 
         from genbacklash_ros.transports.dds_types import DiagnosticArray_, Float64MultiArray_
+        from genbacklash_ros.transports.ros_graph import endpoint_qos
 
         reliable_all = Qos(
             Policy.History.KeepAll,
             Policy.Reliability.Reliable(duration(seconds=1)),
             Policy.Durability.Volatile,
         )
+        # with their type hashes, so that ROS 2 processes in a test do not warn about them
+        arrays = endpoint_qos(reliable_all, "std_msgs/msg/Float64MultiArray")
+        diagnostics = endpoint_qos(reliable_all, "diagnostic_msgs/msg/DiagnosticArray")
         self._wait = duration(milliseconds=50)
         self.got = Received()
         self._stop = threading.Event()
         self.dp = dp = DomainParticipant(domain)
         self._readers = {
             "compensated": DataReader(
-                dp, Topic(dp, "rt/compensated_command", Float64MultiArray_), qos=reliable_all
+                dp, Topic(dp, "rt/compensated_command", Float64MultiArray_), qos=arrays
             ),
             "estimates": DataReader(
                 dp,
                 Topic(dp, "rt/backlash_identifier/estimate", Float64MultiArray_),
-                qos=reliable_all,
+                qos=arrays,
             ),
             "diagnostics": DataReader(
-                dp, Topic(dp, "rt/diagnostics", DiagnosticArray_), qos=reliable_all
+                dp, Topic(dp, "rt/diagnostics", DiagnosticArray_), qos=diagnostics
             ),
         }
         self._waitset = WaitSet(dp)

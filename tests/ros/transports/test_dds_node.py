@@ -227,3 +227,28 @@ def test_restarts_from_the_checkpoint(run: Run) -> None:
         if node.poll() is None:
             node.kill()
         sub.close()
+
+
+def test_a_stalled_loop_loses_no_command() -> None:
+    """Commands that arrive while the loop is busy wait in the reader (READER_DEPTH), instead of
+    being overwritten after ROS 2's 10: here the loop has not started while 300 arrive."""
+    from genbacklash_ros.node.parameters import NodeParameters
+    from genbacklash_ros.transports.dds_node import READER_DEPTH, DdsNode
+
+    sent = 300
+    assert sent < READER_DEPTH
+    node = DdsNode(NodeParameters(joint="j"), domain_id=DOMAIN)
+    sub = Subscriber(DOMAIN)
+    dp = sub.dp
+    writer = DataWriter(dp, Topic(dp, "rt/command", Float64MultiArray_), qos=DEFAULT_QOS)
+    try:
+        assert wait_for(lambda: writer.get_publication_matched_status().current_count >= 1, 10)
+        layout = MultiArrayLayout_([MultiArrayDimension_("u", 3, 3)], 0)
+        for k in range(sent):
+            writer.write(Float64MultiArray_(layout, [0.01 * k, float(k), 0.0]))
+        time.sleep(0.5)  # all delivered and acknowledged into the reader's history
+        node.spin(0.5)
+        assert node.stats.received["command"] == sent
+        assert wait_for(lambda: len(sub.got.compensated) >= sent, 10), len(sub.got.compensated)
+    finally:
+        sub.close()

@@ -75,3 +75,38 @@ def test_cdr_bytes_equal_ros2(typename: str, ours: Any, theirs: Any) -> None:
 def test_type_names_follow_the_ros2_mapping() -> None:
     assert dds.JointState_.__idl_typename__ == "sensor_msgs::msg::dds_::JointState_"
     assert dds.dds_topic("/diagnostics") == "rt/diagnostics"
+
+
+def test_participant_entities_info_bytes_equal_ros2_jazzy() -> None:
+    """``ros_discovery_info``'s message with Jazzy's 16-byte gids, byte for byte."""
+    gids = [bytes(range(k, k + dds.GID_SIZE)) for k in (0, 16, 32)]
+    ours = dds.ParticipantEntitiesInfo_(
+        dds.Gid_(list(gids[0])),
+        [
+            dds.NodeEntitiesInfo_(
+                "/arm",
+                "backlash_identifier",
+                [dds.Gid_(list(gids[1]))],
+                [dds.Gid_(list(gids[2])), dds.Gid_(list(gids[0]))],
+            )
+        ],
+    )
+    gid = T["rmw_dds_common/msg/Gid"]
+    theirs = T["rmw_dds_common/msg/ParticipantEntitiesInfo"](
+        gid=gid(data=np.frombuffer(gids[0], np.uint8)),
+        node_entities_info_seq=[
+            T["rmw_dds_common/msg/NodeEntitiesInfo"](
+                node_namespace="/arm",
+                node_name="backlash_identifier",
+                reader_gid_seq=[gid(data=np.frombuffer(gids[1], np.uint8))],
+                writer_gid_seq=[
+                    gid(data=np.frombuffer(gids[2], np.uint8)),
+                    gid(data=np.frombuffer(gids[0], np.uint8)),
+                ],
+            )
+        ],
+    )
+    theirs_bytes = bytes(STORE.serialize_cdr(theirs, "rmw_dds_common/msg/ParticipantEntitiesInfo"))
+    assert ours.serialize() == theirs_bytes
+    back = dds.ParticipantEntitiesInfo_.deserialize(theirs_bytes)
+    assert bytes(back.node_entities_info_seq[0].writer_gid_seq[0].data) == gids[2]

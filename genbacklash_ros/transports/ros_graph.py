@@ -1,0 +1,298 @@
+"""The DDS node as a ROS 2 graph citizen: type hashes, ``ros_discovery_info``, wiring checks.
+
+What an ``rmw_cyclonedds_cpp`` peer (rclpy, ``ros2`` CLI) needs to see a plain-DDS process as a
+ROS 2 node, as rmw_cyclonedds_cpp / rmw_dds_common (Jazzy) do it:
+
+* every endpoint's USER_DATA QoS is ``typehash=RIHS01_<sha256>;``
+  (:func:`~genbacklash_ros.transports.type_hash.typehash_user_data`); without it each peer logs
+  ``Failed to parse type hash ... from USER_DATA '(null)'`` per topic;
+* the participant's USER_DATA is ``enclave=/;`` (rmw adds a participant to its graph with the
+  enclave it announces);
+* the participant publishes ``rmw_dds_common/msg/ParticipantEntitiesInfo`` on the DDS topic
+  ``ros_discovery_info`` (no ``rt/`` prefix; RELIABLE, TRANSIENT_LOCAL, KEEP_LAST 1): its gid and,
+  per node, the namespace, the name and the gids of the node's readers and writers. A Jazzy gid
+  is the entity's 16-byte DDS GUID (``convert_guid_to_gid``: ``memcpy`` of ``dds_guid_t``), so
+  peers match these gids against the endpoints they discover. ``ros2 node list`` and the node
+  names in ``ros2 topic info -v`` come from this message.
+
+And the reverse check for the node's own subscriptions: :class:`PublicationWatch` reads the
+``DCPSPublication`` builtin topic and reports publishers of another type on a subscribed topic
+(:class:`WiringMismatch`, :func:`wiring_mismatch_text`), which DDS would otherwise never match
+and nobody would notice.
+
+This module imports cyclonedds; import it only where the DDS transport is used.
+"""
+
+from __future__ import annotations
+
+import uuid
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication
+from cyclonedds.core import InstanceState
+from cyclonedds.domain import DomainParticipant
+from cyclonedds.pub import DataWriter
+from cyclonedds.qos import Policy, Qos
+from cyclonedds.topic import Topic
+
+from genbacklash_core import GenBacklashError
+from genbacklash_ros.transports import dds_types
+from genbacklash_ros.transports.type_hash import typehash_user_data
+
+__all__ = [
+    "DISCOVERY_QOS",
+    "DISCOVERY_TOPIC",
+    "PARTICIPANT_USER_DATA",
+    "GraphAnnouncer",
+    "PublicationWatch",
+    "Subscribed",
+    "WiringMismatch",
+    "endpoint_qos",
+    "gid_bytes",
+    "node_namespace",
+    "participant_entities_info",
+    "ros_topic_name",
+    "ros_type_name",
+    "wiring_mismatch_text",
+]
+
+DISCOVERY_TOPIC = "ros_discovery_info"
+DISCOVERY_ROS_TYPE = "rmw_dds_common/msg/ParticipantEntitiesInfo"
+PARTICIPANT_USER_DATA = b"enclave=/;"
+"""The participant's USER_DATA: the default enclave, as ``rmw_create_node`` announces it."""
+
+DISCOVERY_QOS = Qos(
+    Policy.Reliability.Reliable(0),
+    Policy.Durability.TransientLocal,
+    Policy.History.KeepLast(1),
+    Policy.Userdata(typehash_user_data(DISCOVERY_ROS_TYPE)),
+)
+"""rmw's QoS for ``ros_discovery_info``: RELIABLE, TRANSIENT_LOCAL, KEEP_LAST 1 (late joiners
+get the last message), with its type hash."""
+
+_T: Any = dds_types  # the IDL classes are runtime descriptors mypy cannot read
+
+
+def endpoint_qos(qos: Qos, ros_type: str) -> Qos:
+    """``qos`` with the USER_DATA a ROS 2 endpoint of ``ros_type`` carries (its type hash)."""
+    return Qos(*(p for p in qos if not isinstance(p, Policy.Userdata))) + Qos(
+        Policy.Userdata(typehash_user_data(ros_type))
+    )
+
+
+def node_namespace(namespace: str) -> str:
+    """The namespace as rcl hands it to rmw: absolute, ``/`` for the root.
+
+    >>> node_namespace(""), node_namespace("arm"), node_namespace("/robot/arm/")
+    ('/', '/arm', '/robot/arm')
+    """
+    inner = namespace.strip().strip("/")
+    return "/" + inner
+
+
+def gid_bytes(guid: uuid.UUID | bytes) -> list[int]:
+    """A Jazzy ``rmw_gid_t`` payload (16 bytes) from a DDS GUID (cyclonedds' ``entity.guid``)."""
+    data = guid.bytes if isinstance(guid, uuid.UUID) else bytes(guid)
+    if len(data) != dds_types.GID_SIZE:
+        raise GenBacklashError(
+            f"a gid has {dds_types.GID_SIZE} bytes (a DDS GUID), got {len(data)} bytes"
+        )
+    return list(data)
+
+
+def participant_entities_info(
+    participant: uuid.UUID,
+    node_name: str,
+    namespace: str,
+    readers: Iterable[uuid.UUID],
+    writers: Iterable[uuid.UUID],
+) -> Any:
+    """The ``ParticipantEntitiesInfo`` wire object announcing one node (empty ``node_name``:
+    none, as rmw publishes when its last node goes)."""
+    nodes = []
+    if node_name:
+        nodes.append(
+            _T.NodeEntitiesInfo_(
+                node_namespace(namespace),
+                node_name,
+                [_T.Gid_(gid_bytes(g)) for g in readers],
+                [_T.Gid_(gid_bytes(g)) for g in writers],
+            )
+        )
+    return _T.ParticipantEntitiesInfo_(_T.Gid_(gid_bytes(participant)), nodes)
+
+
+class GraphAnnouncer:
+    """Publishes a node's entities on ``ros_discovery_info`` for one participant.
+
+    Parameters
+    ----------
+    participant : DomainParticipant
+        Created with USER_DATA :data:`PARTICIPANT_USER_DATA`.
+    node_name, namespace : str
+        The node as ``ros2 node list`` should show it.
+    """
+
+    def __init__(self, participant: DomainParticipant, node_name: str, namespace: str) -> None:
+        self._participant = participant
+        self.node_name = node_name
+        self.namespace = node_namespace(namespace)
+        topic = Topic(participant, DISCOVERY_TOPIC, _T.ParticipantEntitiesInfo_)
+        self._writer: DataWriter[Any] = DataWriter(participant, topic, qos=DISCOVERY_QOS)
+        self.published = 0
+
+    def announce(self, readers: Iterable[Any], writers: Iterable[Any]) -> None:
+        """Publish the node with these DataReaders and DataWriters."""
+        message = participant_entities_info(
+            self._participant.guid,
+            self.node_name,
+            self.namespace,
+            (r.guid for r in readers),
+            (w.guid for w in writers),
+        )
+        self._writer.write(message)
+        self.published += 1
+
+    def withdraw(self) -> None:
+        """Publish the participant without nodes (the node is going away)."""
+        self._writer.write(participant_entities_info(self._participant.guid, "", "", (), ()))
+        self.published += 1
+
+
+def ros_type_name(dds_type: str) -> str:
+    """``pkg::msg::dds_::Type_`` -> ``pkg/msg/Type``; other names unchanged.
+
+    >>> ros_type_name("std_msgs::msg::dds_::Float64_"), ros_type_name("MyType")
+    ('std_msgs/msg/Float64', 'MyType')
+    """
+    parts = dds_type.split("::")
+    if len(parts) == 4 and parts[2] == "dds_" and parts[3].endswith("_"):
+        return f"{parts[0]}/{parts[1]}/{parts[3][:-1]}"
+    return dds_type
+
+
+def ros_topic_name(dds_topic: str) -> str:
+    """``rt/a/b`` -> ``/a/b``; other names unchanged.
+
+    >>> ros_topic_name("rt/command"), ros_topic_name("ros_discovery_info")
+    ('/command', 'ros_discovery_info')
+    """
+    return "/" + dds_topic[3:] if dds_topic.startswith("rt/") else dds_topic
+
+
+def wiring_mismatch_text(
+    topic: str,
+    seen_type: str,
+    expected_type: str,
+    parameter: str,
+    *,
+    choices: Mapping[str, str] | None = None,
+) -> str:
+    """One line saying that ``topic`` has a publisher of ``seen_type`` while the node
+    subscribes ``expected_type``, and which parameter selects the type.
+
+    ``choices`` maps the parameter's values to the types they select; when ``seen_type`` is
+    one of them the line names the value to set.
+
+    >>> wiring_mismatch_text("/command", "std_msgs/msg/Float64",
+    ...     "std_msgs/msg/Float64MultiArray", "command_type",
+    ...     choices={"float64": "std_msgs/msg/Float64"})  # doctest: +NORMALIZE_WHITESPACE
+    '/command has a publisher of std_msgs/msg/Float64, but the node subscribes
+    std_msgs/msg/Float64MultiArray there, so none of its messages arrive; the parameter
+    command_type selects the type (command_type: float64 for std_msgs/msg/Float64)'
+    """
+    text = (
+        f"{topic} has a publisher of {seen_type}, but the node subscribes {expected_type} "
+        f"there, so none of its messages arrive; the parameter {parameter} selects the type"
+    )
+    value = next((v for v, t in (choices or {}).items() if t == seen_type), None)
+    if value is not None:
+        text += f" ({parameter}: {value} for {seen_type})"
+    else:
+        supported = ", ".join(f"{v} ({t})" for v, t in (choices or {}).items())
+        if supported:
+            text += f"; it supports {supported}"
+    return text
+
+
+@dataclass(frozen=True)
+class WiringMismatch:
+    """A discovered publisher whose type differs from the node's subscription on its topic."""
+
+    topic: str
+    seen_type: str
+    expected_type: str
+    parameter: str
+    choices: tuple[tuple[str, str], ...] = ()
+
+    def text(self) -> str:
+        """:func:`wiring_mismatch_text` for this mismatch."""
+        return wiring_mismatch_text(
+            self.topic,
+            self.seen_type,
+            self.expected_type,
+            self.parameter,
+            choices=dict(self.choices),
+        )
+
+
+@dataclass(frozen=True)
+class Subscribed:
+    """What the node subscribes on one DDS topic, and the parameter that selects its type."""
+
+    dds_type: str
+    parameter: str
+    choices: tuple[tuple[str, str], ...] = ()
+
+
+class PublicationWatch:
+    """Watches discovered publications (``DCPSPublication``) on the node's subscribed topics.
+
+    Parameters
+    ----------
+    participant : DomainParticipant
+    subscribed : mapping
+        DDS topic name (``rt/command``) -> :class:`Subscribed`.
+    """
+
+    def __init__(self, participant: DomainParticipant, subscribed: Mapping[str, Subscribed]):
+        self._subscribed = dict(subscribed)
+        self._reader = BuiltinDataReader(participant, BuiltinTopicDcpsPublication)
+        self._mismatches: dict[uuid.UUID, WiringMismatch] = {}
+
+    @property
+    def mismatches(self) -> tuple[WiringMismatch, ...]:
+        """The distinct mismatches of the publications alive now."""
+        return tuple(dict.fromkeys(self._mismatches.values()))
+
+    def poll(self) -> list[WiringMismatch]:
+        """Take what discovery reported since the last call; the mismatches that are new."""
+        before = set(self._mismatches.values())
+        while True:
+            samples = self._reader.take(64)
+            for sample in samples:
+                self._note(sample)
+            if len(samples) < 64:
+                break
+        return [m for m in self.mismatches if m not in before]
+
+    def _note(self, sample: Any) -> None:
+        info = sample.sample_info
+        key = getattr(sample, "key", None)
+        if key is None:
+            return
+        if info.instance_state != InstanceState.Alive or not info.valid_data:
+            self._mismatches.pop(key, None)
+            return
+        wanted = self._subscribed.get(sample.topic_name)
+        if wanted is None or sample.type_name == wanted.dds_type:
+            return
+        self._mismatches[key] = WiringMismatch(
+            ros_topic_name(sample.topic_name),
+            ros_type_name(sample.type_name),
+            ros_type_name(wanted.dds_type),
+            wanted.parameter,
+            wanted.choices,
+        )
