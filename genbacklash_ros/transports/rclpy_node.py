@@ -210,7 +210,9 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
 
         command_type = _ROS_COMMAND[self._params.command_type]
         encoder_type = _ROS_ENCODER[self._params.encoder_type]
-        self._publishers = {
+        # not `_publishers`: rclpy's Node keeps its own list under that name and
+        # destroy_node() walks it (a dict there ends every shutdown in a KeyError)
+        self._outputs = {
             "compensated_command": self.create_publisher(
                 command_type, "compensated_command", DEFAULT_DEPTH
             ),
@@ -277,7 +279,7 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
 
     def _publish(self, outputs: list[Output]) -> None:
         for output in outputs:
-            self._publishers[output.topic].publish(to_ros(output.message))
+            self._outputs[output.topic].publish(to_ros(output.message))
 
     # ------------------------------------------------------------------ shutdown
 

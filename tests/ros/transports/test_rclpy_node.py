@@ -1,33 +1,42 @@
-"""The rclpy node: run where rclpy imports (a sourced ROS 2 Jazzy), skipped here."""
+"""The rclpy node in process, against the real rclpy (the bundled ROS 2 Jazzy, GUIDE §5).
+
+Each test makes its own rclpy context on a DDS domain of its own. Skipped, with the reason,
+where rclpy does not import (ROS 2 not installed, or its setup.bash not sourced).
+"""
 
 from __future__ import annotations
 
-import importlib.util
+from collections.abc import Iterator
 
 import pytest
 
 from genbacklash_ros.cli.node import choose_transport, ros2_main
 
-RCLPY_MISSING = "rclpy is not installable on this machine (not on PyPI, not in Debian bookworm)"
+from ._ros2 import domain_id, rclpy_missing
+
+needs_rclpy = pytest.mark.skipif(bool(rclpy_missing()), reason=rclpy_missing() or "-")
 
 
-def _rclpy_available() -> bool:
-    try:
-        return importlib.util.find_spec("rclpy") is not None
-    except (ImportError, ValueError):
-        return False
-
-
-needs_rclpy = pytest.mark.skipif(not _rclpy_available(), reason=RCLPY_MISSING)
-
-
-@pytest.mark.skipif(_rclpy_available(), reason="rclpy is installed here")
+@pytest.mark.skipif(not rclpy_missing(), reason="rclpy imports here: the message is not shown")
 def test_without_rclpy_the_cli_says_so(capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(Exception, match="rclpy cannot be imported"):
         choose_transport("rclpy")
     assert choose_transport("auto") == "dds"
     assert ros2_main() == 2
     assert "genbacklash node --transport dds" in capsys.readouterr().err
+
+
+@pytest.fixture
+def ros_args() -> Iterator[list[str]]:
+    """rclpy initialised (global context) on a domain of its own; the test may re-init with
+    its own arguments after ``rclpy.try_shutdown()``."""
+    import rclpy
+
+    rclpy.init(args=[], domain_id=domain_id())
+    try:
+        yield []
+    finally:
+        rclpy.try_shutdown()
 
 
 @needs_rclpy
@@ -45,24 +54,35 @@ def test_descriptors_carry_ranges_and_descriptions() -> None:
 
 
 @needs_rclpy
-def test_node_rejects_bad_parameters_with_the_reason() -> None:
-    import rclpy
+def test_destroy_node_is_clean(ros_args: list[str]) -> None:
+    """rclpy's ``Node`` keeps its publishers in ``self._publishers``; the node must not
+    shadow it, or every ``destroy_node()`` (each shutdown) ends in a KeyError."""
+    from genbacklash_ros.transports import rclpy_node
+
+    node = rclpy_node.BacklashIdentifierNode()
+    own = {p.topic_name for p in node.publishers}
+    assert {"/compensated_command", "/backlash_identifier/estimate", "/diagnostics"} <= own
+    node.finish()
+    node.destroy_node()  # raised KeyError: 0
+    assert not list(node.publishers)
+
+
+@needs_rclpy
+def test_node_rejects_bad_parameters_with_the_reason(ros_args: list[str]) -> None:
     from rclpy.parameter import Parameter
 
     from genbacklash_ros.transports import rclpy_node
 
-    rclpy.init()
+    node = rclpy_node.BacklashIdentifierNode()
     try:
-        node = rclpy_node.BacklashIdentifierNode()
-        result = node.set_parameters([Parameter("gate_low", value=0.99)])[0]
-        assert not result.successful and "gate_low" in result.reason
+        result = node.set_parameters([Parameter("degree", value=12)])[0]
+        assert not result.successful and "degree" in result.reason
         result = node.set_parameters([Parameter("publish_rate", value=5.0)])[0]
         assert result.successful
         assert node.get_parameter("publish_rate").value == 5.0
+    finally:
         node.finish()
         node.destroy_node()
-    finally:
-        rclpy.try_shutdown()
 
 
 @needs_rclpy
