@@ -162,7 +162,7 @@ def _run_rclpy(args: argparse.Namespace) -> int:
             source = "/diagnostics"
         ros_args += ["-r", f"{source}:={target}"]
     # rclpy is imported by this module only, and only now
-    rclpy_node = importlib.import_module(".rclpy_node", __package__)
+    rclpy_node = importlib.import_module("genbacklash_ros.transports.rclpy_node")
     return int(rclpy_node.main([sys.argv[0], *ros_args]))
 
 
@@ -282,7 +282,7 @@ def ros2_main() -> int:
             file=sys.stderr,
         )
         return 2
-    rclpy_node = importlib.import_module(".rclpy_node", __package__)
+    rclpy_node = importlib.import_module("genbacklash_ros.transports.rclpy_node")
     return int(rclpy_node.main())
 
 
