@@ -257,6 +257,7 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
         self._encoder_sub = self.create_subscription(
             encoder_type, "encoder", self._on_encoder, qos_profile_sensor_data
         )
+        self._sim_time = bool(self.get_parameter("use_sim_time").value)
         self._data_since_tick = False
         self._timer = self.create_timer(1.0, self._on_tick)
         self._finished = False
@@ -316,23 +317,35 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
     def _now_ns(self) -> int:
         return int(self.get_clock().now().nanoseconds)
 
-    def _on_command(self, msg: Any) -> None:
+    def _receive_ns(self, info: Any) -> int:
+        """The time of a message without a header stamp: the publisher's source timestamp
+        (as the DDS transport's default ``--receive-time source``), so that a reading stamped
+        after its command is after it here too however late the callback runs; the node's
+        clock with ``use_sim_time`` or without a source timestamp."""
+        source = int(info.get("source_timestamp") or 0) if isinstance(info, dict) else 0
+        if source > 0 and not self._sim_time:
+            return source
+        return self._now_ns()
+
+    def _on_command(self, msg: Any, info: Any) -> None:
+        # (two arguments: rclpy then passes the message info with the source timestamp)
         self._data_since_tick = True
         try:
             ours = from_ros(msg)
         except MessageError as err:
             self.get_logger().warning(f"command: {err}", throttle_duration_sec=5.0)
             return
-        self._publish(self._pipeline.on_command(ours, self._now_ns()))  # type: ignore[arg-type]
+        outputs = self._pipeline.on_command(ours, self._receive_ns(info))  # type: ignore[arg-type]
+        self._publish(outputs)
 
-    def _on_encoder(self, msg: Any) -> None:
+    def _on_encoder(self, msg: Any, info: Any) -> None:
         self._data_since_tick = True
         try:
             ours = from_ros(msg)
         except MessageError as err:
             self.get_logger().warning(f"encoder: {err}", throttle_duration_sec=5.0)
             return
-        self._publish(self._pipeline.on_encoder(ours, self._now_ns()))
+        self._publish(self._pipeline.on_encoder(ours, self._receive_ns(info)))
 
     def _on_tick(self) -> None:
         """1 Hz: the wiring check, and diagnostics with level STALE when no message arrived

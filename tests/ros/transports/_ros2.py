@@ -115,10 +115,10 @@ def built_workspace(base: Path) -> Path:
 
 
 def workspace_env(ws: Path, domain: int) -> dict[str, str]:
-    """This process's environment with the workspace's ``install/setup.bash`` sourced, on
-    DDS domain ``domain``."""
+    """This process's environment with the workspace's ``install/setup.sh`` sourced (colcon
+    writes ``setup.bash`` only with the colcon-bash extension), on DDS domain ``domain``."""
     dumped = subprocess.run(
-        ["bash", "-c", f'source "{ws}/install/setup.bash" && env -0'],
+        ["sh", "-c", f'. "{ws}/install/setup.sh" && env -0'],
         capture_output=True,
         check=True,
         timeout=60,
