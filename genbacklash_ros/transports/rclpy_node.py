@@ -45,24 +45,24 @@ from collections.abc import Sequence
 from types import FrameType
 from typing import Any
 
-import rclpy  # type: ignore[import-not-found]
-from diagnostic_msgs.msg import (  # type: ignore[import-not-found]
+import rclpy
+from diagnostic_msgs.msg import (
     DiagnosticArray as RosDiagnosticArray,
 )
 from diagnostic_msgs.msg import DiagnosticStatus as RosDiagnosticStatus
 from diagnostic_msgs.msg import KeyValue as RosKeyValue
-from rcl_interfaces.msg import (  # type: ignore[import-not-found]
+from rcl_interfaces.msg import (
     FloatingPointRange,
     IntegerRange,
     ParameterDescriptor,
     SetParametersResult,
 )
-from rclpy.executors import ExternalShutdownException  # type: ignore[import-not-found]
-from rclpy.node import Node  # type: ignore[import-not-found]
-from rclpy.parameter import Parameter  # type: ignore[import-not-found]
-from rclpy.qos import qos_profile_sensor_data  # type: ignore[import-not-found]
-from sensor_msgs.msg import JointState as RosJointState  # type: ignore[import-not-found]
-from std_msgs.msg import Float64 as RosFloat64  # type: ignore[import-not-found]
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import JointState as RosJointState
+from std_msgs.msg import Float64 as RosFloat64
 from std_msgs.msg import Float64MultiArray as RosFloat64MultiArray
 from std_msgs.msg import MultiArrayDimension as RosMultiArrayDimension
 
