@@ -73,7 +73,6 @@ def _launch_file() -> Path:
     return share / "launch" / "backlash_identifier.launch.py"
 
 
-@pytest.mark.launch_test
 def generate_test_description() -> tuple[launch.LaunchDescription, dict[str, Any]]:
     """The launch file's description (arguments at their defaults) and ReadyToTest; the
     node action is handed to the tests as ``identifier``."""
