@@ -41,8 +41,9 @@ Transports:
 """
 
 _EPILOG = """\
-The params file is a standard ROS 2 parameters YAML (backlash_identifier: ros__parameters:
-...), e.g. config/params.yaml. Stop the node with Ctrl-C (SIGINT) or SIGTERM: it finishes the
+The params file is a standard ROS 2 parameters YAML (/**/backlash_identifier: ros__parameters:
+...), e.g. config/params.yaml; its sections apply as rcl applies them to the node in its
+--namespace. Stop the node with Ctrl-C (SIGINT) or SIGTERM: it finishes the
 identification, publishes the final estimate and writes the final checkpoint.
 
 examples:
@@ -161,7 +162,7 @@ def _run_rclpy(args: argparse.Namespace) -> int:
             source = "/diagnostics"
         ros_args += ["-r", f"{source}:={target}"]
     # rclpy is imported by this module only, and only now
-    rclpy_node = importlib.import_module(".rclpy_node", __package__)
+    rclpy_node = importlib.import_module("genbacklash_ros.transports.rclpy_node")
     return int(rclpy_node.main([sys.argv[0], *ros_args]))
 
 
@@ -171,7 +172,12 @@ def run_node(args: argparse.Namespace) -> int:
     logging.basicConfig(level=level, format="[%(levelname)s] [backlash_identifier]: %(message)s")
     transport = choose_transport(args.transport)
     # validate the params file before any middleware starts: a bad value is a clear error
-    params = load_params_file(args.params_file, NODE_NAME) if args.params_file else None
+    # (with the namespace: the sections that apply are the ones rcl applies to the rclpy node)
+    params = (
+        load_params_file(args.params_file, NODE_NAME, namespace=args.namespace)
+        if args.params_file
+        else None
+    )
     if transport == "rclpy":
         return _run_rclpy(args)
     return _run_dds(args, params or NodeParameters())
@@ -188,7 +194,7 @@ def _configure(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     parser.add_argument(
         "--params-file",
         metavar="FILE",
-        help="ROS 2 parameters YAML with a backlash_identifier (or /**) section; unset "
+        help="ROS 2 parameters YAML with a /**/backlash_identifier (or /**) section; unset "
         "parameters keep their defaults (see config/params.yaml)",
     )
     parser.add_argument(
@@ -276,7 +282,7 @@ def ros2_main() -> int:
             file=sys.stderr,
         )
         return 2
-    rclpy_node = importlib.import_module(".rclpy_node", __package__)
+    rclpy_node = importlib.import_module("genbacklash_ros.transports.rclpy_node")
     return int(rclpy_node.main())
 
 

@@ -23,9 +23,9 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
-import fnmatch
 import math
-from collections.abc import Iterable, Iterator, Mapping
+import re
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal, TypeAlias
@@ -46,14 +46,18 @@ from genbacklash_ros.node.messages import COMMAND_TYPES, ENCODER_TYPES, CommandT
 
 __all__ = [
     "NODE_NAME",
+    "PAIRS",
     "PARAMETER_SPECS",
     "NodeParameters",
     "ParameterSpec",
+    "RosArguments",
     "command_line_parameters",
     "load_params_file",
     "parameter_table",
     "parse_param_overrides",
+    "parse_ros_arguments",
     "read_params_file",
+    "resolve_requested",
 ]
 
 NODE_NAME = "backlash_identifier"
@@ -333,6 +337,20 @@ PARAMETER_SPECS: tuple[ParameterSpec, ...] = (
 
 _SPECS: dict[str, ParameterSpec] = {spec.name: spec for spec in PARAMETER_SPECS}
 
+#: Parameters checked against each other: ``u_min < u_max``, ``gate_low <= gate_high``.
+PAIRS: tuple[tuple[str, str], ...] = (("u_min", "u_max"), ("gate_low", "gate_high"))
+
+
+def _pair_problem(low_name: str, low: object, high_name: str, high: object) -> str | None:
+    """Why a pair of values is inconsistent, or None."""
+    if not isinstance(low, int | float) or not isinstance(high, int | float):
+        return None  # the value checks report these
+    if low_name == "u_min" and not low < high:
+        return f"parameter 'u_min' ({low:g}) must be below 'u_max' ({high:g})"
+    if low_name != "u_min" and low > high:
+        return f"parameter {low_name!r} ({low:g}) must not exceed {high_name!r} ({high:g})"
+    return None
+
 
 @dataclass(frozen=True)
 class NodeParameters:
@@ -379,15 +397,10 @@ class NodeParameters:
     def __post_init__(self) -> None:
         for spec in PARAMETER_SPECS:
             object.__setattr__(self, spec.name, spec.check(getattr(self, spec.name)))
-        if not self.u_min < self.u_max:
-            raise GenBacklashError(
-                f"parameter 'u_min' ({self.u_min:g}) must be below 'u_max' ({self.u_max:g})"
-            )
-        if self.gate_low > self.gate_high:
-            raise GenBacklashError(
-                f"parameter 'gate_low' ({self.gate_low:g}) must not exceed "
-                f"'gate_high' ({self.gate_high:g})"
-            )
+        for low, high in PAIRS:
+            problem = _pair_problem(low, getattr(self, low), high, getattr(self, high))
+            if problem:
+                raise GenBacklashError(problem)
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, object]) -> NodeParameters:
@@ -485,6 +498,128 @@ class NodeParameters:
         return round(self.checkpoint_period * 1e9)
 
 
+def resolve_requested(
+    current: NodeParameters, requested: Mapping[str, object]
+) -> tuple[NodeParameters, tuple[str, ...]]:
+    """The parameters a running node applies when it holds the values ``requested``.
+
+    The rule for changing parameters one at a time (``ros2 param set``, which sends one
+    parameter per request): each value is checked on its own when it is set, and refused
+    with the reason when it is invalid (a type, range or choice); the pairs of :data:`PAIRS`
+    are checked on the values the node holds after the request. While a pair is
+    inconsistent (the first of two ``ros2 param set`` that move it, in either order), both
+    its values stay at ``current``'s and every other value applies; the pair applies as soon
+    as it is consistent again. So a pair moves with two sets in any order, and the node never
+    runs on an inconsistent pair.
+
+    Parameters
+    ----------
+    current : NodeParameters
+        What the node runs with now (always consistent).
+    requested : mapping
+        Name -> value the node holds (``current``'s values where not given); every value
+        already valid on its own.
+
+    Returns
+    -------
+    params : NodeParameters
+        What to run with.
+    pending : tuple of str
+        One line per pair left at ``current``'s values: what is inconsistent and what is
+        kept.
+
+    Examples
+    --------
+    >>> now = NodeParameters()
+    >>> params, pending = resolve_requested(now, {"gate_low": 0.7, "publish_rate": 5.0})
+    >>> params.gate_low, params.publish_rate
+    (0.2, 5.0)
+    >>> print(pending[0])  # doctest: +NORMALIZE_WHITESPACE
+    parameter 'gate_low' (0.7) must not exceed 'gate_high' (0.5): running on gate_low 0.2,
+    gate_high 0.5 until the pair is consistent (set the other one next)
+    >>> resolve_requested(now, {"gate_low": 0.7, "gate_high": 0.9})[0].gate_low
+    0.7
+    """
+    merged: dict[str, object] = {**current.to_mapping(), **requested}
+    pending: list[str] = []
+    for low, high in PAIRS:
+        problem = _pair_problem(low, merged[low], high, merged[high])
+        if problem:
+            kept_low, kept_high = getattr(current, low), getattr(current, high)
+            merged[low], merged[high] = kept_low, kept_high
+            pending.append(
+                f"{problem}: running on {low} {kept_low:g}, {high} {kept_high:g} until the "
+                "pair is consistent (set the other one next)"
+            )
+    return NodeParameters.from_mapping(merged), tuple(pending)
+
+
+# --------------------------------------------------------------------------- ROS arguments
+
+
+@dataclass(frozen=True)
+class RosArguments:
+    """What a node's ``--ros-args`` say about its parameters: the params files in order, and
+    the namespace and name they are matched against.
+
+    Attributes
+    ----------
+    params_files : tuple of str
+    namespace : str
+        From ``-r __ns:=/arm`` (``""``: the root namespace).
+    node_name : str
+        From ``-r __node:=name`` (default :data:`NODE_NAME`).
+    """
+
+    params_files: tuple[str, ...] = ()
+    namespace: str = ""
+    node_name: str = NODE_NAME
+
+
+_ROS_OPTIONS_WITH_VALUE = frozenset(
+    {"-r", "--remap", "-p", "--param", "--params-file", "-e", "--enclave", "--log-level"}
+    | {"--log-config-file", "--log-file-name"}
+)
+
+
+def parse_ros_arguments(argv: Sequence[str]) -> RosArguments:
+    """The params files, namespace and node name in a command line's ``--ros-args``
+    sections (each up to ``--`` or the next ``--ros-args``), as rcl reads them.
+
+    >>> ros = parse_ros_arguments(["node", "--ros-args", "-r", "__ns:=/arm", "--params-file",
+    ...     "a.yaml", "-p", "degree:=2", "--", "x", "--ros-args", "--params-file", "b.yaml"])
+    >>> ros.params_files, ros.namespace, ros.node_name
+    (('a.yaml', 'b.yaml'), '/arm', 'backlash_identifier')
+    """
+    files: list[str] = []
+    namespace = ""
+    node_name = NODE_NAME
+    inside = False
+    items = iter(argv)
+    for item in items:
+        if item == "--ros-args":
+            inside = True
+            continue
+        if not inside:
+            continue
+        if item == "--":
+            inside = False
+            continue
+        if item not in _ROS_OPTIONS_WITH_VALUE:
+            continue
+        value = next(items, "")
+        if item == "--params-file":
+            files.append(value)
+        elif item in ("-r", "--remap"):
+            source, _, target = value.partition(":=")
+            source = source.rsplit(":", 1)[-1]  # node-specific remaps: `name:__ns:=...`
+            if source == "__ns":
+                namespace = target
+            elif source in ("__node", "__name"):
+                node_name = target
+    return RosArguments(tuple(files), namespace, node_name)
+
+
 # --------------------------------------------------------------------------- params YAML
 
 
@@ -498,34 +633,71 @@ def _flatten(prefix: str, values: Mapping[Any, Any]) -> Iterator[tuple[str, obje
             yield name, value
 
 
-def _matches(key: str, node_name: str) -> tuple[bool, bool]:
-    """``(applies, specific)``: whether a top-level YAML key applies to the node, and whether
-    it names the node itself rather than a wildcard.
+_TOKEN = re.compile(r"[A-Za-z0-9_]+")
 
-    ``/**`` and ``**`` apply to every node; ``name``, ``/name``, ``/ns/name`` name it (the
-    namespace is not checked: the file is passed to this node); other ``*`` patterns apply
-    when they match the full name with any namespace.
+
+def _section_pattern(key: str, file: Path) -> re.Pattern[str]:
+    """The regular expression rcl matches a node's fully qualified name against, for one
+    top-level key of a params file.
+
+    rcl puts a ``/`` before a key without one; ``/**`` stands for any number of namespace
+    tokens (none included) and ``/*`` for exactly one token. Tokens are alphanumerics and
+    ``_``, or a whole ``*`` / ``**``: rcl refuses the file otherwise (``backlash_*``), and so
+    does this reader. Checked against rcl on this machine (tests/ros/node/test_parameters.py).
     """
-    stripped = key.strip()
-    if stripped in ("/**", "**"):
-        return True, False
-    last = stripped.rsplit("/", 1)[-1]
-    if "*" not in stripped:
-        return last == node_name, True
-    pattern = stripped.lstrip("/")
-    applies = fnmatch.fnmatchcase(node_name, pattern) or fnmatch.fnmatchcase(node_name, last)
-    return applies, False
+    tokens = key.strip().lstrip("/").split("/")
+    regex = ""
+    for token in tokens:
+        if token == "**":
+            regex += "(?:/[A-Za-z0-9_]+)*"
+        elif token == "*":
+            regex += "/[A-Za-z0-9_]+"
+        elif _TOKEN.fullmatch(token):
+            regex += "/" + token
+        else:
+            raise GenBacklashError(
+                f"params file {file}: section {key!r} is not a node name ROS 2 accepts "
+                "(names of alphanumerics and '_' separated by '/', or a whole '*' or '**'; "
+                "e.g. '/**/backlash_identifier')"
+            )
+    return re.compile(regex)
 
 
-def read_params_file(path: str | Path, node_name: str = NODE_NAME) -> dict[str, object]:
+def _matches(key: str, node_name: str, namespace: str | None, file: Path) -> tuple[bool, bool]:
+    """``(applies, specific)``: whether a top-level YAML key applies to the node, and whether
+    it is addressed to the node by name (its last token is the node's name, e.g.
+    ``backlash_identifier``, ``/arm/backlash_identifier``, ``/**/backlash_identifier``)
+    rather than to every node (``/**``, ``/arm/*``).
+
+    With a ``namespace`` the key applies as rcl applies it to the node
+    ``/<namespace>/<node_name>`` (``backlash_identifier:`` is ``/backlash_identifier`` and
+    does not apply under a namespace; ``/**/backlash_identifier:`` and ``/**:`` do). With
+    ``namespace=None`` (tools without a namespace: replay, identify, diagnose) it applies
+    when it would in some namespace.
+    """
+    pattern = _section_pattern(key, file)
+    last = key.strip().rstrip("/").rsplit("/", 1)[-1]
+    specific = last == node_name
+    if namespace is None:
+        return specific or last in ("*", "**"), specific
+    inner = namespace.strip("/")
+    fqn = f"/{inner}/{node_name}" if inner else f"/{node_name}"
+    return pattern.fullmatch(fqn) is not None, specific
+
+
+def read_params_file(
+    path: str | Path, node_name: str = NODE_NAME, *, namespace: str | None = None
+) -> dict[str, object]:
     """The parameters a ROS 2 params YAML sets for ``node_name``, merged in file order.
 
-    Sections apply when their key is ``/**`` (every node), the node's name (with or without a
-    namespace) or a wildcard matching it; each holds ``ros__parameters`` (nested keys are
-    joined with dots, as ROS does). Later sections override earlier ones. Parameters every
-    node has (``use_sim_time``, ``qos_overrides.*``) are left out. Names from wildcard
-    sections that this node does not know are ignored (they may be meant for other nodes),
-    names in the node's own section are kept, so that :func:`load_params_file` reports them.
+    A section applies to the node ``/<namespace>/<node_name>`` as rcl decides it (see
+    :func:`_matches`: ``/**``, ``/**/backlash_identifier``, ``/arm/backlash_identifier``,
+    ``/arm/*``, ...; ``namespace=None``: in any namespace); each holds ``ros__parameters``
+    (nested keys are joined with dots, as ROS does). Later sections override earlier ones.
+    Parameters every node has (``use_sim_time``, ``qos_overrides.*``) are left out. Names
+    from sections addressed to every node (``/**``) that this node does not know are
+    ignored (they may be meant for other nodes); names in a section that names the node are
+    kept, so that :func:`load_params_file` reports them.
     """
     file = Path(path)
     try:
@@ -549,7 +721,7 @@ def read_params_file(path: str | Path, node_name: str = NODE_NAME) -> dict[str, 
         )
     merged: dict[str, object] = {}
     for key, section in document.items():
-        applies, specific = _matches(str(key), node_name)
+        applies, specific = _matches(str(key), node_name, namespace, file)
         if not applies:
             continue
         if not isinstance(section, Mapping) or "ros__parameters" not in section:
@@ -571,12 +743,18 @@ def read_params_file(path: str | Path, node_name: str = NODE_NAME) -> dict[str, 
     return merged
 
 
-def load_params_file(path: str | Path, node_name: str = NODE_NAME) -> NodeParameters:
+def load_params_file(
+    path: str | Path, node_name: str = NODE_NAME, *, namespace: str | None = None
+) -> NodeParameters:
     """:class:`NodeParameters` from a standard ROS 2 params YAML (see :func:`read_params_file`).
 
-    Unknown names in the node's own section and invalid values are errors naming the file.
+    Unknown names in a section naming the node and invalid values are errors naming the
+    file. Both transports read a params file with this function (the rclpy node before rcl
+    does), so a file means the same to both: the same sections apply under the same
+    namespace, a whole number is taken for a double (``publish_rate: 10``), and a value out
+    of range stops the node with the same one-line reason.
     """
-    return _params_from_file(path, read_params_file(path, node_name))
+    return _params_from_file(path, read_params_file(path, node_name, namespace=namespace))
 
 
 def _params_from_file(path: str | Path, values: Mapping[str, object]) -> NodeParameters:

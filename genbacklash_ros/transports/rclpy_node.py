@@ -10,11 +10,23 @@ what it returns. All logic is in the pipeline.
   and ``encoder`` (``qos_profile_sensor_data``);
 * publishes ``~/estimate``, ``compensated_command`` (the command's type) and ``/diagnostics``
   (also on a 1 Hz timer with level STALE while no message arrives);
-* a set-parameters callback validates changes with
-  :meth:`~genbacklash_ros.node.parameters.NodeParameters.replace` and rejects them with the reason;
-  accepted ones reach the pipeline in a post-set callback. ``command_type`` and
-  ``encoder_type`` are read-only (they fix the subscription types: set them in the params
-  file);
+* parameters: the params files in ``--ros-args`` are read first by the reader the DDS
+  transport uses (:func:`~genbacklash_ros.node.parameters.load_params_file`, the same
+  sections under the same namespace), so both transports accept and refuse a file alike, with
+  the same one-line reason and exit status 2; a whole number is taken for a double
+  (``publish_rate: 10`` in a file, ``ros2 param set ... publish_rate 5``). At run time each
+  value is checked on its own and refused with the reason; the pairs ``u_min``/``u_max`` and
+  ``gate_low``/``gate_high`` follow the rule of
+  :func:`~genbacklash_ros.node.parameters.resolve_requested` (a pair left inconsistent by one
+  set keeps running on its last consistent values until the other set comes, and the
+  diagnostics say so under ``parameters_pending``). ``command_type`` and ``encoder_type`` are
+  read-only (they fix the subscription types: set them in the params file);
+* wiring: once a second the node asks discovery which types are published on its
+  ``command`` and ``encoder`` topics; a publisher of another type is named in
+  ``/diagnostics`` (WARN, key ``wiring``) with the parameter that selects the type;
+* shutdown: the first SIGINT (or SIGTERM) ends the spin; any further ones (a terminal's
+  Ctrl-C reaches ``ros2 launch`` and the node, and launch forwards another) are ignored
+  while the node feeds what is pending, refits and writes its final checkpoint;
 * checkpoints are written on a background thread (atomic file writes);
 * everything runs on the executor's one thread (``rclpy.spin``).
 
@@ -27,26 +39,30 @@ config/params.yaml``, ``ros2 launch genbacklash_ros backlash_identifier.launch.p
 from __future__ import annotations
 
 import math
+import signal
+import sys
 from collections.abc import Sequence
+from types import FrameType
 from typing import Any
 
-import rclpy  # type: ignore[import-not-found]
-from diagnostic_msgs.msg import (  # type: ignore[import-not-found]
+import rclpy
+from diagnostic_msgs.msg import (
     DiagnosticArray as RosDiagnosticArray,
 )
 from diagnostic_msgs.msg import DiagnosticStatus as RosDiagnosticStatus
 from diagnostic_msgs.msg import KeyValue as RosKeyValue
-from rcl_interfaces.msg import (  # type: ignore[import-not-found]
+from rcl_interfaces.msg import (
     FloatingPointRange,
     IntegerRange,
     ParameterDescriptor,
     SetParametersResult,
 )
-from rclpy.executors import ExternalShutdownException  # type: ignore[import-not-found]
-from rclpy.node import Node  # type: ignore[import-not-found]
-from rclpy.qos import qos_profile_sensor_data  # type: ignore[import-not-found]
-from sensor_msgs.msg import JointState as RosJointState  # type: ignore[import-not-found]
-from std_msgs.msg import Float64 as RosFloat64  # type: ignore[import-not-found]
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import JointState as RosJointState
+from std_msgs.msg import Float64 as RosFloat64
 from std_msgs.msg import Float64MultiArray as RosFloat64MultiArray
 from std_msgs.msg import MultiArrayDimension as RosMultiArrayDimension
 
@@ -70,8 +86,12 @@ from genbacklash_ros.node.parameters import (
     PARAMETER_SPECS,
     NodeParameters,
     ParameterSpec,
+    load_params_file,
+    parse_ros_arguments,
+    resolve_requested,
 )
 from genbacklash_ros.node.pipeline import BacklashPipeline, Output
+from genbacklash_ros.node.wiring import annotate, selected_type, type_mismatches
 
 __all__ = ["BacklashIdentifierNode", "descriptor", "from_ros", "main", "to_ros"]
 
@@ -83,6 +103,8 @@ _ROS_COMMAND = {
     "joint_state": RosJointState,
 }
 _ROS_ENCODER = {"joint_state": RosJointState, "float64": RosFloat64}
+_SPECS = {spec.name: spec for spec in PARAMETER_SPECS}
+PENDING_KEY = "parameters_pending"  # diagnostics key: pairs held at their last consistent values
 
 
 # --------------------------------------------------------------------------- descriptors
@@ -196,10 +218,19 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
 
     def __init__(self) -> None:
         super().__init__(NODE_NAME)
+        # The values from the params files and `-p` (rcl's overrides), checked and typed by
+        # NodeParameters before rclpy sees them: rclpy would raise on an integer for a double
+        # and on a value out of range, with a traceback. Raises: the node does not start.
+        overrides = {
+            name: param.value for name, param in self._parameter_overrides.items() if name in _SPECS
+        }
+        self._params = NodeParameters.from_mapping(overrides)
         for spec in PARAMETER_SPECS:
-            self.declare_parameter(spec.name, spec.default, descriptor(spec))
-        values = {s.name: self.get_parameter(s.name).value for s in PARAMETER_SPECS}
-        self._params = NodeParameters.from_mapping(values)  # raises: the node does not start
+            value = getattr(self._params, spec.name)
+            self.declare_parameter(spec.name, value, descriptor(spec), ignore_override=True)
+        self._requested = self._params.to_mapping()  # what `ros2 param get` shows
+        self._pending: tuple[str, ...] = ()
+        self._wiring: tuple[str, ...] = ()
         self._checkpoints = BackgroundCheckpointWriter(
             on_error=lambda reason: self.get_logger().warning(reason)
         )
@@ -208,12 +239,15 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
         )
         if self._pipeline.warm_start_note:
             self.get_logger().info(self._pipeline.warm_start_note)
+        self.add_pre_set_parameters_callback(self._coerce_parameters)
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
 
         command_type = _ROS_COMMAND[self._params.command_type]
         encoder_type = _ROS_ENCODER[self._params.encoder_type]
-        self._publishers = {
+        # not `_publishers`: rclpy's Node keeps its own list under that name and
+        # destroy_node() walks it (a dict there ends every shutdown in a KeyError)
+        self._outputs = {
             "compensated_command": self.create_publisher(
                 command_type, "compensated_command", DEFAULT_DEPTH
             ),
@@ -226,61 +260,130 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
         self._encoder_sub = self.create_subscription(
             encoder_type, "encoder", self._on_encoder, qos_profile_sensor_data
         )
+        self._sim_time = bool(self.get_parameter("use_sim_time").value)
         self._data_since_tick = False
         self._timer = self.create_timer(1.0, self._on_tick)
         self._finished = False
 
     # ------------------------------------------------------------------ parameters
 
+    def _coerce_parameters(self, parameters: Sequence[Any]) -> list[Any]:
+        """A whole number for a double parameter becomes the double (``ros2 param set``
+        sends ``5`` as an integer); everything else passes unchanged."""
+        out = []
+        for param in parameters:
+            spec = _SPECS.get(param.name)
+            value = param.value
+            if (
+                spec is not None
+                and spec.type == "double"
+                and isinstance(value, int)
+                and not isinstance(value, bool)
+            ):
+                param = Parameter(param.name, value=float(value))
+            out.append(param)
+        return out
+
     def _validate_parameters(self, parameters: Sequence[Any]) -> Any:
-        """Accept a change only when :meth:`NodeParameters.replace` accepts it."""
-        changes = {p.name: p.value for p in parameters if p.name in self._params.to_mapping()}
-        try:
-            self._params.replace(**changes)
-        except GenBacklashError as err:
-            return SetParametersResult(successful=False, reason=str(err))
+        """Refuse a value that is invalid on its own, with the reason; pairs are resolved
+        after the request (:func:`resolve_requested`), so a pair moves in either order."""
+        for param in parameters:
+            spec = _SPECS.get(param.name)
+            if spec is None:
+                continue
+            try:
+                spec.check(param.value)
+            except GenBacklashError as err:
+                return SetParametersResult(successful=False, reason=str(err))
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, parameters: Sequence[Any]) -> None:
-        changes = {p.name: p.value for p in parameters if p.name in self._params.to_mapping()}
+        changes = {p.name: p.value for p in parameters if p.name in _SPECS}
         if not changes:
             return
-        self._params = self._params.replace(**changes)
-        self._pipeline.set_params(self._params)
-        self.get_logger().info(f"parameters changed: {changes}")
+        self._requested.update(changes)
+        params, pending = resolve_requested(self._params, self._requested)
+        for line in pending:
+            if line not in self._pending:
+                self.get_logger().warning(line)
+        self._pending = pending
+        if params != self._params:
+            applied = {
+                k: v for k, v in params.to_mapping().items() if v != getattr(self._params, k)
+            }
+            self._params = params
+            self._pipeline.set_params(params)
+            self.get_logger().info(f"parameters changed: {applied}")
 
     # ------------------------------------------------------------------ callbacks
 
     def _now_ns(self) -> int:
         return int(self.get_clock().now().nanoseconds)
 
-    def _on_command(self, msg: Any) -> None:
+    def _receive_ns(self, info: Any) -> int:
+        """The time of a message without a header stamp: the publisher's source timestamp
+        (as the DDS transport's default ``--receive-time source``), so that a reading stamped
+        after its command is after it here too however late the callback runs; the node's
+        clock with ``use_sim_time`` or without a source timestamp."""
+        source = int(info.get("source_timestamp") or 0) if isinstance(info, dict) else 0
+        if source > 0 and not self._sim_time:
+            return source
+        return self._now_ns()
+
+    def _on_command(self, msg: Any, info: Any) -> None:
+        # (two arguments: rclpy then passes the message info with the source timestamp)
         self._data_since_tick = True
         try:
             ours = from_ros(msg)
         except MessageError as err:
             self.get_logger().warning(f"command: {err}", throttle_duration_sec=5.0)
             return
-        self._publish(self._pipeline.on_command(ours, self._now_ns()))  # type: ignore[arg-type]
+        outputs = self._pipeline.on_command(ours, self._receive_ns(info))  # type: ignore[arg-type]
+        self._publish(outputs)
 
-    def _on_encoder(self, msg: Any) -> None:
+    def _on_encoder(self, msg: Any, info: Any) -> None:
         self._data_since_tick = True
         try:
             ours = from_ros(msg)
         except MessageError as err:
             self.get_logger().warning(f"encoder: {err}", throttle_duration_sec=5.0)
             return
-        self._publish(self._pipeline.on_encoder(ours, self._now_ns()))
+        self._publish(self._pipeline.on_encoder(ours, self._receive_ns(info)))
 
     def _on_tick(self) -> None:
-        """1 Hz: diagnostics with level STALE when no message arrived during the second."""
+        """1 Hz: the wiring check, and diagnostics with level STALE when no message arrived
+        during the second."""
+        self.check_wiring()
         if not self._data_since_tick:
             self._publish([self._pipeline.diagnostics(self._now_ns(), stale=True)])
         self._data_since_tick = False
 
+    def check_wiring(self) -> tuple[str, ...]:
+        """Publishers of another type on the subscribed topics, as discovery shows them: one
+        line each (:func:`~genbacklash_ros.node.wiring.type_mismatches`), kept for the
+        diagnostics and logged when new."""
+        problems: list[str] = []
+        for subscription, parameter in (
+            (self._command_sub, "command_type"),
+            (self._encoder_sub, "encoder_type"),
+        ):
+            topic = subscription.topic_name
+            seen = [info.topic_type for info in self.get_publishers_info_by_topic(topic)]
+            expected = selected_type(parameter, getattr(self._params, parameter))
+            problems.extend(type_mismatches(topic, expected, parameter, seen))
+        for line in problems:
+            if line not in self._wiring:
+                self.get_logger().warning(line)
+        self._wiring = tuple(problems)
+        return self._wiring
+
     def _publish(self, outputs: list[Output]) -> None:
         for output in outputs:
-            self._publishers[output.topic].publish(to_ros(output.message))
+            message = output.message
+            if isinstance(message, DiagnosticArray):
+                message = annotate(message, self._wiring)
+                message = annotate(message, self._pending, key=PENDING_KEY)
+            self._outputs[output.topic].publish(to_ros(message))
 
     # ------------------------------------------------------------------ shutdown
 
@@ -300,26 +403,73 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
         self._checkpoints.close()
 
 
+class _Interrupts:
+    """SIGINT/SIGTERM handler: the first one ends the spin (KeyboardInterrupt), later ones
+    are counted and ignored, so that the node finishes (final refit, checkpoint) however many
+    arrive. Installed before ``rclpy.init``: rclpy's own handler wakes the executor and then
+    calls this one."""
+
+    def __init__(self) -> None:
+        self.count = 0
+        self.quiet = False  # True once the spin has ended: finishing is not interrupted
+
+    def __call__(self, signum: int, frame: FrameType | None) -> None:
+        self.count += 1
+        if not self.quiet:
+            self.quiet = True
+            raise KeyboardInterrupt
+
+
+def _error(text: str) -> int:
+    print(f"{NODE_NAME}: error: {text}", file=sys.stderr, flush=True)
+    return 2
+
+
 def main(args: list[str] | None = None) -> int:
     """Entry point (``ros2 run genbacklash_ros backlash_identifier``), in the ros2/examples
-    style: Ctrl-C and an external shutdown end the node quietly, after the final checkpoint.
+    style: Ctrl-C, SIGTERM and an external shutdown end the node quietly, after the final
+    checkpoint; invalid parameters end it with one line on stderr and exit status 2.
     """
-    rclpy.init(args=args)
+    argv = list(sys.argv if args is None else args)
+    ros = parse_ros_arguments(argv)
+    try:  # the params files as the DDS transport reads them, before rcl does
+        for path in ros.params_files:
+            load_params_file(path, ros.node_name, namespace=ros.namespace)
+    except GenBacklashError as err:
+        return _error(str(err))
+    interrupts = _Interrupts()
+    previous = {sig: signal.signal(sig, interrupts) for sig in (signal.SIGINT, signal.SIGTERM)}
     node: BacklashIdentifierNode | None = None
+    status = 0
     try:
-        node = BacklashIdentifierNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except GenBacklashError as err:  # invalid parameters at start
-        print(f"backlash_identifier: error: {err}", flush=True)
-        return 2
+        try:
+            rclpy.init(args=argv)
+        except KeyboardInterrupt:
+            return 0
+        except Exception as err:  # e.g. a params file rcl cannot parse
+            return _error(f"ROS 2 could not start the node: {err}")
+        try:
+            node = BacklashIdentifierNode()
+            rclpy.spin(node)
+        except (KeyboardInterrupt, ExternalShutdownException):
+            pass
+        except GenBacklashError as err:  # invalid parameters at start
+            status = _error(str(err))
+        finally:
+            interrupts.quiet = True
+            if node is not None:
+                before = interrupts.count
+                node.finish()
+                if interrupts.count > before:
+                    node.get_logger().info(
+                        f"{interrupts.count - before} more interrupt(s) ignored while finishing"
+                    )
+                node.destroy_node()
+            rclpy.try_shutdown()
     finally:
-        if node is not None:
-            node.finish()
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    return status
 
 
 if __name__ == "__main__":

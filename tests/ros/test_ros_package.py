@@ -4,9 +4,7 @@ from __future__ import annotations
 
 import ast
 import configparser
-import importlib.util
 import os
-import shutil
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
@@ -15,6 +13,8 @@ from pathlib import Path
 import pytest
 
 from genbacklash_ros.node.parameters import PARAMETER_SPECS, NodeParameters, load_params_file
+
+from .transports._ros2 import built_workspace, domain_id, rclpy_missing
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -104,13 +104,10 @@ def test_launch_file_starts_the_node_with_the_params_file() -> None:
     assert "params_file" in source
 
 
-# What a colcon workspace needs of this repository (the bags, tests and benchmarks are not).
-_PACKAGE_FILES = ("pyproject.toml", "setup.py", "setup.cfg", "package.xml", "README.md")
-_PACKAGE_DIRS = ("resource", "launch", "config", "genbacklash_core", "genbacklash_ros")
-
-
-def _colcon() -> list[str]:
-    """The colcon command of this environment (the dev extra installs colcon-core/-ros)."""
+def test_colcon_build_installs_the_node(tmp_path_factory: pytest.TempPathFactory) -> None:
+    """A real `colcon build` (ament_python) of a workspace holding this repository installs the
+    node where `ros2 run` / `ros2 launch` look for it, and its entry point runs. The build is
+    the test session's one (shared with the ros2 launch tests)."""
     try:
         import colcon_core  # noqa: F401
         import colcon_ros  # noqa: F401
@@ -118,38 +115,7 @@ def _colcon() -> list[str]:
         pytest.skip(
             "colcon-core and colcon-ros are not installed (pip install -e '.[dev]' installs them)"
         )
-    script = Path(sys.executable).with_name("colcon")
-    if script.is_file():
-        return [str(script)]
-    return [
-        sys.executable,
-        "-c",
-        "import sys; from colcon_core.command import main; sys.exit(main())",
-    ]
-
-
-def test_colcon_build_installs_the_node(tmp_path: Path) -> None:
-    """A real `colcon build` (ament_python) of a workspace holding this repository installs the
-    node where `ros2 run` / `ros2 launch` look for it, and its entry point runs."""
-    colcon = _colcon()
-    src = tmp_path / "ws" / "src" / "genbacklash"
-    src.mkdir(parents=True)
-    for name in _PACKAGE_FILES:
-        shutil.copy2(ROOT / name, src / name)
-    for name in _PACKAGE_DIRS:
-        shutil.copytree(ROOT / name, src / name, ignore=shutil.ignore_patterns("__pycache__"))
-    ws = tmp_path / "ws"
-    env = {k: v for k, v in os.environ.items() if not k.startswith(("COLCON", "AMENT"))}
-    env["COLCON_HOME"] = str(tmp_path / "colcon_home")  # no user defaults
-    done = subprocess.run(
-        [*colcon, "build", "--base-paths", "src", "--event-handlers", "console_direct-"],
-        cwd=ws,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+    ws = built_workspace(tmp_path_factory.mktemp("colcon"))
 
     prefix = ws / "install" / "genbacklash_ros"
     node = prefix / "lib" / "genbacklash_ros" / "backlash_identifier"
@@ -168,15 +134,25 @@ def test_colcon_build_installs_the_node(tmp_path: Path) -> None:
     # only our two packages: a top-level `launch` would shadow ROS's launch package
     assert top == {"genbacklash_core", "genbacklash_ros"}, top
 
-    # The installed entry point runs (here without rclpy: the one-line reason, exit 2).
-    env["PYTHONPATH"] = str(site)
+    # The installed entry point runs: without rclpy the one-line reason; with rclpy the node
+    # starts, here refusing a bad parameter with its one line. Exit status 2 either way.
+    env = {k: v for k, v in os.environ.items() if not k.startswith("COLCON")}
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(site), env.get("PYTHONPATH")]))
+    env["ROS_DOMAIN_ID"] = str(domain_id())
     ran = subprocess.run(
-        [sys.executable, str(node)], cwd=tmp_path, env=env, capture_output=True, text=True
+        [sys.executable, str(node), "--ros-args", "-p", "degree:=12"],
+        cwd=ws,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
     )
-    if importlib.util.find_spec("rclpy") is None:
-        assert ran.returncode == 2, ran.stderr
+    assert ran.returncode == 2, ran.stderr
+    assert "Traceback" not in ran.stderr
+    if rclpy_missing():
         assert "rclpy cannot be imported" in ran.stderr
-        assert "Traceback" not in ran.stderr
+    else:
+        assert ran.stderr.strip().endswith("parameter 'degree' must lie in [1, 9], got 12")
 
 
 def test_package_xml_passes_catkin_pkg_validation() -> None:

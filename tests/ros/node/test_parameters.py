@@ -20,8 +20,12 @@ from genbacklash_ros.node.parameters import (
     NodeParameters,
     load_params_file,
     parameter_table,
+    parse_ros_arguments,
     read_params_file,
+    resolve_requested,
 )
+
+ROOT = Path(__file__).resolve().parents[3]
 
 
 def test_specs_match_the_dataclass_fields_and_defaults() -> None:
@@ -214,3 +218,150 @@ def test_missing_and_empty_files(tmp_path: Path) -> None:
     assert load_params_file(write(tmp_path, "other:\n  ros__parameters: {degree: 1}\n")) == (
         NodeParameters()
     )
+
+
+# Which top-level keys rcl (ROS 2 Jazzy, rcl 9.2.0) applies to backlash_identifier in the
+# namespaces /, /arm and /a/b: measured with rclpy on this machine, and checked again by
+# test_sections_apply_as_rcl_applies_them where rclpy imports.
+RCL_SECTIONS: dict[str, tuple[bool, bool, bool]] = {
+    "/**": (True, True, True),
+    "**": (True, True, True),
+    "/**/backlash_identifier": (True, True, True),
+    "/**/*": (True, True, True),
+    "backlash_identifier": (True, False, False),
+    "/backlash_identifier": (True, False, False),
+    "*": (True, False, False),
+    "/*": (True, False, False),
+    "arm/backlash_identifier": (False, True, False),
+    "/arm/backlash_identifier": (False, True, False),
+    "/*/backlash_identifier": (False, True, False),
+    "*/backlash_identifier": (False, True, False),
+    "/arm/*": (False, True, False),
+    "/arm/**": (False, True, False),
+    "arm/**": (False, True, False),
+    "/**/arm/backlash_identifier": (False, True, False),
+    "/x/backlash_identifier": (False, False, False),
+    "/arm/*/backlash_identifier": (False, False, False),
+}
+NAMESPACES = ("", "/arm", "/a/b")
+
+
+def _one_section(tmp_path: Path, key: str) -> Path:
+    return write(tmp_path, f'"{key}":\n  ros__parameters:\n    degree: 2\n')
+
+
+@pytest.mark.parametrize("key", sorted(RCL_SECTIONS))
+def test_sections_apply_under_a_namespace_as_in_rcl(tmp_path: Path, key: str) -> None:
+    path = _one_section(tmp_path, key)
+    for namespace, applies in zip(NAMESPACES, RCL_SECTIONS[key], strict=True):
+        got = load_params_file(path, namespace=namespace).degree == 2
+        assert got == applies, (key, namespace)
+    # without a namespace (replay, identify, diagnose): a section naming the node, or a
+    # wildcard in its place, applies
+    last = key.rsplit("/", 1)[-1]
+    assert (load_params_file(path).degree == 2) == (last in ("backlash_identifier", "*", "**"))
+
+
+def test_the_config_file_applies_under_a_namespace() -> None:
+    """config/params.yaml was keyed `backlash_identifier:`, which rcl reads as
+    `/backlash_identifier`: under `namespace:=arm` the node ran on its defaults silently."""
+    config = ROOT / "config" / "params.yaml"
+    for namespace in NAMESPACES:
+        values = read_params_file(config, namespace=namespace)
+        assert set(values) == {s.name for s in PARAMETER_SPECS}, namespace
+
+
+def test_section_keys_rcl_refuses_are_refused(tmp_path: Path) -> None:
+    path = write(tmp_path, "backlash_*:\n  ros__parameters:\n    degree: 2\n")
+    with pytest.raises(GenBacklashError, match="'backlash_\\*' is not a node name ROS 2"):
+        load_params_file(path)
+
+
+def test_sections_apply_as_rcl_applies_them(tmp_path: Path) -> None:
+    """The same keys through the real rcl: what rclpy declares equals what the reader says."""
+    from tests.ros.transports._ros2 import domain_id, rclpy_missing
+
+    if reason := rclpy_missing():
+        pytest.skip(reason)
+    import rclpy
+    from rclpy.node import Node
+
+    for key in RCL_SECTIONS:
+        path = _one_section(tmp_path, key)
+        for namespace in NAMESPACES:
+            args = ["x", "--ros-args", "--params-file", str(path)]
+            if namespace:
+                args += ["-r", f"__ns:={namespace}"]
+            rclpy.init(args=args, domain_id=domain_id())
+            try:
+                node = Node("backlash_identifier")
+                rcl = node.declare_parameter("degree", 3).value == 2
+                node.destroy_node()
+            finally:
+                rclpy.try_shutdown()
+            ours = load_params_file(path, namespace=namespace).degree == 2
+            assert ours == rcl, (key, namespace)
+
+
+def test_ros_arguments_name_the_files_and_the_namespace() -> None:
+    launch = [
+        "/ws/install/genbacklash_ros/lib/genbacklash_ros/backlash_identifier",
+        "--ros-args",
+        "-r",
+        "__node:=identifier",
+        "-r",
+        "__ns:=/arm",
+        "--params-file",
+        "/tmp/a.yaml",
+        "-r",
+        "command:=/arm/command",
+        "--log-level",
+        "debug",
+        "--params-file",
+        "/tmp/b.yaml",
+    ]
+    ros = parse_ros_arguments(launch)
+    assert ros.params_files == ("/tmp/a.yaml", "/tmp/b.yaml")
+    assert (ros.namespace, ros.node_name) == ("/arm", "identifier")
+    assert parse_ros_arguments(["x", "--params-file", "not_ros.yaml"]).params_files == ()
+    assert parse_ros_arguments(["x", "--ros-args", "-p", "degree:=2"]) == parse_ros_arguments([])
+
+
+@pytest.mark.parametrize(
+    ("low", "high", "start", "goal"),
+    [
+        ("gate_low", "gate_high", (0.2, 0.5), (0.7, 0.9)),
+        ("gate_low", "gate_high", (0.2, 0.5), (0.05, 0.1)),
+        ("u_min", "u_max", (-1.0, 1.0), (2.0, 3.0)),
+        ("u_min", "u_max", (-1.0, 1.0), (-3.0, -2.0)),
+    ],
+)
+def test_a_pair_moves_in_either_order(
+    low: str, high: str, start: tuple[float, float], goal: tuple[float, float]
+) -> None:
+    """One parameter per request: the first set leaves the pair inconsistent, the node keeps
+    the old pair (and says so) until the second set makes it consistent."""
+    now = NodeParameters.from_mapping({low: start[0], high: start[1]})
+    for first, second in ((low, high), (high, low)):
+        target = dict(zip((low, high), goal, strict=True))
+        held: dict[str, object] = {**now.to_mapping(), first: target[first]}
+        params, pending = resolve_requested(now, held)
+        if pending:  # the pair is inconsistent in between: the old one runs
+            assert (getattr(params, low), getattr(params, high)) == start
+            assert low in pending[0] and "until the pair is consistent" in pending[0]
+        held[second] = target[second]
+        params, pending = resolve_requested(params, held)
+        assert pending == ()
+        assert (getattr(params, low), getattr(params, high)) == goal
+    # one of the two orders must pass through an inconsistent pair (else nothing is tested)
+    assert any(
+        resolve_requested(now, {name: dict(zip((low, high), goal, strict=True))[name]})[1]
+        for name in (low, high)
+    )
+
+
+def test_other_values_apply_while_a_pair_is_pending() -> None:
+    now = NodeParameters()
+    params, pending = resolve_requested(now, {"gate_high": 0.1, "publish_rate": 3.0})
+    assert params.publish_rate == 3.0 and params.gate_high == now.gate_high
+    assert len(pending) == 1

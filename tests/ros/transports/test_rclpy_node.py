@@ -1,33 +1,56 @@
-"""The rclpy node: run where rclpy imports (a sourced ROS 2 Jazzy), skipped here."""
+"""The rclpy node in process, against the real rclpy (the bundled ROS 2 Jazzy, GUIDE §5).
+
+Each test makes its own rclpy context on a DDS domain of its own. Skipped, with the reason,
+where rclpy does not import (ROS 2 not installed, or its setup.bash not sourced).
+"""
 
 from __future__ import annotations
 
-import importlib.util
+import os
+import signal
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
 
 import pytest
 
 from genbacklash_ros.cli.node import choose_transport, ros2_main
 
-RCLPY_MISSING = "rclpy is not installable on this machine (not on PyPI, not in Debian bookworm)"
+from ._ros2 import ROOT, domain_id, rclpy_missing
+
+needs_rclpy = pytest.mark.skipif(bool(rclpy_missing()), reason=rclpy_missing() or "-")
 
 
-def _rclpy_available() -> bool:
-    try:
-        return importlib.util.find_spec("rclpy") is not None
-    except (ImportError, ValueError):
-        return False
-
-
-needs_rclpy = pytest.mark.skipif(not _rclpy_available(), reason=RCLPY_MISSING)
-
-
-@pytest.mark.skipif(_rclpy_available(), reason="rclpy is installed here")
+@pytest.mark.skipif(not rclpy_missing(), reason="rclpy imports here: the message is not shown")
 def test_without_rclpy_the_cli_says_so(capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(Exception, match="rclpy cannot be imported"):
         choose_transport("rclpy")
     assert choose_transport("auto") == "dds"
     assert ros2_main() == 2
     assert "genbacklash node --transport dds" in capsys.readouterr().err
+
+
+@pytest.fixture
+def ros_init() -> Iterator[Callable[..., None]]:
+    """``ros_init(*ros_args)``: rclpy initialised (the global context) with those
+    ``--ros-args`` on a DDS domain of its own; shut down after the test."""
+    import rclpy
+
+    def init(*ros_args: str) -> None:
+        rclpy.init(args=["backlash_identifier", "--ros-args", *ros_args], domain_id=domain_id())
+
+    try:
+        yield init
+    finally:
+        rclpy.try_shutdown()
+
+
+@pytest.fixture
+def ros_args(ros_init: Callable[..., None]) -> list[str]:
+    ros_init()
+    return []
 
 
 @needs_rclpy
@@ -45,24 +68,35 @@ def test_descriptors_carry_ranges_and_descriptions() -> None:
 
 
 @needs_rclpy
-def test_node_rejects_bad_parameters_with_the_reason() -> None:
-    import rclpy
+def test_destroy_node_is_clean(ros_args: list[str]) -> None:
+    """rclpy's ``Node`` keeps its publishers in ``self._publishers``; the node must not
+    shadow it, or every ``destroy_node()`` (each shutdown) ends in a KeyError."""
+    from genbacklash_ros.transports import rclpy_node
+
+    node = rclpy_node.BacklashIdentifierNode()
+    own = {p.topic_name for p in node.publishers}
+    assert {"/compensated_command", "/backlash_identifier/estimate", "/diagnostics"} <= own
+    node.finish()
+    node.destroy_node()  # raised KeyError: 0
+    assert not list(node.publishers)
+
+
+@needs_rclpy
+def test_node_rejects_bad_parameters_with_the_reason(ros_args: list[str]) -> None:
     from rclpy.parameter import Parameter
 
     from genbacklash_ros.transports import rclpy_node
 
-    rclpy.init()
+    node = rclpy_node.BacklashIdentifierNode()
     try:
-        node = rclpy_node.BacklashIdentifierNode()
-        result = node.set_parameters([Parameter("gate_low", value=0.99)])[0]
-        assert not result.successful and "gate_low" in result.reason
+        result = node.set_parameters([Parameter("degree", value=12)])[0]
+        assert not result.successful and "degree" in result.reason
         result = node.set_parameters([Parameter("publish_rate", value=5.0)])[0]
         assert result.successful
         assert node.get_parameter("publish_rate").value == 5.0
+    finally:
         node.finish()
         node.destroy_node()
-    finally:
-        rclpy.try_shutdown()
 
 
 @needs_rclpy
@@ -75,3 +109,250 @@ def test_message_conversion_round_trip() -> None:
         JointState(Header(Time(3, 4), "f"), ("a",), (0.1,), (), ()),
     ):
         assert rclpy_node.from_ros(rclpy_node.to_ros(msg)) == msg
+
+
+def _params_file(tmp_path: Path, **values: object) -> Path:
+    """config/params.yaml (every default, keyed as shipped) with ``values`` changed."""
+    lines = []
+    for line in (ROOT / "config" / "params.yaml").read_text().splitlines():
+        name = line.strip().split(":", 1)[0]
+        if line.startswith("    ") and name in values:
+            line = f"    {name}: {values[name]}"
+        lines.append(line)
+    path = tmp_path / "params.yaml"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+@needs_rclpy
+def test_the_shipped_params_file_applies_under_a_namespace(
+    tmp_path: Path, ros_init: Callable[..., None]
+) -> None:
+    """rcl reads a `backlash_identifier:` key as `/backlash_identifier`: under a namespace the
+    node ran on its defaults without a word."""
+    from genbacklash_ros.transports import rclpy_node
+
+    ros_init("--params-file", str(_params_file(tmp_path, degree=2)), "-r", "__ns:=/arm")
+    node = rclpy_node.BacklashIdentifierNode()
+    try:
+        assert node.get_fully_qualified_name() == "/arm/backlash_identifier"
+        assert node.get_parameter("degree").value == 2
+    finally:
+        node.destroy_node()
+
+
+@needs_rclpy
+def test_a_whole_number_is_taken_for_a_double(
+    tmp_path: Path, ros_init: Callable[..., None]
+) -> None:
+    """`publish_rate: 10` in a params file and `ros2 param set ... publish_rate 5` (an
+    integer): rclpy typed the parameter from its default and raised
+    InvalidParameterTypeException (a traceback) for the first, refused the second."""
+    from rclpy.parameter import Parameter
+
+    from genbacklash_ros.transports import rclpy_node
+
+    ros_init("--params-file", str(_params_file(tmp_path, publish_rate=10, u_max=3)))
+    node = rclpy_node.BacklashIdentifierNode()
+    try:
+        for name, value in (("publish_rate", 10.0), ("u_max", 3.0)):
+            param = node.get_parameter(name)
+            assert param.type_ == Parameter.Type.DOUBLE and param.value == value
+        result = node.set_parameters([Parameter("publish_rate", value=5)])[0]
+        assert result.successful, result.reason
+        assert node.get_parameter("publish_rate").value == 5.0
+        assert node._params.publish_rate == 5.0
+        # a whole number for an integer parameter stays one; a double there is refused
+        assert not node.set_parameters([Parameter("degree", value=2.0)])[0].successful
+    finally:
+        node.destroy_node()
+
+
+def _run_main(args: list[str], capfd: pytest.CaptureFixture[str]) -> tuple[int, str]:
+    from genbacklash_ros.transports import rclpy_node
+
+    status = rclpy_node.main(["backlash_identifier", *args])
+    return status, capfd.readouterr().err
+
+
+@needs_rclpy
+@pytest.mark.parametrize(
+    ("values", "reason"),
+    [
+        ({"degree": 12}, "parameter 'degree' must lie in [1, 9], got 12"),
+        ({"publish_rate": 0}, "parameter 'publish_rate' must lie in [0.01, 1000], got 0"),
+        ({"gate_low": 0.9}, "parameter 'gate_low' (0.9) must not exceed 'gate_high' (0.5)"),
+        ({"method": "kalman"}, "parameter 'method' must be one of 'windowed', 'recursive'"),
+    ],
+)
+def test_a_bad_params_file_is_one_line_the_same_for_both_transports(
+    tmp_path: Path,
+    capfd: pytest.CaptureFixture[str],
+    values: dict[str, object],
+    reason: str,
+) -> None:
+    from genbacklash_ros.cli.main import main as genbacklash
+
+    path = _params_file(tmp_path, **values)
+    status, err = _run_main(["--ros-args", "--params-file", str(path)], capfd)
+    assert status == 2
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    assert reason in err
+    rclpy_line = err.strip().removeprefix("backlash_identifier: error: ")
+    # the DDS transport refuses the same file with the same reason
+    pytest.importorskip("cyclonedds", reason="the DDS half needs cyclonedds (the dds extra)")
+    assert genbacklash(["node", "--transport", "dds", "--params-file", str(path)]) == 2
+    assert capfd.readouterr().err.strip() == f"genbacklash node: error: {rclpy_line}"
+
+
+@needs_rclpy
+def test_a_bad_command_line_parameter_is_one_line(capfd: pytest.CaptureFixture[str]) -> None:
+    status, err = _run_main(["--ros-args", "-p", "forgetting:=2.0"], capfd)
+    assert status == 2 and "Traceback" not in err
+    assert err.strip() == (
+        "backlash_identifier: error: parameter 'forgetting' must lie in [0.5, 1], got 2.0"
+    )
+
+
+@needs_rclpy
+@pytest.mark.parametrize(
+    ("low", "high", "goal"),
+    [
+        ("gate_low", "gate_high", (0.7, 0.9)),
+        ("gate_low", "gate_high", (0.05, 0.1)),
+        ("u_min", "u_max", (5.0, 6.0)),
+        ("u_min", "u_max", (-6.0, -5.0)),
+    ],
+)
+def test_ros2_param_set_moves_a_pair_in_either_order(
+    ros_args: list[str], low: str, high: str, goal: tuple[float, float]
+) -> None:
+    """`ros2 param set` sends one parameter per request: the callback checked the pair per
+    parameter, so one of the two orders was refused."""
+    from rclpy.parameter import Parameter
+
+    from genbacklash_ros.transports import rclpy_node
+
+    node = rclpy_node.BacklashIdentifierNode()
+    try:
+        start = (0.2, 0.5) if low == "gate_low" else (-1.0, 1.0)
+        both = [Parameter(low, value=start[0]), Parameter(high, value=start[1])]
+        assert node.set_parameters_atomically(both).successful
+        for order in ((low, high), (high, low)):
+            for name in order:
+                value = goal[(low, high).index(name)]
+                result = node.set_parameters([Parameter(name, value=value)])[0]
+                assert result.successful, (order, result.reason)
+                assert node.get_parameter(name).value == value
+            assert (getattr(node._params, low), getattr(node._params, high)) == goal
+            assert node._pending == ()
+            for name in reversed(order):  # back to the start, in the other order
+                value = start[(low, high).index(name)]
+                assert node.set_parameters([Parameter(name, value=value)])[0].successful
+            assert (getattr(node._params, low), getattr(node._params, high)) == start
+        # in between, the node runs on the last consistent pair and says so
+        assert node.set_parameters([Parameter(low, value=start[1] + 0.1)])[0].successful
+        assert (getattr(node._params, low), getattr(node._params, high)) == start
+        assert len(node._pending) == 1 and "until the pair is consistent" in node._pending[0]
+        # a value invalid on its own is still refused with the reason
+        if low == "gate_low":
+            result = node.set_parameters([Parameter(high, value=1.5)])[0]
+            # (the descriptor's range, checked by rclpy itself: its one-line reason)
+            assert not result.successful and "gate_high out of range" in result.reason
+    finally:
+        node.destroy_node()
+
+
+@needs_rclpy
+def test_pending_pair_and_wiring_are_in_the_diagnostics(ros_args: list[str]) -> None:
+    """A publisher of std_msgs/Float64 on /command while the node subscribes
+    Float64MultiArray: 0 commands, and the diagnostics name the type and command_type."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from std_msgs.msg import Float64 as RosFloat64
+
+    from genbacklash_ros.transports import rclpy_node
+
+    node = rclpy_node.BacklashIdentifierNode()
+    peer = rclpy.create_node("wrong_type_publisher")
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    executor.add_node(peer)
+    try:
+        assert node.check_wiring() == ()
+        peer.create_publisher(RosFloat64, "/command", 10)
+        deadline = time.monotonic() + 10.0
+        while not node.check_wiring():
+            assert time.monotonic() < deadline, "discovery did not show the publisher"
+            executor.spin_once(timeout_sec=0.05)
+        (line,) = node._wiring
+        assert "std_msgs/msg/Float64 on /command" in line
+        assert "std_msgs/msg/Float64MultiArray" in line
+        assert "set parameter command_type to float64" in line
+        received: list[Any] = []
+        from diagnostic_msgs.msg import DiagnosticArray
+
+        peer.create_subscription(DiagnosticArray, "/diagnostics", received.append, 10)
+        deadline = time.monotonic() + 10.0
+        while not received:
+            assert time.monotonic() < deadline, "no /diagnostics"
+            node._on_tick()  # the 1 Hz tick, without waiting for it
+            executor.spin_once(timeout_sec=0.1)
+        status = received[-1].status[0]
+        values = {kv.key: kv.value for kv in status.values}
+        assert values["wiring"] == line and line in status.message
+        assert status.level >= bytes([1])
+        assert values["parameters_pending"] == "ok"
+    finally:
+        executor.shutdown()
+        peer.destroy_node()
+        node.destroy_node()
+
+
+@needs_rclpy
+def test_a_second_sigint_during_the_final_refit_is_ignored(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capfd: pytest.CaptureFixture[str]
+) -> None:
+    """Ctrl-C on `ros2 launch` reaches the node twice (the terminal's process group, then
+    launch); the second landed in finish() and ended in a KeyboardInterrupt traceback
+    without the final checkpoint. Here: a SIGINT ends the spin, and two more arrive while
+    the pipeline finishes."""
+    from genbacklash_ros.node.checkpoint_writer import BackgroundCheckpointWriter
+    from genbacklash_ros.node.pipeline import BacklashPipeline
+    from genbacklash_ros.transports import rclpy_node
+
+    events: list[str] = []
+    real_finish = BacklashPipeline.finish
+    real_close = BackgroundCheckpointWriter.close
+
+    def finish(self: BacklashPipeline, **kwargs: Any) -> Any:
+        events.append("finish")
+        for _ in range(2):
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.05)  # the handler runs here
+        out = real_finish(self, **kwargs)
+        events.append("refit done")
+        return out
+
+    def close(self: BackgroundCheckpointWriter) -> None:
+        real_close(self)
+        events.append("checkpoints closed")
+
+    monkeypatch.setattr(BacklashPipeline, "finish", finish)
+    monkeypatch.setattr(BackgroundCheckpointWriter, "close", close)
+    before = signal.getsignal(signal.SIGINT)  # (SIG_IGN in a background job)
+    timer = threading.Timer(1.0, os.kill, (os.getpid(), signal.SIGINT))
+    timer.start()
+    try:
+        status = rclpy_node.main(
+            ["backlash_identifier", "--ros-args", "-p", f"checkpoint_file:={tmp_path}/c.json"]
+        )
+    except KeyboardInterrupt:  # (caught: pytest would end the whole session)
+        pytest.fail(f"KeyboardInterrupt escaped main() after {events}")
+    finally:
+        timer.cancel()
+    err = capfd.readouterr().err
+    assert status == 0
+    assert events == ["finish", "refit done", "checkpoints closed"]
+    assert "Traceback" not in err and "2 more interrupt(s) ignored while finishing" in err
+    assert signal.getsignal(signal.SIGINT) == before  # restored

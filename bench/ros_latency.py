@@ -1,0 +1,290 @@
+"""ROS 2 latency: the node launched by ``ros2 launch``, fed at 1 kHz over rclpy, next to an echo.
+
+    source /opt/ros2_jazzy/setup.bash
+    python bench/ros_latency.py [--seconds S] [--warmup S] [--rate HZ] [--quick]
+
+Three processes share a DDS domain of their own (an id in 201-231, apart from the tests'):
+the node as a ROS 2 user runs it (this repository built with ``colcon build`` into a
+temporary workspace, then ``ros2 launch genbacklash_ros backlash_identifier.launch.py
+params_file:=...``: the shipped parameters with a checkpoint file in the temporary
+directory); a plain rclpy echo (this script with ``--role echo``: a node that publishes every
+``std_msgs/Float64MultiArray`` taken on ``/ros_latency/ping`` back unchanged on
+``/ros_latency/pong``, default QoS, ``rclpy.spin``) and the player (this process, rclpy). The
+player waits until the node and the echo have matched its endpoints, then at each tick of the
+rate (sleeping until the tick's deadline) publishes a command ``[u_k, k]`` on ``/command``
+(default QoS), the encoder reading ``y_k`` of joint ``j`` stamped after it on ``/encoder``
+(sensor-data QoS) and a ping ``[k]``. ``u`` is the paper's Example 1 input and ``y`` the true
+backlash's noisy response (``PaperExample.generate``, seeded), so the node's identifier
+converges during the warm-up and compensates while latency is measured. An executor thread
+of the player takes ``/compensated_command``, ``/ros_latency/pong`` and
+``/backlash_identifier/estimate``; a compensated command is matched to its command by ``k``
+(element 1, which the node passes unchanged). Latency is the receive time (in the
+subscription callback) less the publish time, on the player's monotonic clock: one publish,
+the hop to the other process, its processing, the hop back, and the player's executor. The
+echo runs at the same ticks, under the same load, so node / echo is the node's own cost.
+A reply that never comes is lost. The estimate error is the largest |parameter error| of the
+last ``~/estimate`` against the truth.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from _common import OUTPUT_DIR, ROOT, command_line, machine_description, md_table, write_section
+
+from genbacklash_core import paper_example
+
+sys.path.insert(0, str(ROOT))
+from tests.ros.transports._ros2 import colcon_build, ros2_cli_missing, workspace_env
+
+SEED = 1
+PING, PONG = "/ros_latency/ping", "/ros_latency/pong"
+LAUNCH = ("ros2", "launch", "genbacklash_ros", "backlash_identifier.launch.py")
+
+
+def echo(lifetime_s: float) -> int:
+    """The reference: ping -> pong, nothing else."""
+    import rclpy
+    from std_msgs.msg import Float64MultiArray
+
+    rclpy.init()
+    node = rclpy.create_node("ros_latency_echo")
+    pong = node.create_publisher(Float64MultiArray, PONG, 10)
+    node.create_subscription(Float64MultiArray, PING, pong.publish, 10)
+    end = time.monotonic() + lifetime_s
+    try:
+        while rclpy.ok() and time.monotonic() < end:
+            rclpy.spin_once(node, timeout_sec=0.5)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+@dataclass
+class Played:
+    sent_ns: np.ndarray
+    command_back_ns: np.ndarray
+    ping_back_ns: np.ndarray
+    late_ticks: int
+    achieved_hz: float
+    last_estimate: list[float] | None
+
+
+def play(rate: float, n: int) -> Played:
+    """Publish ``n`` ticks at ``rate``; what came back, per tick."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import qos_profile_sensor_data
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray
+
+    data = paper_example(1).generate(SEED, n_samples=n)
+    rclpy.init()
+    node = rclpy.create_node("ros_latency_player")
+    sent = np.zeros(n, dtype=np.int64)
+    command_back = np.zeros(n, dtype=np.int64)
+    ping_back = np.zeros(n, dtype=np.int64)
+    estimates: list[list[float]] = []
+
+    def on_compensated(msg: Any) -> None:
+        now = time.monotonic_ns()
+        k = int(msg.data[1])
+        if 0 <= k < n and not command_back[k]:
+            command_back[k] = now
+
+    def on_pong(msg: Any) -> None:
+        now = time.monotonic_ns()
+        k = int(msg.data[0])
+        if 0 <= k < n and not ping_back[k]:
+            ping_back[k] = now
+
+    node.create_subscription(Float64MultiArray, "/compensated_command", on_compensated, 100)
+    node.create_subscription(Float64MultiArray, PONG, on_pong, 100)
+    node.create_subscription(
+        Float64MultiArray,
+        "/backlash_identifier/estimate",
+        lambda m: estimates.append(list(m.data)),
+        10,
+    )
+    command = node.create_publisher(Float64MultiArray, "/command", 10)
+    encoder = node.create_publisher(JointState, "/encoder", qos_profile_sensor_data)
+    ping = node.create_publisher(Float64MultiArray, PING, 10)
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
+    try:
+        deadline = time.monotonic() + 60.0
+        while min(command.get_subscription_count(), encoder.get_subscription_count()) < 1 or (
+            ping.get_subscription_count() < 1
+            or node.count_publishers("/compensated_command") < 1
+            or node.count_publishers(PONG) < 1
+        ):
+            if time.monotonic() > deadline:
+                raise RuntimeError("the node's or the echo's endpoints did not match in 60 s")
+            time.sleep(0.05)
+        time.sleep(1.0)  # let discovery settle both ways
+        period_ns = round(1e9 / rate)
+        start = time.monotonic_ns()
+        late = 0
+        for k in range(n):
+            tick = start + k * period_ns
+            while (wait := tick - time.monotonic_ns()) > 0:
+                time.sleep(wait / 1e9)
+            if time.monotonic_ns() - tick > period_ns:
+                late += 1
+            cmd = Float64MultiArray(data=[float(data.u[k]), float(k)])
+            sent[k] = time.monotonic_ns()
+            command.publish(cmd)
+            reading = JointState()
+            reading.header.stamp = node.get_clock().now().to_msg()
+            reading.name = ["j"]
+            reading.position = [float(data.y[k])]
+            encoder.publish(reading)
+            ping.publish(Float64MultiArray(data=[float(k)]))
+        span = (sent[-1] - sent[0]) / 1e9
+        time.sleep(2.0)  # replies in flight
+    finally:
+        executor.shutdown(timeout_sec=1.0)
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return Played(
+        sent,
+        command_back,
+        ping_back,
+        late,
+        (n - 1) / span if span > 0 else float("nan"),
+        estimates[-1] if estimates else None,
+    )
+
+
+def stats(sent: np.ndarray, back: np.ndarray) -> tuple[int, int, float, float, float, float]:
+    """(replies, lost, median, p90, p99, max) in ms."""
+    got = back > 0
+    ms = (back[got] - sent[got]) / 1e6
+    if ms.size == 0:
+        return 0, int(sent.size), *(float("nan"),) * 4  # type: ignore[return-value]
+    return (
+        int(got.sum()),
+        int((~got).sum()),
+        float(np.median(ms)),
+        float(np.percentile(ms, 90)),
+        float(np.percentile(ms, 99)),
+        float(ms.max()),
+    )
+
+
+def run(rate: float, warmup_s: float, seconds: float) -> str:
+    domain = 201 + (os.getpid() % 31)
+    warm = round(warmup_s * rate)
+    n = warm + round(seconds * rate)
+    with tempfile.TemporaryDirectory(prefix="ros_latency_") as tmp_name:
+        tmp = Path(tmp_name)
+        built = colcon_build(tmp / "ws")
+        if built.returncode != 0:
+            raise RuntimeError("colcon build failed:\n" + built.stderr[-2000:])
+        env = workspace_env(tmp / "ws", domain)
+        params = tmp / "params.yaml"
+        text = (ROOT / "config" / "params.yaml").read_text()
+        params.write_text(
+            text.replace('checkpoint_file: ""', f'checkpoint_file: "{tmp / "ckpt.json"}"')
+        )
+        launch = subprocess.Popen(
+            [*LAUNCH, f"params_file:={params}"],
+            env=env,
+            stdout=(tmp / "launch.log").open("wb"),
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+        )
+        lifetime = warmup_s + seconds + 120
+        echo_proc = subprocess.Popen(
+            [sys.executable, __file__, "--role", "echo", "--lifetime", f"{lifetime:.0f}"],
+            env=env,
+        )
+        os.environ["ROS_DOMAIN_ID"] = str(domain)
+        try:
+            played = play(rate, n)
+        finally:
+            os.killpg(launch.pid, signal.SIGINT)
+            echo_proc.send_signal(signal.SIGINT)
+            node_status = launch.wait(timeout=60)
+            echo_proc.wait(timeout=30)
+        launch_log = (tmp / "launch.log").read_text(errors="replace")
+    truth = paper_example(1).model.parameters()
+    error = (
+        float(np.max(np.abs(np.array(played.last_estimate) - truth)))
+        if played.last_estimate is not None
+        else float("nan")
+    )
+    w = slice(warm, None)
+    ours = stats(played.sent_ns[w], played.command_back_ns[w])
+    ref = stats(played.sent_ns[w], played.ping_back_ns[w])
+    rows = []
+    for name, s in (
+        ("node: command -> compensated_command", ours),
+        ("plain rclpy echo: ping -> pong (reference)", ref),
+    ):
+        rows.append([name, f"{s[0]:,}", f"{s[1]:,}", *(f"{v:.3f} ms" for v in s[2:])])
+    ratio = [f"{a / b:.1f}x" if b > 0 else "n/a" for a, b in zip(ours[2:], ref[2:], strict=True)]
+    rows.append(["ratio node / echo", "", "", *ratio])
+    table = md_table(["path", "replies", "lost", "median", "p90", "p99", "max"], rows)
+    clean = "process has finished cleanly" in launch_log and "Traceback" not in launch_log
+    intro = __doc__.split("\n", 5)[5].strip()
+    summary = {"error": error, "node": ours, "echo": ref, "node_status": node_status}
+    OUTPUT_DIR.mkdir(parents=True, exist_ok=True)
+    (OUTPUT_DIR / "ros_latency.json").write_text(json.dumps(summary, indent=1))
+    return f"""## ROS 2 latency (ros2 launch, rclpy, 1 kHz)
+
+{intro} Machine: {machine_description()}.
+
+{n - warm:,} ticks measured after a warm-up of {warm:,} ticks ({warmup_s:g} s); target rate
+{rate:g} Hz, achieved {played.achieved_hz:.1f} Hz ({played.late_ticks} ticks published more
+than one period late).
+
+{table}
+
+Estimate error against the truth at the end (max |parameter error| of the last
+`~/estimate`): **{error:.4f}** (target 0.05). The launch ended with status {node_status} on
+SIGINT to its process group; the node {"finished cleanly" if clean else "did NOT finish cleanly"}.
+
+Command: `{command_line()}`
+"""
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--role", choices=("player", "echo"), default="player")
+    parser.add_argument("--lifetime", type=float, default=300.0, help="echo: seconds to live")
+    parser.add_argument("--rate", type=float, default=1000.0)
+    parser.add_argument("--warmup", type=float, default=8.0)
+    parser.add_argument("--seconds", type=float, default=20.0)
+    parser.add_argument("--quick", action="store_true", help="3 s warm-up, 5 s measured")
+    args = parser.parse_args(argv)
+    if args.role == "echo":
+        return echo(args.lifetime)
+    if reason := ros2_cli_missing():
+        print(f"ros_latency: {reason}", file=sys.stderr)
+        return 2
+    if args.quick:
+        args.warmup, args.seconds = 3.0, 5.0
+    write_section("ros_latency", run(args.rate, args.warmup, args.seconds))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
