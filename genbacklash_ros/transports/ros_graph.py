@@ -17,8 +17,8 @@ ROS 2 node, as rmw_cyclonedds_cpp / rmw_dds_common (Jazzy) do it:
 
 And the reverse check for the node's own subscriptions: :class:`PublicationWatch` reads the
 ``DCPSPublication`` builtin topic and reports publishers of another type on a subscribed topic
-(:class:`WiringMismatch`, :func:`wiring_mismatch_text`), which DDS would otherwise never match
-and nobody would notice.
+(:class:`WiringMismatch`, worded by :mod:`genbacklash_ros.node.wiring`), which DDS would
+otherwise never match and nobody would notice.
 
 This module imports cyclonedds; import it only where the DDS transport is used.
 """
@@ -38,6 +38,7 @@ from cyclonedds.qos import Policy, Qos
 from cyclonedds.topic import Topic
 
 from genbacklash_core import GenBacklashError
+from genbacklash_ros.node.wiring import type_mismatch
 from genbacklash_ros.transports import dds_types
 from genbacklash_ros.transports.type_hash import typehash_user_data
 
@@ -55,7 +56,6 @@ __all__ = [
     "participant_entities_info",
     "ros_topic_name",
     "ros_type_name",
-    "wiring_mismatch_text",
 ]
 
 DISCOVERY_TOPIC = "ros_discovery_info"
@@ -182,41 +182,6 @@ def ros_topic_name(dds_topic: str) -> str:
     return "/" + dds_topic[3:] if dds_topic.startswith("rt/") else dds_topic
 
 
-def wiring_mismatch_text(
-    topic: str,
-    seen_type: str,
-    expected_type: str,
-    parameter: str,
-    *,
-    choices: Mapping[str, str] | None = None,
-) -> str:
-    """One line saying that ``topic`` has a publisher of ``seen_type`` while the node
-    subscribes ``expected_type``, and which parameter selects the type.
-
-    ``choices`` maps the parameter's values to the types they select; when ``seen_type`` is
-    one of them the line names the value to set.
-
-    >>> wiring_mismatch_text("/command", "std_msgs/msg/Float64",
-    ...     "std_msgs/msg/Float64MultiArray", "command_type",
-    ...     choices={"float64": "std_msgs/msg/Float64"})  # doctest: +NORMALIZE_WHITESPACE
-    '/command has a publisher of std_msgs/msg/Float64, but the node subscribes
-    std_msgs/msg/Float64MultiArray there, so none of its messages arrive; the parameter
-    command_type selects the type (command_type: float64 for std_msgs/msg/Float64)'
-    """
-    text = (
-        f"{topic} has a publisher of {seen_type}, but the node subscribes {expected_type} "
-        f"there, so none of its messages arrive; the parameter {parameter} selects the type"
-    )
-    value = next((v for v, t in (choices or {}).items() if t == seen_type), None)
-    if value is not None:
-        text += f" ({parameter}: {value} for {seen_type})"
-    else:
-        supported = ", ".join(f"{v} ({t})" for v, t in (choices or {}).items())
-        if supported:
-            text += f"; it supports {supported}"
-    return text
-
-
 @dataclass(frozen=True)
 class WiringMismatch:
     """A discovered publisher whose type differs from the node's subscription on its topic."""
@@ -228,14 +193,11 @@ class WiringMismatch:
     choices: tuple[tuple[str, str], ...] = ()
 
     def text(self) -> str:
-        """:func:`wiring_mismatch_text` for this mismatch."""
-        return wiring_mismatch_text(
-            self.topic,
-            self.seen_type,
-            self.expected_type,
-            self.parameter,
-            choices=dict(self.choices),
-        )
+        """The line the rclpy node writes too.
+
+        See :func:`~genbacklash_ros.node.wiring.type_mismatch`.
+        """
+        return type_mismatch(self.topic, self.seen_type, self.expected_type, self.parameter)
 
 
 @dataclass(frozen=True)

@@ -257,8 +257,8 @@ def test_namespaced_node_is_listed_and_names_a_wrong_type_publisher(tmp_path: Pa
         assert wait_for(lambda: bool(wiring()), 20), log.read_text()
         text = wiring()
         print(f"wiring diagnostic: {text}")
-        assert text.startswith("/arm/command has a publisher of std_msgs/msg/Float64,")
-        assert "command_type: float64" in text
+        assert text.startswith("a publisher of std_msgs/msg/Float64 on /arm/command,")
+        assert "command_type to float64" in text
         assert text in log.read_text(), "the mismatch is also logged"
         wrong.send_signal(signal.SIGINT)
         wrong.wait(10)
