@@ -76,7 +76,7 @@ def test_wear_rates_recovered_and_ranking_right(
     assert [d.robot for d in summary.drivetrains] == sorted(truth_days, key=truth_days.get)
 
 
-def test_rerun_skips_and_new_settings_add(
+def test_rerun_skips(
     fleet_db: Path, synthetic_fleet: tuple[Path, SyntheticFleet]
 ) -> None:
     root, _ = synthetic_fleet
