@@ -111,7 +111,7 @@ def fleet_client(
         n_workers=workers,
         threads_per_worker=1,
         processes=processes,
-        dashboard_address=None,
+        dashboard_address=":0",  # any free port: other clusters may run here
     )
     client = dask.Client(cluster)
     try:

@@ -15,7 +15,7 @@ import pytest
 
 from genbacklash_ros.cli.main import main
 from genbacklash_ros.fleet.database import ResultStore
-from genbacklash_ros.fleet.job import FleetSettings
+from genbacklash_ros.fleet.job import STATUSES, FleetSettings
 from genbacklash_ros.fleet.runner import fleet_client, run_fleet
 from genbacklash_ros.fleet.summary import DAY_NS, FleetSummary, summarise
 from genbacklash_ros.fleet.synthetic import SyntheticFleet
@@ -76,9 +76,7 @@ def test_wear_rates_recovered_and_ranking_right(
     assert [d.robot for d in summary.drivetrains] == sorted(truth_days, key=truth_days.get)
 
 
-def test_rerun_skips(
-    fleet_db: Path, synthetic_fleet: tuple[Path, SyntheticFleet]
-) -> None:
+def test_rerun_skips(fleet_db: Path, synthetic_fleet: tuple[Path, SyntheticFleet]) -> None:
     root, _ = synthetic_fleet
     with ResultStore(fleet_db) as store, fleet_client(workers=1, processes=False) as client:
         again = run_fleet(root, store, FleetSettings(diagnose=False), client)
@@ -131,3 +129,16 @@ def test_command_line_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str])
     assert "no database at" in capsys.readouterr().err
     assert main(["fleet", str(tmp_path / "nothing"), "--db", str(tmp_path / "x.db")]) == 2
     assert "is not a directory" in capsys.readouterr().err
+
+
+def test_readme_queries_run(fleet_db: Path) -> None:
+    import sqlite3
+
+    readme = (Path(__file__).parents[3] / "README.md").read_text(encoding="utf-8")
+    block = readme.split("```sql", 1)[1].split("```", 1)[0]
+    queries = [q for q in block.split(";") if q.strip()]
+    assert len(queries) == 4
+    with sqlite3.connect(fleet_db) as conn:
+        results = [list(conn.execute(q)) for q in queries]
+    assert len(results[0]) >= 36
+    assert {"unreadable", "no_motion"} <= {r[1] for r in results[1]} <= set(STATUSES) - {"ok"}
