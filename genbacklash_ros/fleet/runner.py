@@ -74,7 +74,8 @@ class FleetRun:
         statuses = ", ".join(f"{n} {s}" for s, n in sorted(self.statuses.items())) or "none"
         rate = self.analysed / self.seconds * 60 if self.seconds > 0 else 0.0
         text = (
-            f"{self.bags} bags: {self.analysed} analysed ({rate:.1f} bags/min), "
+            f"{self.bags} bag{'' if self.bags == 1 else 's'}: {self.analysed} analysed "
+            f"({rate:.1f} bags/min), "
             f"{self.skipped} already in the database; {self.rows} rows added ({statuses})"
         )
         if self.lost:

@@ -142,3 +142,21 @@ def test_readme_queries_run(fleet_db: Path) -> None:
         results = [list(conn.execute(q)) for q in queries]
     assert len(results[0]) >= 36
     assert {"unreadable", "no_motion"} <= {r[1] for r in results[1]} <= set(STATUSES) - {"ok"}
+
+
+def test_scheduler_address_uses_that_cluster(
+    synthetic_fleet: tuple[Path, SyntheticFleet], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from distributed import LocalCluster
+
+    root, fleet = synthetic_fleet
+    archive = tmp_path / "one"
+    bag = next(b for b in fleet.bags if b.kind == "corrupt")
+    target = archive / bag.relpath
+    target.parent.mkdir(parents=True)
+    source = root / bag.relpath
+    (shutil.copytree if source.is_dir() else shutil.copy)(source, target)
+    with LocalCluster(n_workers=1, processes=False, dashboard_address=":0") as cluster:
+        args = ["fleet", str(archive), "--db", str(tmp_path / "s.db"), "--no-progress"]
+        assert main([*args, "--scheduler", cluster.scheduler_address]) == 0
+    assert "1 bag: 1 analysed" in capsys.readouterr().out

@@ -27,7 +27,7 @@ def _rows(db: Path) -> list[tuple[int, str, str, str]]:
 
 
 def test_kill_9_then_rerun(tmp_path: Path) -> None:
-    spec = SyntheticFleetSpec(drivetrains=2, days=5, seconds=5.0, corrupt=1, no_motion=0, seed=3)
+    spec = SyntheticFleetSpec(drivetrains=2, days=4, seconds=4.0, corrupt=1, no_motion=0, seed=3)
     fleet = write_synthetic_fleet(tmp_path / "archive", spec)
     db = tmp_path / "fleet.db"
     command = [
