@@ -28,6 +28,7 @@ BENCHMARKS = (
     "soak",
     "faults",
     "restart",
+    "fleet",
 )
 
 

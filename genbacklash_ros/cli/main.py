@@ -29,6 +29,7 @@ from genbacklash_core.data import NonFinitePolicy
 from genbacklash_ros.bags.csvio import Series, write_series_csv
 from genbacklash_ros.cli import diagnose as diagnose_cli
 from genbacklash_ros.cli import excite as excite_cli
+from genbacklash_ros.cli import fleet as fleet_cli
 from genbacklash_ros.cli import node as node_cli  # imports no middleware
 from genbacklash_ros.cli import replay as replay_cli
 
@@ -372,6 +373,7 @@ def build_parser() -> argparse.ArgumentParser:
     replay_cli.add_parser(sub)
     node_cli.add_parser(sub)
     excite_cli.add_parser(sub)
+    fleet_cli.add_parsers(sub)
     return parser
 
 
