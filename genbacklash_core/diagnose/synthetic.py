@@ -309,6 +309,43 @@ class OperationCase:
     effects: tuple[str, ...]
     description: str
 
+    def without(self, effect: str) -> FloatArray:
+        """The noise-free output of the same record with ``effect`` taken out (every other
+        effect, the motion and the stamps unchanged), at the readings that arrived."""
+        if effect not in self.effects:
+            raise GenBacklashError(f"{effect!r} is not hidden in this record")
+        record = self.record
+        settings = record.settings
+        hidden = record.hidden if record.hidden is not None else HiddenEffects()
+        if effect == "curved_branches":
+            m = settings.model
+            settings = replace(settings, model=GeneralBacklash.ideal(1.0, m.c_left, m.c_right))
+        elif effect == "gap_drift":
+            settings = replace(settings, wear=0.0)
+        elif effect == "time_delay":
+            hidden = replace(hidden, delay=0.0)
+        elif effect == "input_lag":
+            hidden = replace(hidden, input_lag=0.0)
+        elif effect == "linear_dynamics":
+            hidden = replace(hidden, load_lag=0.0)
+        elif effect == "output_offset":
+            hidden = replace(hidden, offset=0.0)
+        elif effect == "saturation":
+            hidden = replace(hidden, limit=(None, None))
+        else:  # periodic_error
+            hidden = replace(hidden, period=0.0, harmonics=())
+        other = operation_record(settings, record.seed, hidden=hidden)
+        return np.asarray(other.x_all[record.received], dtype=np.float64)
+
+    def sizes(self) -> dict[str, float]:
+        """How much each hidden effect moves the output: the RMS change of the noise-free
+        output when it alone is taken out. "Named in the order of size" is this order."""
+        clean = self.record.x_all[self.record.received]
+        return {
+            effect: float(np.sqrt(np.mean((clean - self.without(effect)) ** 2)))
+            for effect in self.effects
+        }
+
 
 def operation_case(
     effects: Sequence[str], seed: int, duration: float = 30.0, *, noise: float | None = None
