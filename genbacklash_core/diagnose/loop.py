@@ -12,7 +12,11 @@
    time and a lag by the shape of the error step response (a box or a decay), so only the one
    the evidence points to is nominated (both when it is unclear).
 4. Each nominee's augmentation is fitted on the estimation data; they are ranked by the change
-   of the BIC, the same yardstick for every effect - not by the order they are tried in.
+   of the BIC, the same yardstick for every effect - not by the order they are tried in. With
+   lost readings in the estimation data those that lower the BIC by the margin are ranked by
+   their validation gap instead (see ``_Run.anchored``): a model without a linear block
+   restarts its simulation at the reading after each loss, a cascade cannot, so their
+   estimation errors are not alike.
 5. The best is accepted only if it lowers the BIC by more than a margin *and* lowers the
    validation gap significantly (a one-sided Newey-West test on the squared errors, plus a
    minimum relative drop); otherwise the next nominee is checked.
@@ -63,6 +67,7 @@ from .gap import GapReport, Split, measure_gap, split_record
 from .model import AugmentedModel, without_effect
 from .result import Diagnosis, DiagnosisStep, Round, Trial
 from .settings import DiagnoseSettings
+from .spec import anchors_of
 from .stats import long_run_variance
 
 __all__ = ["StartStructure", "diagnose", "gap_drop_test"]
@@ -253,15 +258,36 @@ class _Run:
             self.y[self.split.validation], before, after, bic_change, self.settings, self.floor
         )
 
-    def follow_up(self, first: _Candidate) -> tuple[float, str]:
-        """The BIC after ``first`` and its best follow-up (``first``'s own when none is
-        better by the margin), and that follow-up's name ("nothing")."""
+    @property
+    def anchored(self) -> bool:
+        """True when the estimation data have lost readings: then the fits of models that
+        restart their simulation at the reading after a loss and of models that cannot (a
+        linear block's state is not one reading) are not comparable by their estimation
+        error, and candidates are ranked by the free-run validation gap instead."""
+        return anchors_of(self.breaks) is not None
+
+    def rank_by_gap(
+        self, candidates: list[_Candidate]
+    ) -> tuple[list[_Candidate], dict[int, GapReport]]:
+        """The candidates that lower the BIC by the margin, by their validation gap (lowest
+        first), then the others; and their gap reports (by ``id``)."""
+        margin = self.settings.bic_margin
+        good = [c for c in candidates if c.bic_change < -margin]
+        gaps = {id(c): measure_gap(c.fit.model, self.u, self.y, self.split) for c in good}
+        good.sort(key=lambda c: gaps[id(c)].gap)
+        return good + [c for c in candidates if c.bic_change >= -margin], gaps
+
+    def follow_up(self, first: _Candidate) -> tuple[float, float, str]:
+        """The BIC and validation gap after ``first`` and its best follow-up (``first``'s own
+        when none lowers the BIC by the margin), and that follow-up's name ("nothing")."""
         est = self.split.estimation
         context = build_context(self.u[est], self.y[est], first.fit, self.settings, self.breaks)
         _, seconds, _ = self.nominate(context)
-        if seconds and seconds[0].bic_change < -self.settings.bic_margin:
-            return seconds[0].fit.bic, seconds[0].effect
-        return first.fit.bic, "nothing"
+        seconds = [c for c in seconds if c.bic_change < -self.settings.bic_margin]
+        if self.anchored and seconds:
+            seconds, _ = self.rank_by_gap(seconds)
+        fit, name = (seconds[0].fit, seconds[0].effect) if seconds else (first.fit, "nothing")
+        return fit.bic, measure_gap(fit.model, self.u, self.y, self.split).gap, name
 
     def break_tie(
         self, report: GapReport, candidates: list[_Candidate], chosen: _Candidate
@@ -279,18 +305,24 @@ class _Run:
         if not rivals:
             return None
         rival = rivals[0]
-        bic_chosen, next_chosen = self.follow_up(chosen)
-        bic_rival, next_rival = self.follow_up(rival)
-        if not bic_rival < bic_chosen - margin:
-            return None
+        bic_chosen, gap_chosen, next_chosen = self.follow_up(chosen)
+        bic_rival, gap_rival, next_rival = self.follow_up(rival)
+        if self.anchored:  # see `anchored`: the validation gaps decide
+            better = f"its validation gap {gap_rival:.4f} is lower than {gap_chosen:.4f}"
+            if not gap_rival < (1.0 - self.settings.min_gap_drop) * gap_chosen:
+                return None
+        else:
+            better = f"the model's BIC is {bic_chosen - bic_rival:.1f} lower"
+            if not bic_rival < bic_chosen - margin:
+                return None
         after = measure_gap(rival.fit.model, self.u, self.y, self.split)
         ok, verdict = self.judge(report, after, rival.bic_change)
         if not ok:
             return None
         note = (
             f"{verdict}; preferred to {chosen.effect} (BIC {chosen.bic_change:+.1f} alone, a "
-            f"near tie): followed by {next_rival} the model's BIC is "
-            f"{bic_chosen - bic_rival:.1f} lower than {chosen.effect} followed by {next_chosen}"
+            f"near tie): followed by {next_rival} {better} than {chosen.effect} followed by "
+            f"{next_chosen}"
         )
         return rival, after, note
 
@@ -442,13 +474,16 @@ def diagnose(
             break
         accepted: list[tuple[_Candidate, GapReport, str]] = []
         alone: dict[str, str] = {}
+        gaps: dict[int, GapReport] = {}
+        if run.anchored:
+            candidates, gaps = run.rank_by_gap(candidates)
         for candidate in candidates:
             if accepted:
                 trials.append(
                     Trial(candidate.effect, candidate.bic_change, None, False, "not needed")
                 )
                 continue
-            after = measure_gap(candidate.fit.model, uu, yy, split)
+            after = gaps.get(id(candidate)) or measure_gap(candidate.fit.model, uu, yy, split)
             ok, verdict = run.judge(report, after, candidate.bic_change)
             trials.append(Trial(candidate.effect, candidate.bic_change, after.gap, ok, verdict))
             alone[candidate.effect] = verdict
@@ -491,22 +526,22 @@ def diagnose(
             current, report = candidate.fit, after
             reports.append(report)
     if len(steps) >= 2:
-        for effect in [step.effect for step in steps]:
+        for effect in dict.fromkeys(step.effect for step in steps):
             pruned = run.earns_place(current, report, effect)
             if pruned is None:
                 continue
             current, report, note = pruned
-            index = [step.effect for step in steps].index(effect)
-            del steps[index]
-            del reports[index + 1]
+            keep = [i for i, step in enumerate(steps) if step.effect != effect]
+            steps = [steps[i] for i in keep]
+            reports = [reports[0], *(reports[i + 1] for i in keep)]
             reports[-1] = report
-            last = steps[-1]
-            steps[-1] = replace(
-                last,
-                evidence=f"{last.evidence}; at the end {note}, so it was dropped",
-                gap_after=report.gap,
-                model=current.model,
-            )
+            if steps:
+                steps[-1] = replace(
+                    steps[-1],
+                    evidence=f"{steps[-1].evidence}; at the end {note}, so it was dropped",
+                    gap_after=report.gap,
+                    model=current.model,
+                )
             reason += f"; {note}, so it was dropped"
             if len(steps) < 2:
                 break
