@@ -363,7 +363,8 @@ def operation_case(
     * ``time_delay``: a dead time of 3-8 ms;
     * ``output_offset``: an encoder zero 0.15-0.6 rad away (larger than the dead zones);
     * ``gap_drift``: both dead zones growing 50-150% over the record;
-    * ``saturation``: an output limit cutting 5-15% of the output range on one side;
+    * ``saturation``: an output limit cutting 5-15% of the output range on one side (of the
+      range the first 70% of the record reaches);
     * ``input_lag``: the servo's first-order lag of 5-20 ms before the backlash;
     * ``periodic_error``: a runout of 0.15-0.4 degrees with period 0.25-0.8 rad of load
       travel, with a second harmonic of up to half its size on half the records.
@@ -443,7 +444,10 @@ def operation_case(
     side = float(rng.uniform()) < 0.5
     depth = float(rng.uniform(0.05, 0.15))
     if draw_limit:
+        # the limit cuts into the range the first 70% of the record reaches: the part a
+        # diagnosis fits on (a limit first reached in the held-out part cannot be seen there)
         free = operation_record(settings, seed, hidden=HiddenEffects(**hidden)).x_all
+        free = free[: int(0.7 * free.size)]
         cut = depth * float(np.ptp(free))
         if side:
             hidden["limit"] = (None, float(np.max(free)) - cut)

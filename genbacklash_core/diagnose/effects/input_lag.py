@@ -52,8 +52,11 @@ class InputLag:
     name = "input_lag"
 
     def applicable(self, model: AugmentedModel) -> bool:
-        """Only while the model has no input lag."""
-        return model.input_lag == 0.0
+        """Only while the model has no input lag and no linear block: once a linear block
+        follows the backlash its orders absorb a lag before it wherever a branch is engaged,
+        and the two differ only while the play is crossed (a servo lag found first may still
+        be followed by a load lag)."""
+        return model.input_lag == 0.0 and not model.cascade
 
     def detect(self, context: Context) -> Detection:
         """Trial-direction tests of a few poles; the best one counts (Bonferroni)."""
