@@ -136,3 +136,28 @@ def test_two_effects_are_named_largest_first() -> None:
     # the servo lag moves the output by more than the runout does, so it comes first
     assert result.effects[0] == "input_lag"
     assert result.floor is not None and result.gap_final < 2.0 * result.floor.gap
+
+
+def test_an_effect_that_does_not_earn_its_place_is_dropped() -> None:
+    """The end-of-run check of two effects or more: refitted without an effect the data do
+    not need, the model is as good (the effect goes); without one they need, it is not."""
+    from dataclasses import replace
+
+    from genbacklash_core.diagnose import DiagnoseSettings, measure_gap, synthetic_case
+    from genbacklash_core.diagnose.effects import CATALOG
+    from genbacklash_core.diagnose.fit import fit_model
+    from genbacklash_core.diagnose.loop import _Run
+
+    case = synthetic_case(["time_delay"], seed=13, n_samples=2000)
+    split = split_record(case.u.size, 0.3)
+    est = split.estimation
+    run = _Run(case.u, case.y, split, CATALOG, DiagnoseSettings())
+    padded = replace(case.truth, offset=0.01)  # a delay the data need, an offset they do not
+    final = fit_model(padded, case.u[est], case.y[est])
+    report = measure_gap(final.model, case.u, case.y, split)
+    dropped = run.earns_place(final, report, "output_offset")
+    assert dropped is not None
+    refit, after, note = dropped
+    assert refit.model.offset == 0.0 and refit.model.delay == case.truth.delay
+    assert after.gap < 1.05 * report.gap and "does not earn its place" in note
+    assert run.earns_place(final, report, "time_delay") is None
