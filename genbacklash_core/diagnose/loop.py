@@ -184,10 +184,12 @@ def _judge(
     t, p = gap_drop_test(y_val, report.y_sim[val], candidate.y_sim[val])
     drop = 1.0 - candidate.gap / report.gap if report.gap > 0 else 0.0
     excess = ""
+    least = settings.min_gap_drop
     if floor is not None and report.gap > floor:
         # measured against what quantisation and noise allow: the share of the excess closed
         drop = (report.gap - candidate.gap) / (report.gap - floor)
         excess = f" of the excess over the floor {floor:.4f}"
+        least = settings.min_excess_drop
     numbers = (
         f"BIC {bic_change:+.1f} on the estimation data, validation gap {report.gap:.4f} -> "
         f"{candidate.gap:.4f} ({-100 * drop:+.1f}%{excess}, one-sided test t = {t:.1f}, "
@@ -195,10 +197,9 @@ def _judge(
     )
     if bic_change > -settings.bic_margin:
         return False, f"rejected: the BIC does not drop by {settings.bic_margin:g} ({numbers})"
-    if drop < settings.min_gap_drop:
+    if drop < least:
         return False, (
-            f"rejected: the validation gap drops less than {100 * settings.min_gap_drop:g}%"
-            f"{excess} ({numbers})"
+            f"rejected: the validation gap drops less than {100 * least:g}%{excess} ({numbers})"
         )
     if p >= settings.gap_alpha:
         return False, f"rejected: the gap drop is not significant ({numbers})"
