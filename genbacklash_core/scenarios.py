@@ -56,6 +56,7 @@ __all__ = [
     "OPERATION_BACKLASH",
     "PHASE_KINDS",
     "STRAIGHT_BACKLASH",
+    "HiddenEffects",
     "OperationRecord",
     "OperationSettings",
     "operation_record",
@@ -183,6 +184,127 @@ class OperationSettings:
         return 2.0 * math.pi / self.counts_per_rev if self.counts_per_rev else 0.0
 
 
+@dataclass(frozen=True)
+class HiddenEffects:
+    """Effects of a drivetrain beyond its backlash, for records with a known missing effect.
+
+    The chain, per encoder sampling instant ``t``:
+
+        command (held) -> dead time -> servo lag -> backlash -> load lag -> periodic error,
+        offset -> limit -> reading (noise, quantisation)
+
+    Attributes
+    ----------
+    delay : float
+        Dead time between the command and the motor, seconds (the held command at
+        ``t - delay`` drives the motor).
+    input_lag : float
+        Time constant of the servo's first-order lag, seconds: the motor position ``m``
+        follows the held command by ``dm/dt = (v - m) / input_lag`` (solved exactly over each
+        sampling interval, the command switching at its stamp). 0: the motor follows at once.
+    load_lag : float
+        Time constant of a first-order lag between the backlash output and the load,
+        seconds (linear dynamics after the backlash): ``z_k = p z_{k-1} + (1 - p) x_{k-1}``,
+        ``p = exp(-(t_k - t_{k-1}) / load_lag)``.
+    offset : float
+        Added to the load position (an encoder zero that is not the backlash's), radians.
+    limit : (float or None, float or None)
+        Lower and upper limits of the output (a hard stop or a sensor range), radians.
+    period : float
+        Period in load position of the periodic error (gear runout, encoder eccentricity),
+        radians; 0: none.
+    harmonics : tuple of (float, float)
+        ``(amplitude, phase)`` of harmonics ``1, 2, ..`` of the periodic error:
+        ``e(z) = sum_j A_j sin(2 pi j z / period + phi_j)``.
+
+    Examples
+    --------
+    >>> HiddenEffects(delay=0.005).delay
+    0.005
+    >>> HiddenEffects(period=0.5)
+    Traceback (most recent call last):
+    ...
+    genbacklash_core.errors.GenBacklashError: a periodic error needs a period > 0 and harmonics
+    """
+
+    delay: float = 0.0
+    input_lag: float = 0.0
+    load_lag: float = 0.0
+    offset: float = 0.0
+    limit: tuple[float | None, float | None] = (None, None)
+    period: float = 0.0
+    harmonics: tuple[tuple[float, float], ...] = ()
+
+    def __post_init__(self) -> None:
+        for name in ("delay", "input_lag", "load_lag", "period"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0.0):
+                raise GenBacklashError(f"{name} must be a number >= 0, got {value!r}")
+        if not math.isfinite(self.offset):
+            raise GenBacklashError(f"offset must be finite, got {self.offset!r}")
+        low, high = self.limit
+        if low is not None and high is not None and not low < high:
+            raise GenBacklashError(f"limit must be (low, high) with low < high, got {self.limit}")
+        if (self.period > 0.0) != bool(self.harmonics):
+            raise GenBacklashError("a periodic error needs a period > 0 and harmonics")
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """The diagnose catalog names of the effects present (GUIDE §4)."""
+        present = (
+            (self.delay > 0.0, "time_delay"),
+            (self.input_lag > 0.0, "input_lag"),
+            (self.load_lag > 0.0, "linear_dynamics"),
+            (self.offset != 0.0, "output_offset"),
+            (self.limit != (None, None), "saturation"),
+            (self.period > 0.0, "periodic_error"),
+        )
+        return tuple(name for flag, name in present if flag)
+
+    def motor(self, cmd_t: IntArray, values: FloatArray, t: IntArray) -> FloatArray:
+        """The backlash input at the sampling instants ``t``: the commands (stamps ``cmd_t``)
+        delayed and lagged."""
+        delay_ns = round(self.delay * 1e9)
+        k = np.maximum(np.searchsorted(cmd_t, t - delay_ns, side="right") - 1, 0)
+        held = np.asarray(values[k], dtype=np.float64)
+        if self.input_lag <= 0.0:
+            return held
+        tau = self.input_lag * 1e9
+        switch = cmd_t[k] + delay_ns  # when the command in force at t_k took over
+        out = np.empty_like(held)
+        m = float(held[0])
+        out[0] = m
+        for i in range(1, held.size):
+            old, new = float(held[i - 1]), float(held[i])
+            if old != new:  # toward the old command until the switch, then toward the new
+                s = min(max(float(switch[i]), float(t[i - 1])), float(t[i]))
+                m = old + (m - old) * math.exp(-(s - float(t[i - 1])) / tau)
+                m = new + (m - new) * math.exp(-(float(t[i]) - s) / tau)
+            else:
+                m = new + (m - new) * math.exp(-(float(t[i]) - float(t[i - 1])) / tau)
+            out[i] = m
+        return out
+
+    def load(self, x: FloatArray, t: IntArray) -> FloatArray:
+        """The output before noise for the backlash output ``x`` at the instants ``t``."""
+        z = np.asarray(x, dtype=np.float64)
+        if self.load_lag > 0.0:
+            p = np.exp(-np.diff(t.astype(np.float64)) / (self.load_lag * 1e9))
+            lagged = np.empty_like(z)
+            lagged[0] = z[0]
+            for i in range(1, z.size):
+                lagged[i] = p[i - 1] * lagged[i - 1] + (1.0 - p[i - 1]) * z[i - 1]
+            z = lagged
+        out = z + self.offset
+        if self.period > 0.0:
+            for j, (amplitude, phase) in enumerate(self.harmonics, 1):
+                out = out + amplitude * np.sin(2.0 * math.pi * j * z / self.period + phase)
+        low, high = self.limit
+        if low is not None or high is not None:
+            out = np.clip(out, -np.inf if low is None else low, np.inf if high is None else high)
+        return np.asarray(out, dtype=np.float64)
+
+
 @dataclass(frozen=True, eq=False)
 class OperationRecord:
     """A simulated record and its truth.
@@ -205,6 +327,11 @@ class OperationRecord:
         Readings that arrive (the others are lost).
     c_left, c_right : ndarray
         The true dead zones at each instant (they change with wear).
+    phase_starts : tuple of (str, float)
+        Each phase's kind and start, seconds.
+    hidden : HiddenEffects or None
+        The effects beyond the backlash the record was made with (``x_all`` is then the
+        output before noise, not the backlash output).
     """
 
     settings: OperationSettings
@@ -219,6 +346,7 @@ class OperationRecord:
     c_left: FloatArray
     c_right: FloatArray
     phase_starts: tuple[tuple[str, float], ...] = field(default=())
+    hidden: HiddenEffects | None = None
 
     @property
     def truth(self) -> GeneralBacklash:
@@ -441,13 +569,16 @@ def drive(
     noise: float = 0.0,
     quantum: float = 0.0,
     loss: float = 0.0,
+    hidden: HiddenEffects | None = None,
 ) -> tuple[
     IntArray, IntArray, FloatArray, FloatArray, FloatArray, BoolArray, FloatArray, FloatArray
 ]:
     """The drivetrain's time line for commands ``values`` at the nominal command ticks (see
     the module notes): ``(command stamps, reading stamps, held input, load, reading,
     received, c_left, c_right)``, every reading included. Draws from ``rng`` in this order:
-    command jitter, stamp jitter, noise, loss (each only when non-zero, loss always)."""
+    command jitter, stamp jitter, noise, loss (each only when non-zero, loss always).
+    ``hidden`` adds effects beyond the backlash (:class:`HiddenEffects`; it draws nothing):
+    the held input stays the command, the load is the output before noise."""
     n_cmd = values.size
     cmd_period = 1e9 / command_rate
     cmd_t = np.round(np.arange(n_cmd) * cmd_period).astype(np.int64)
@@ -470,8 +601,11 @@ def drive(
         [float(np.mean(factor[s : min(s + _BLOCK, n)])) for s in range(0, n, _BLOCK)], _BLOCK
     )[:n]
     c_left, c_right = model.c_left * block_factor, model.c_right * block_factor
-    x0 = 0.5 * float(model.left(u[:1])[0] + model.right(u[:1])[0])  # at rest, mid-gap
-    x = simulate_worn(model, u, x0, c_left, c_right)
+    v = u if hidden is None else hidden.motor(cmd_t, values, t)
+    x0 = 0.5 * float(model.left(v[:1])[0] + model.right(v[:1])[0])  # at rest, mid-gap
+    x = simulate_worn(model, v, x0, c_left, c_right)
+    if hidden is not None:
+        x = hidden.load(x, t)
     y = x + (rng.normal(0.0, noise, n) if noise > 0 else 0.0)
     if quantum > 0:
         y = np.round(y / quantum) * quantum
@@ -480,7 +614,9 @@ def drive(
     return cmd_t, t, u, x, np.asarray(y, dtype=np.float64), received, c_left, c_right
 
 
-def operation_record(settings: OperationSettings | None = None, seed: int = 0) -> OperationRecord:
+def operation_record(
+    settings: OperationSettings | None = None, seed: int = 0, *, hidden: HiddenEffects | None = None
+) -> OperationRecord:
     """Simulate a drivetrain in operation (see the module notes).
 
     Parameters
@@ -489,6 +625,11 @@ def operation_record(settings: OperationSettings | None = None, seed: int = 0) -
         Default: 60 s of ``"operation"`` with :data:`OPERATION_BACKLASH`.
     seed : int
         Seeds everything random (motions, jitter, loss, noise).
+    hidden : HiddenEffects, optional
+        Effects of the drivetrain beyond its backlash (a servo lag, a dead time, a load lag,
+        an encoder offset, an output limit, a periodic error); none by default. They draw
+        nothing from the random stream: the same seed gives the same motion, stamps, noise
+        and losses with and without them.
     """
     cfg = OperationSettings() if settings is None else settings
     if not isinstance(cfg, OperationSettings):
@@ -507,6 +648,7 @@ def operation_record(settings: OperationSettings | None = None, seed: int = 0) -
         noise=cfg.noise,
         quantum=cfg.quantum,
         loss=cfg.loss,
+        hidden=hidden,
     )
     cmd_t, t, u, x, y, received, c_left, c_right = driven
     return OperationRecord(
@@ -522,4 +664,5 @@ def operation_record(settings: OperationSettings | None = None, seed: int = 0) -
         c_left=c_left,
         c_right=c_right,
         phase_starts=phase_starts,
+        hidden=hidden,
     )

@@ -12,7 +12,11 @@
    time and a lag by the shape of the error step response (a box or a decay), so only the one
    the evidence points to is nominated (both when it is unclear).
 4. Each nominee's augmentation is fitted on the estimation data; they are ranked by the change
-   of the BIC, the same yardstick for every effect - not by the order they are tried in.
+   of the BIC, the same yardstick for every effect - not by the order they are tried in. With
+   lost readings in the estimation data those that lower the BIC by the margin are ranked by
+   their validation gap instead (see ``_Run.anchored``): a model without a linear block
+   restarts its simulation at the reading after each loss, a cascade cannot, so their
+   estimation errors are not alike.
 5. The best is accepted only if it lowers the BIC by more than a margin *and* lowers the
    validation gap significantly (a one-sided Newey-West test on the squared errors, plus a
    minimum relative drop); otherwise the next nominee is checked.
@@ -20,6 +24,15 @@
    pair against the current model: two effects can hide each other (an offset pins a dead-zone
    constant and the lag then fits badly; the offset alone extrapolates poorly). If no pair
    passes either, stop.
+7. When the accepted effect and a rival are nearly tied (the rival's BIC change within
+   ``_TIE`` of it: a servo lag before the backlash and a load lag after it look alike when a
+   dead time hides where the lag sits), each is followed by its best follow-up and the path
+   with the lower BIC is taken, the numbers in the evidence.
+8. At the end, with two effects or more, each must earn its place: the final model is refitted
+   without it, and an effect whose removal does not worsen the model (the same BIC margin
+   and significant validation-gap test as when it was added) is dropped, its step removed.
+9. Before each round the gap is compared with the floor quantisation and noise allow
+   (:mod:`.floor`): within ``floor_margin`` of it there is nothing left to explain.
 
 Lost readings (``breaks``, the sample rule of :mod:`genbacklash_core.samples`): the
 estimation segment keeps its part of the breaks, and every fit there takes them -- the
@@ -33,7 +46,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import stats
@@ -49,15 +62,18 @@ from genbacklash_core.structure import as_order
 from .context import Context, build_context
 from .effects import CATALOG, Detection, Effect
 from .fit import ModelFit, fit_model
+from .floor import noise_floor
 from .gap import GapReport, Split, measure_gap, split_record
-from .model import AugmentedModel
+from .model import AugmentedModel, without_effect
 from .result import Diagnosis, DiagnosisStep, Round, Trial
 from .settings import DiagnoseSettings
+from .spec import anchors_of
 from .stats import long_run_variance
 
 __all__ = ["StartStructure", "diagnose", "gap_drop_test"]
 
 _LOOK_AHEAD = 2  # nominees (and follow-ups of each) tried as pairs when none passes alone
+_TIE = 0.9  # a rival whose BIC change is at least this share of the best's is a near tie
 _SIGN_LAGS = 10  # lags of the input-output covariance that decide the branch sense
 
 
@@ -162,20 +178,28 @@ def _judge(
     candidate: GapReport,
     bic_change: float,
     settings: DiagnoseSettings,
+    floor: float | None = None,
 ) -> tuple[bool, str]:
     val = report.split.validation
     t, p = gap_drop_test(y_val, report.y_sim[val], candidate.y_sim[val])
     drop = 1.0 - candidate.gap / report.gap if report.gap > 0 else 0.0
+    excess = ""
+    least = settings.min_gap_drop
+    if floor is not None and report.gap > floor:
+        # measured against what quantisation and noise allow: the share of the excess closed
+        drop = (report.gap - candidate.gap) / (report.gap - floor)
+        excess = f" of the excess over the floor {floor:.4f}"
+        least = settings.min_excess_drop
     numbers = (
         f"BIC {bic_change:+.1f} on the estimation data, validation gap {report.gap:.4f} -> "
-        f"{candidate.gap:.4f} ({-100 * drop:+.1f}%, one-sided test t = {t:.1f}, p = {p:.2g})"
+        f"{candidate.gap:.4f} ({-100 * drop:+.1f}%{excess}, one-sided test t = {t:.1f}, "
+        f"p = {p:.2g})"
     )
     if bic_change > -settings.bic_margin:
         return False, f"rejected: the BIC does not drop by {settings.bic_margin:g} ({numbers})"
-    if drop < settings.min_gap_drop:
+    if drop < least:
         return False, (
-            f"rejected: the validation gap drops less than {100 * settings.min_gap_drop:g}% "
-            f"({numbers})"
+            f"rejected: the validation gap drops less than {100 * least:g}%{excess} ({numbers})"
         )
     if p >= settings.gap_alpha:
         return False, f"rejected: the gap drop is not significant ({numbers})"
@@ -205,6 +229,7 @@ class _Run:
     effects: tuple[Effect, ...]
     settings: DiagnoseSettings
     breaks: BoolArray | None = None  # of the estimation segment
+    floor: float | None = None  # the floor's gap, when the dwells measured the noise
 
     def nominate(
         self, context: Context
@@ -230,7 +255,96 @@ class _Run:
 
     def judge(self, before: GapReport, after: GapReport, bic_change: float) -> tuple[bool, str]:
         """Accept an augmentation? (BIC margin, validation gap drop, its significance)."""
-        return _judge(self.y[self.split.validation], before, after, bic_change, self.settings)
+        return _judge(
+            self.y[self.split.validation], before, after, bic_change, self.settings, self.floor
+        )
+
+    @property
+    def anchored(self) -> bool:
+        """True when the estimation data have lost readings: then the fits of models that
+        restart their simulation at the reading after a loss and of models that cannot (a
+        linear block's state is not one reading) are not comparable by their estimation
+        error, and candidates are ranked by the free-run validation gap instead."""
+        return anchors_of(self.breaks) is not None
+
+    def rank_by_gap(
+        self, candidates: list[_Candidate]
+    ) -> tuple[list[_Candidate], dict[int, GapReport]]:
+        """The candidates that lower the BIC by the margin, by their validation gap (lowest
+        first), then the others; and their gap reports (by ``id``)."""
+        margin = self.settings.bic_margin
+        good = [c for c in candidates if c.bic_change < -margin]
+        gaps = {id(c): measure_gap(c.fit.model, self.u, self.y, self.split) for c in good}
+        good.sort(key=lambda c: gaps[id(c)].gap)
+        return good + [c for c in candidates if c.bic_change >= -margin], gaps
+
+    def follow_up(self, first: _Candidate) -> tuple[float, float, str]:
+        """The BIC and validation gap after ``first`` and its best follow-up (``first``'s own
+        when none lowers the BIC by the margin), and that follow-up's name ("nothing")."""
+        est = self.split.estimation
+        context = build_context(self.u[est], self.y[est], first.fit, self.settings, self.breaks)
+        _, seconds, _ = self.nominate(context)
+        seconds = [c for c in seconds if c.bic_change < -self.settings.bic_margin]
+        if self.anchored and seconds:
+            seconds, _ = self.rank_by_gap(seconds)
+        fit, name = (seconds[0].fit, seconds[0].effect) if seconds else (first.fit, "nothing")
+        return fit.bic, measure_gap(fit.model, self.u, self.y, self.split).gap, name
+
+    def break_tie(
+        self, report: GapReport, candidates: list[_Candidate], chosen: _Candidate
+    ) -> tuple[_Candidate, GapReport, str] | None:
+        """A rival nearly tied with ``chosen`` (see the module notes, step 7) that wins once
+        both are followed by their best follow-up, judged as ``chosen`` was; else None."""
+        margin = self.settings.bic_margin
+        rivals = [
+            c
+            for c in candidates
+            if c is not chosen
+            and c.bic_change < -margin
+            and c.bic_change <= _TIE * chosen.bic_change
+        ]
+        if not rivals:
+            return None
+        rival = rivals[0]
+        bic_chosen, gap_chosen, next_chosen = self.follow_up(chosen)
+        bic_rival, gap_rival, next_rival = self.follow_up(rival)
+        if self.anchored:  # see `anchored`: the validation gaps decide
+            better = f"its validation gap {gap_rival:.4f} is lower than {gap_chosen:.4f}"
+            if not gap_rival < (1.0 - self.settings.min_gap_drop) * gap_chosen:
+                return None
+        else:
+            better = f"the model's BIC is {bic_chosen - bic_rival:.1f} lower"
+            if not bic_rival < bic_chosen - margin:
+                return None
+        after = measure_gap(rival.fit.model, self.u, self.y, self.split)
+        ok, verdict = self.judge(report, after, rival.bic_change)
+        if not ok:
+            return None
+        note = (
+            f"{verdict}; preferred to {chosen.effect} (BIC {chosen.bic_change:+.1f} alone, a "
+            f"near tie): followed by {next_rival} {better} than {chosen.effect} followed by "
+            f"{next_chosen}"
+        )
+        return rival, after, note
+
+    def earns_place(
+        self, final: ModelFit, final_report: GapReport, effect: str
+    ) -> tuple[ModelFit, GapReport, str] | None:
+        """Refit the final model without ``effect``; when that is not significantly worse
+        (the acceptance test, reversed), return the refit, its gap and why; else None."""
+        reduced = without_effect(final.model, effect)
+        if reduced is None:
+            return None
+        est = self.split.estimation
+        try:
+            refit = fit_model(reduced, self.u[est], self.y[est], breaks=self.breaks)
+        except GenBacklashError:
+            return None
+        after = measure_gap(refit.model, self.u, self.y, self.split)
+        ok, verdict = self.judge(after, final_report, final.bic - refit.bic)
+        if ok:
+            return None
+        return refit, after, f"{effect} does not earn its place next to the others ({verdict})"
 
     def look_ahead(
         self, report: GapReport, candidates: list[_Candidate], alone: dict[str, str]
@@ -320,7 +434,8 @@ def diagnose(
     u_est, y_est = uu[split.estimation], yy[split.estimation]
     b_est = None if bb is None else bb[split.estimation]
     check_excitation(u_est, y_est, 4)
-    run = _Run(uu, yy, split, effects, settings, b_est)
+    floor = noise_floor(uu, yy, split.validation, bb)
+    run = _Run(uu, yy, split, effects, settings, b_est, floor.gap if floor.known else None)
 
     current = _start_fit(start, u_est, y_est, b_est)
     initial = current
@@ -332,6 +447,13 @@ def diagnose(
     while True:
         context = build_context(u_est, y_est, current, settings, b_est)
         analysis = context.analysis
+        if floor.known and report.gap <= settings.floor_margin * floor.gap:
+            rounds.append(Round(report.gap, analysis, (), ()))
+            reason = (
+                f"the gap {report.gap:.4f} is within {settings.floor_margin:g} times the floor: "
+                f"{floor.describe()}; nothing is left for an effect to explain"
+            )
+            break
         noise = analysis.consistent_with_noise(settings.alpha)
         tests = (
             f"Ljung-Box p = {analysis.ljung_box.p_value:.2g}, input cross-correlation "
@@ -353,18 +475,30 @@ def diagnose(
             break
         accepted: list[tuple[_Candidate, GapReport, str]] = []
         alone: dict[str, str] = {}
+        gaps: dict[int, GapReport] = {}
+        if run.anchored:
+            candidates, gaps = run.rank_by_gap(candidates)
         for candidate in candidates:
             if accepted:
                 trials.append(
                     Trial(candidate.effect, candidate.bic_change, None, False, "not needed")
                 )
                 continue
-            after = measure_gap(candidate.fit.model, uu, yy, split)
+            after = gaps.get(id(candidate)) or measure_gap(candidate.fit.model, uu, yy, split)
             ok, verdict = run.judge(report, after, candidate.bic_change)
             trials.append(Trial(candidate.effect, candidate.bic_change, after.gap, ok, verdict))
             alone[candidate.effect] = verdict
             if ok:
                 accepted = [(candidate, after, verdict)]
+        if len(accepted) == 1:
+            swapped = run.break_tie(report, candidates, accepted[0][0])
+            if swapped is not None:
+                trials.append(
+                    Trial(
+                        swapped[0].effect, swapped[0].bic_change, swapped[1].gap, True, swapped[2]
+                    )
+                )
+                accepted = [swapped]
         rounds.append(Round(report.gap, analysis, detections, tuple(trials)))
         if not accepted and len(steps) + 2 <= settings.max_steps:
             accepted, extra = run.look_ahead(report, candidates, alone)
@@ -392,6 +526,26 @@ def diagnose(
             )
             current, report = candidate.fit, after
             reports.append(report)
+    if len(steps) >= 2:
+        for effect in dict.fromkeys(step.effect for step in steps):
+            pruned = run.earns_place(current, report, effect)
+            if pruned is None:
+                continue
+            current, report, note = pruned
+            keep = [i for i, step in enumerate(steps) if step.effect != effect]
+            steps = [steps[i] for i in keep]
+            reports = [reports[0], *(reports[i + 1] for i in keep)]
+            reports[-1] = report
+            if steps:
+                steps[-1] = replace(
+                    steps[-1],
+                    evidence=f"{steps[-1].evidence}; at the end {note}, so it was dropped",
+                    gap_after=report.gap,
+                    model=current.model,
+                )
+            reason += f"; {note}, so it was dropped"
+            if len(steps) < 2:
+                break
     return Diagnosis(
         steps=tuple(steps),
         gap_initial=reports[0].gap,
@@ -403,4 +557,5 @@ def diagnose(
         reports=tuple(reports),
         rounds=tuple(rounds),
         reason=reason,
+        floor=floor,
     )

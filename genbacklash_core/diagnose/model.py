@@ -2,11 +2,15 @@
 
 The model output is
 
-    y(t) = sat( G(q) x(t) + o ),    x = general backlash of u(t - d) with gaps c(t) = c + k s(t)
+    y(t) = sat( z(t) + o + E(z(t)) ),    z = G(q) x,
+    x = general backlash of v with gaps c(t) = c + k s(t),
+    v(t) = a v(t-1) + (1 - a) u(t - d)
 
 where the backlash is eqs. (11)-(13)/(20), ``G(q)`` the linear block of eq. (30) (absent for a
-backlash alone, where ``y = x + o``), ``d`` a dead time in samples, ``o`` an output offset,
-``k`` a gap drift (wear) along ``s(t)`` = the sample index or the input travel so far, and
+backlash alone, where ``z = x``), ``d`` a dead time in samples, ``a`` the pole of the servo's
+first-order lag before the backlash (``input_lag``; 0: none), ``o`` an output offset, ``k`` a
+gap drift (wear) along ``s(t)`` = the sample index or the input travel so far, ``E`` an error
+periodic in the load position ``z`` (``periodic_error``: harmonics of a period ``P``) and
 ``sat`` an output limit. The base model classes stay untouched; this wrapper composes them.
 """
 
@@ -14,7 +18,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Literal
 
 import numpy as np
@@ -26,7 +30,30 @@ from genbacklash_core.errors import GenBacklashError
 from genbacklash_core.linear import LinearBlock
 from genbacklash_core.structure import as_order
 
-__all__ = ["AugmentedModel", "Drift", "DriftBasis", "Saturation", "drift_coordinate"]
+__all__ = [
+    "AugmentedModel",
+    "Drift",
+    "DriftBasis",
+    "PeriodicError",
+    "Saturation",
+    "drift_coordinate",
+    "lag_pole",
+    "without_effect",
+]
+
+MAX_LAG_POLE = 0.995  # an input lag's pole above this is a time constant of > 200 samples
+
+
+def lag_pole(time_constant: float) -> float:
+    """The pole ``a = exp(-1 / T)`` of a first-order lag with time constant ``T`` samples.
+
+    >>> round(lag_pole(10.0), 4)
+    0.9048
+    """
+    if not time_constant > 0.0:
+        raise GenBacklashError(f"the time constant must be > 0 samples, got {time_constant}")
+    return math.exp(-1.0 / time_constant)
+
 
 DriftBasis = Literal["time", "travel"]
 _BASES = ("time", "travel")
@@ -120,8 +147,71 @@ class Saturation:
 
 
 @dataclass(frozen=True)
+class PeriodicError:
+    """An output error periodic in the load position ``z`` (gear runout, encoder eccentricity):
+    ``E(z) = sum_j cos_j cos(2 pi j z / P) + sin_j sin(2 pi j z / P)``, ``j = 1..K``.
+
+    Parameters
+    ----------
+    period : float
+        ``P``, in units of the output (radians of load travel, say).
+    cos, sin : tuple of float
+        The coefficients of harmonics ``1..K`` (one each per harmonic).
+
+    Examples
+    --------
+    >>> e = PeriodicError(0.5, (0.0,), (0.01,))
+    >>> round(float(e(np.array([0.125]))[0]), 6)
+    0.01
+    >>> e.amplitudes
+    (0.01,)
+    """
+
+    period: float
+    cos: tuple[float, ...]
+    sin: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        period = self.period
+        if isinstance(period, bool) or not isinstance(period, (int, float, np.floating)):
+            raise GenBacklashError(f"the period must be a number, got {period!r}")
+        if not (math.isfinite(period) and period > 0.0):
+            raise GenBacklashError(f"the period must be finite and > 0, got {period}")
+        object.__setattr__(self, "period", float(period))
+        cos = tuple(float(c) for c in self.cos)
+        sin = tuple(float(c) for c in self.sin)
+        if not cos or len(cos) != len(sin):
+            raise GenBacklashError(
+                f"need one cos and one sin coefficient per harmonic, got {len(cos)} and {len(sin)}"
+            )
+        if not all(math.isfinite(c) for c in (*cos, *sin)):
+            raise GenBacklashError("the coefficients of a periodic error must be finite")
+        object.__setattr__(self, "cos", cos)
+        object.__setattr__(self, "sin", sin)
+
+    @property
+    def harmonics(self) -> int:
+        """``K``."""
+        return len(self.cos)
+
+    @property
+    def amplitudes(self) -> tuple[float, ...]:
+        """The amplitude of each harmonic, ``sqrt(cos_j^2 + sin_j^2)``."""
+        return tuple(math.hypot(c, s) for c, s in zip(self.cos, self.sin, strict=True))
+
+    def __call__(self, z: FloatArray) -> FloatArray:
+        """``E(z)``."""
+        out = np.zeros_like(z, dtype=np.float64)
+        for j, (c, s) in enumerate(zip(self.cos, self.sin, strict=True), 1):
+            phase = (2.0 * math.pi * j / self.period) * z
+            out += c * np.cos(phase) + s * np.sin(phase)
+        return out
+
+
+@dataclass(frozen=True)
 class AugmentedModel:
-    """A general backlash or cascade with dead time, output offset, gap drift and saturation.
+    """A general backlash or cascade with dead time, output offset, gap drift, saturation,
+    an input lag and a periodic error.
 
     Parameters
     ----------
@@ -135,6 +225,11 @@ class AugmentedModel:
         Gap growth with time or travel (wear).
     saturation : Saturation, optional
         Output limits (a hard stop or a sensor range).
+    input_lag : float
+        Pole ``a`` in ``[0, 0.995]`` of the servo's first-order lag between the (delayed)
+        command and the backlash input: ``v(t) = a v(t-1) + (1 - a) u(t - d)``; 0: none.
+    periodic : PeriodicError, optional
+        An output error periodic in the load position.
 
     Examples
     --------
@@ -151,6 +246,8 @@ class AugmentedModel:
     offset: float = 0.0
     drift: Drift | None = None
     saturation: Saturation | None = None
+    input_lag: float = 0.0
+    periodic: PeriodicError | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.base, (GeneralBacklash, Cascade)):
@@ -171,6 +268,16 @@ class AugmentedModel:
         if self.saturation is not None and not isinstance(self.saturation, Saturation):
             raise GenBacklashError(
                 f"saturation must be a Saturation or None, got {self.saturation!r}"
+            )
+        lag = self.input_lag
+        if isinstance(lag, bool) or not isinstance(lag, (int, float, np.floating)):
+            raise GenBacklashError(f"input_lag must be a number, got {lag!r}")
+        if not 0.0 <= lag <= MAX_LAG_POLE:
+            raise GenBacklashError(f"input_lag (a pole) must be in [0, {MAX_LAG_POLE}], got {lag}")
+        object.__setattr__(self, "input_lag", float(lag))
+        if self.periodic is not None and not isinstance(self.periodic, PeriodicError):
+            raise GenBacklashError(
+                f"periodic must be a PeriodicError or None, got {self.periodic!r}"
             )
 
     @property
@@ -199,6 +306,10 @@ class AugmentedModel:
             names.append("gap_drift")
         if self.saturation is not None:
             names.append("saturation")
+        if self.input_lag != 0.0:
+            names.append("input_lag")
+        if self.periodic is not None:
+            names.append("periodic_error")
         return tuple(names)
 
     def simulate(self, u: ArrayLike, y_start: float | None = None) -> FloatArray:
@@ -226,7 +337,8 @@ class AugmentedModel:
 
         Accepts ``genbacklash identify --json`` output (``model``, ``backlash`` and, for a
         cascade, ``linear``), the ``model`` object of ``genbacklash diagnose --json`` (which
-        adds ``delay``, ``offset``, ``drift``, ``saturation``), or a whole diagnose result.
+        adds ``delay``, ``offset``, ``drift``, ``saturation``, ``input_lag``,
+        ``periodic_error``), or a whole diagnose result.
 
         >>> model = AugmentedModel(GeneralBacklash.ideal(1.0, 0.2, 0.3), delay=2)
         >>> AugmentedModel.from_dict(model.to_dict()) == model
@@ -248,6 +360,8 @@ class AugmentedModel:
                 raise GenBacklashError(f"'model' must be 'backlash' or 'cascade', got {kind!r}")
             drift = data.get("drift")
             saturation = data.get("saturation")
+            lag = data.get("input_lag")
+            periodic = data.get("periodic_error")
             return cls(
                 base,
                 delay=data.get("delay", 0),
@@ -257,6 +371,14 @@ class AugmentedModel:
                     None
                     if saturation is None
                     else Saturation(saturation.get("low"), saturation.get("high"))
+                ),
+                input_lag=0.0 if lag is None else lag["pole"],
+                periodic=(
+                    None
+                    if periodic is None
+                    else PeriodicError(
+                        periodic["period"], tuple(periodic["cos"]), tuple(periodic["sin"])
+                    )
                 ),
             )
         except (KeyError, TypeError, AttributeError) as err:
@@ -288,4 +410,64 @@ class AugmentedModel:
             if self.saturation is None
             else {"low": self.saturation.low, "high": self.saturation.high}
         )
+        out["input_lag"] = (
+            None
+            if self.input_lag == 0.0
+            else {"pole": self.input_lag, "time_constant": -1.0 / math.log(self.input_lag)}
+        )
+        periodic = self.periodic
+        out["periodic_error"] = (
+            None
+            if periodic is None
+            else {
+                "period": periodic.period,
+                "cos": list(periodic.cos),
+                "sin": list(periodic.sin),
+                "amplitudes": list(periodic.amplitudes),
+            }
+        )
         return out
+
+
+def without_effect(model: AugmentedModel, effect: str) -> AugmentedModel | None:
+    """``model`` with one of its effects taken out (a start for a refit without it), or None
+    when it does not carry ``effect``.
+
+    Curved branches become straight (the first coefficients kept); a linear block goes with
+    its static gain moved into the branch slopes; the other effects are simply removed.
+
+    >>> model = AugmentedModel(GeneralBacklash.ideal(1.0, 0.2, 0.3), delay=2, offset=0.5)
+    >>> without_effect(model, "time_delay").effects
+    ('output_offset',)
+    >>> without_effect(model, "saturation") is None
+    True
+    """
+    if effect not in model.effects:
+        return None
+    bl = model.backlash
+    if effect == "curved_branches":
+        straight = GeneralBacklash((bl.m_left[0],), bl.c_left, (bl.m_right[0],), bl.c_right)
+        base: GeneralBacklash | Cascade = (
+            Cascade(straight, model.base.linear) if isinstance(model.base, Cascade) else straight
+        )
+        return replace(model, base=base)
+    if effect == "linear_dynamics" and isinstance(model.base, Cascade):
+        gain = model.base.linear.dc_gain
+        if not (math.isfinite(gain) and gain != 0.0):
+            return None
+        scaled = GeneralBacklash(
+            tuple(gain * m for m in bl.m_left),
+            bl.c_left,
+            tuple(gain * m for m in bl.m_right),
+            bl.c_right,
+        )
+        return replace(model, base=scaled)
+    neutral: dict[str, dict[str, Any]] = {
+        "time_delay": {"delay": 0},
+        "output_offset": {"offset": 0.0},
+        "gap_drift": {"drift": None},
+        "saturation": {"saturation": None},
+        "input_lag": {"input_lag": 0.0},
+        "periodic_error": {"periodic": None},
+    }
+    return replace(model, **neutral[effect])

@@ -10,6 +10,7 @@ from genbacklash_core.errors import GenBacklashError
 
 from .effects import Detection
 from .fit import ModelFit
+from .floor import NoiseFloor
 from .gap import GapReport, Split
 from .model import AugmentedModel
 from .residuals import ResidualAnalysis
@@ -108,6 +109,8 @@ class Diagnosis:
         Every pass of the loop (the last one found nothing to add or hit the step limit).
     reason : str
         Why the loop stopped.
+    floor : NoiseFloor, optional
+        What quantisation and noise allow (the gap no model can beat).
     """
 
     steps: tuple[DiagnosisStep, ...]
@@ -120,6 +123,7 @@ class Diagnosis:
     reports: tuple[GapReport, ...]
     rounds: tuple[Round, ...]
     reason: str
+    floor: NoiseFloor | None = None
 
     def __post_init__(self) -> None:
         _check_gap("gap_initial", self.gap_initial)
@@ -150,21 +154,25 @@ class Diagnosis:
         out["converged"] = self.fit.converged
         out["reason"] = self.fit.reason
         out["fit"] = {"nrmse": self.fit.nrmse}
-        out.update(shape)  # delay, offset, drift, saturation
+        out.update(shape)  # delay, offset, drift, saturation, input_lag, periodic_error
         return out
 
     def to_dict(self) -> dict[str, Any]:
-        """The JSON object of ``genbacklash diagnose --json`` (GUIDE §4)."""
+        """The JSON object of ``genbacklash diagnose --json`` (GUIDE §4), plus
+        ``gap_floor``: the gap quantisation and noise allow (null when not measured)."""
         return {
             "steps": [step.to_dict() for step in self.steps],
             "gap_initial": self.gap_initial,
             "gap_final": self.gap_final,
+            "gap_floor": None if self.floor is None else self.floor.gap,
             "model": self.model_dict(),
         }
 
     def summary(self) -> str:
         """A few readable lines: the steps, the gaps and why the loop stopped."""
         lines = [f"validation gap {self.gap_initial:.4f} with the starting model"]
+        if self.floor is not None:
+            lines.append(self.floor.describe())
         for i, step in enumerate(self.steps, 1):
             lines.append(
                 f"{i}. {step.effect}: gap {step.gap_before:.4f} -> {step.gap_after:.4f}. "

@@ -27,6 +27,9 @@ class DiagnoseSettings:
         An augmentation must lower the BIC on the estimation data by more than this.
     min_gap_drop : float
         ...and lower the validation gap by at least this fraction,
+    min_excess_drop : float
+        ...or, when the record's dwells measured the floor quantisation and noise allow, close
+        at least this share of the gap's excess over that floor,
     gap_alpha : float
         ...significantly: a one-sided test on the squared validation errors (Newey-West).
     max_steps : int
@@ -35,6 +38,10 @@ class DiagnoseSettings:
         Longest dead time searched, in samples.
     max_degree : int
         Highest branch degree tried.
+    floor_margin : float
+        Stop when the validation gap is within this factor of what quantisation and noise
+        allow (:mod:`~genbacklash_core.diagnose.floor`; only when the record's dwells measured
+        the noise).
 
     Examples
     --------
@@ -56,6 +63,8 @@ class DiagnoseSettings:
     max_steps: int = 6
     max_delay: int = 20
     max_degree: int = 5
+    floor_margin: float = 1.3
+    min_excess_drop: float = 0.1
 
     def __post_init__(self) -> None:
         for name in ("validation", "alpha", "screen_alpha", "min_share", "gap_alpha"):
@@ -64,10 +73,15 @@ class DiagnoseSettings:
                 raise GenBacklashError(f"{name} must be a number, got {value!r}")
             if not 0.0 < value < 1.0:
                 raise GenBacklashError(f"{name} must be in (0, 1), got {value}")
-        for name in ("bic_margin", "min_gap_drop"):
+        for name in ("bic_margin", "min_gap_drop", "min_excess_drop"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or value < 0:
                 raise GenBacklashError(f"{name} must be a number >= 0, got {value!r}")
+        margin = self.floor_margin
+        if isinstance(margin, bool) or not isinstance(margin, (int, float)) or not margin >= 1.0:
+            raise GenBacklashError(f"floor_margin must be a number >= 1, got {margin!r}")
+        if not self.min_excess_drop < 1.0:
+            raise GenBacklashError(f"min_excess_drop must be < 1, got {self.min_excess_drop}")
         if not self.min_gap_drop < 1.0:
             raise GenBacklashError(f"min_gap_drop must be < 1, got {self.min_gap_drop}")
         for name in ("max_steps", "max_delay", "max_degree"):

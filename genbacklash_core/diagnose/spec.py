@@ -1,13 +1,17 @@
 """The augmented model as a flat parameter vector: simulation, Jacobian and validity.
 
 Layout: the base model's natural parameters (:class:`~genbacklash_core.structure.Structure`),
-then, when present, ``offset``, ``drift rate``, ``saturation low``, ``saturation high``. The
-dead time and the drift basis are structural (not fitted by gradient steps).
+then, when present, ``offset``, ``drift rate``, ``saturation low``, ``saturation high``, the
+input lag's pole, and a periodic error's period and ``cos_1, sin_1, .., cos_K, sin_K``. The
+dead time, the drift basis and the number of harmonics are structural (not fitted by gradient
+steps).
 
 The Jacobian generalises :mod:`genbacklash_core.refine`: while a branch is engaged the backlash
 output is the branch value, so its sensitivity is the branch derivative; while it holds, the
 sensitivity is the one at the last engagement. With a drifting gap the branch derivative in
-``k`` is the one in ``c`` times ``s(t)``.
+``k`` is the one in ``c`` times ``s(t)``. With an input lag the branch derivative in its pole
+``a`` is the branch slope times ``dv/da``, which obeys ``dv/da(t) = a dv/da(t-1) + v(t-1) -
+u(t-d)``; a periodic error scales every sensitivity of the load position by ``1 + E'(z)``.
 
 Lost readings (the sample rule, :mod:`genbacklash_core.samples`): the fits pass ``anchors``,
 the samples after a break, where the simulation of a model without linear dynamics restarts
@@ -32,7 +36,15 @@ from genbacklash_core.samples import restart_points
 from genbacklash_core.simulate import play_bounds
 from genbacklash_core.structure import Structure
 
-from .model import AugmentedModel, Drift, DriftBasis, Saturation, drift_coordinate
+from .model import (
+    MAX_LAG_POLE,
+    AugmentedModel,
+    Drift,
+    DriftBasis,
+    PeriodicError,
+    Saturation,
+    drift_coordinate,
+)
 
 __all__ = ["ModelSpec", "SimulationOutput", "anchors_of", "shift_input"]
 
@@ -41,11 +53,18 @@ anchors_of = restart_points  # the samples a fit restarts its simulation at
 
 
 class SimulationOutput(NamedTuple):
-    """Backlash output ``x``, pre-limit output ``y_free = G x + o`` and output ``y``."""
+    """Backlash output ``x``, pre-limit output ``y_free = z + o + E(z)`` and output ``y``;
+    ``z = G x`` the load position (None when it is ``x``)."""
 
     x: FloatArray
     y_free: FloatArray
     y: FloatArray
+    z: FloatArray | None = None
+
+    @property
+    def load(self) -> FloatArray:
+        """The load position ``z``."""
+        return self.x if self.z is None else self.z
 
 
 def shift_input(u: FloatArray, delay: int) -> FloatArray:
@@ -83,6 +102,8 @@ class ModelSpec:
     offset: bool = False
     drift: DriftBasis | None = None
     saturation: tuple[bool, bool] = (False, False)
+    input_lag: bool = False
+    harmonics: int = 0
 
     @classmethod
     def of(cls, model: AugmentedModel) -> ModelSpec:
@@ -93,6 +114,8 @@ class ModelSpec:
             model.offset != 0.0,
             None if model.drift is None else model.drift.basis,
             (False, False) if model.saturation is None else model.saturation.sides,
+            model.input_lag != 0.0,
+            0 if model.periodic is None else model.periodic.harmonics,
         )
 
     @property
@@ -103,6 +126,8 @@ class ModelSpec:
             + int(self.offset)
             + int(self.drift is not None)
             + sum(self.saturation)
+            + int(self.input_lag)
+            + (1 + 2 * self.harmonics if self.harmonics else 0)
         )
 
     @property
@@ -121,6 +146,12 @@ class ModelSpec:
             names.append("saturation_low")
         if self.saturation[1]:
             names.append("saturation_high")
+        if self.input_lag:
+            names.append("input_lag_pole")
+        if self.harmonics:
+            names.append("period")
+            for j in range(1, self.harmonics + 1):
+                names += [f"cos_{j}", f"sin_{j}"]
         return tuple(names)
 
     def _index(self) -> tuple[int | None, int | None, int | None, int | None]:
@@ -130,6 +161,14 @@ class ModelSpec:
             slots.append(k if present else None)
             k += int(present)
         return slots[0], slots[1], slots[2], slots[3]
+
+    def _extra_index(self) -> tuple[int | None, int | None]:
+        """Where the input lag's pole and the periodic error's period sit (or None)."""
+        k = self.structure.n_parameters + int(self.offset) + int(self.drift is not None)
+        k += sum(self.saturation)
+        i_lag = k if self.input_lag else None
+        k += int(self.input_lag)
+        return i_lag, (k if self.harmonics else None)
 
     def vector(self, model: AugmentedModel) -> FloatArray:
         """Flat parameters of ``model`` (which must have this spec's structure)."""
@@ -145,7 +184,23 @@ class ModelSpec:
             theta[i_low] = sat.low if sat is not None and sat.low is not None else np.nan
         if i_high is not None:
             theta[i_high] = sat.high if sat is not None and sat.high is not None else np.nan
+        self._put_extras(theta, model)
         return theta
+
+    def _put_extras(self, theta: FloatArray, model: AugmentedModel) -> None:
+        """Write the input lag and periodic error of ``model`` (neutral when it has none: a
+        pole 0, coefficients 0 and a NaN period the caller must set)."""
+        i_lag, i_period = self._extra_index()
+        if i_lag is not None:
+            theta[i_lag] = model.input_lag
+        if i_period is not None:
+            periodic = model.periodic
+            theta[i_period : i_period + 1 + 2 * self.harmonics] = 0.0
+            theta[i_period] = np.nan if periodic is None else periodic.period
+            if periodic is not None:
+                k = min(periodic.harmonics, self.harmonics)
+                theta[i_period + 1 : i_period + 1 + 2 * k : 2] = periodic.cos[:k]
+                theta[i_period + 2 : i_period + 2 + 2 * k : 2] = periodic.sin[:k]
 
     def model(self, theta: FloatArray) -> AugmentedModel:
         """The validated model object for ``theta``."""
@@ -160,12 +215,15 @@ class ModelSpec:
         drift = None
         if i_drift is not None and self.drift is not None:
             drift = Drift(float(theta[i_drift]), self.drift)
+        i_lag, _ = self._extra_index()
         return AugmentedModel(
             base,
             self.delay,
             0.0 if i_off is None else float(theta[i_off]),
             drift,
             saturation,
+            0.0 if i_lag is None else float(theta[i_lag]),
+            self.periodic_error(theta),
         )
 
     # ------------------------------------------------------------------ pieces
@@ -214,7 +272,58 @@ class ModelSpec:
             return problem
         if low is not None and high is not None and not low < high:
             return f"the saturation limits are not ordered (low={low:.3g}, high={high:.3g})"
+        i_lag, i_period = self._extra_index()
+        if i_lag is not None and not 0.0 <= theta[i_lag] <= MAX_LAG_POLE:
+            return f"the input lag's pole left [0, {MAX_LAG_POLE}] ({theta[i_lag]:.4g})"
+        if i_period is not None and not theta[i_period] > 0.0:
+            return f"the period of the periodic error is not positive ({theta[i_period]:.3g})"
         return None
+
+    def backlash_input(self, theta: FloatArray, u: FloatArray) -> FloatArray:
+        """``v``: the input delayed by the dead time and lagged by the input lag (if any)."""
+        ud = shift_input(u, self.delay)
+        i_lag, _ = self._extra_index()
+        if i_lag is None:
+            return ud
+        a = float(theta[i_lag])
+        if a == 0.0:
+            return ud
+        # v(t) = a v(t-1) + (1 - a) u(t-d), v(-1) = u(-d): the servo at rest at the start
+        v, _ = signal.lfilter([1.0 - a], [1.0, -a], ud, zi=[a * float(ud[0])])
+        return np.asarray(v, dtype=np.float64)
+
+    def _input_sensitivity(self, theta: FloatArray, u: FloatArray, v: FloatArray) -> FloatArray:
+        """``dv/da``: ``dv(t) = a dv(t-1) + v(t-1) - u(t-d)``, 0 at the start."""
+        i_lag, _ = self._extra_index()
+        a = 0.0 if i_lag is None else float(theta[i_lag])
+        ud = shift_input(u, self.delay)
+        v_prev = np.concatenate([[float(ud[0])], v[:-1]])
+        return np.asarray(signal.lfilter([1.0], [1.0, -a], v_prev - ud), dtype=np.float64)
+
+    def unread(self, theta: FloatArray, readings: FloatArray) -> FloatArray:
+        """The load position ``z`` a reading ``r = z + o + E(z)`` comes from (the fixed point
+        ``z = r - o - E(z)``, a few iterations: the periodic error is small)."""
+        _, offset, _, _, _ = self._parts(theta)
+        z = np.asarray(readings, dtype=np.float64) - offset
+        periodic = self.periodic_error(theta)
+        if periodic is None:
+            return z
+        base = z
+        for _ in range(3):
+            z = base - periodic(z)
+        return z
+
+    def periodic_error(self, theta: FloatArray) -> PeriodicError | None:
+        """The periodic error of ``theta`` (None without one)."""
+        _, i_period = self._extra_index()
+        if i_period is None:
+            return None
+        coefficients = theta[i_period + 1 : i_period + 1 + 2 * self.harmonics]
+        return PeriodicError(
+            float(theta[i_period]),
+            tuple(float(c) for c in coefficients[0::2]),
+            tuple(float(c) for c in coefficients[1::2]),
+        )
 
     # ------------------------------------------------------------------ simulation
 
@@ -235,7 +344,7 @@ class ModelSpec:
         """
         p, offset, rate, low, high = self._parts(theta)
         structure = self.structure
-        ud = shift_input(u, self.delay)
+        ud = self.backlash_input(theta, u)
         m_left, c_left, m_right, c_right = structure.split(p)
         s = self.coordinate(u)
         if s is None:
@@ -244,11 +353,15 @@ class ModelSpec:
             grow = rate * s  # c(t) = c + k s(t)
             left = evaluate_branch(m_left, ud + (c_left + grow))
             right = evaluate_branch(m_right, ud - (c_right + grow))
-        x0 = 0.0 if y_start is None else (float(y_start) - offset) / self._gain(p)
+        x0 = (
+            0.0
+            if y_start is None
+            else float(self.unread(theta, np.array([y_start]))[0]) / self._gain(p)
+        )
         lo, hi = play_bounds(left, right)
         if anchors is not None and y is not None and not structure.cascade:
             lo, hi = lo.copy(), hi.copy()
-            lo[anchors] = hi[anchors] = y[anchors] - offset  # the clamp pins x to the reading
+            lo[anchors] = hi[anchors] = self.unread(theta, y[anchors])  # pin x to the reading
         x = play_operator(lo, hi, x0)  # eq. (20)
         if structure.cascade:
             a, b = structure.linear_part(p)
@@ -262,24 +375,31 @@ class ModelSpec:
         else:
             y_lin = x
         y_free = y_lin + offset
+        periodic = self.periodic_error(theta) if self.harmonics else None
+        if periodic is not None:
+            y_free = y_free + periodic(y_lin)  # E(z): periodic in the load position
         y = y_free
         if low is not None or high is not None:
             y = np.clip(y_free, -np.inf if low is None else low, np.inf if high is None else high)
-        return SimulationOutput(x, y_free, y)
+        return SimulationOutput(x, y_free, y, y_lin if structure.cascade else None)
 
     def engaged(
         self, theta: FloatArray, u: FloatArray, out: SimulationOutput, y_start: float | None
     ) -> tuple[BoolArray, BoolArray]:
         """Where the left and where the right branch is engaged (eqs. 18-19), as booleans."""
         structure = self.structure
-        p, offset, rate, _, _ = self._parts(theta)
+        p, _offset, rate, _, _ = self._parts(theta)
         m_left, c_left, m_right, c_right = structure.split(p)
-        ud = shift_input(u, self.delay)
+        ud = self.backlash_input(theta, u)
         s = self.coordinate(u)
         grow = 0.0 if s is None else rate * s
         left = evaluate_branch(m_left, ud + (c_left + grow))
         right = evaluate_branch(m_right, ud - (c_right + grow))
-        x0 = 0.0 if y_start is None else (float(y_start) - offset) / self._gain(p)
+        x0 = (
+            0.0
+            if y_start is None
+            else float(self.unread(theta, np.array([y_start]))[0]) / self._gain(p)
+        )
         x_prev = np.concatenate([[x0], out.x[:-1]])
         f1 = (left - x_prev) * structure.sign <= 0.0  # eq. (18)
         f2 = ((x_prev - right) * structure.sign <= 0.0) & ~f1  # eq. (19)
@@ -295,7 +415,8 @@ class ModelSpec:
         x0: float,
         anchors: BoolArray | None = None,
     ) -> tuple[FloatArray, BoolArray]:
-        """``dx/d(backlash parameters[, drift rate])``, shape (N, 2n+2[+1]), column-major.
+        """``dx/d(backlash parameters[, drift rate][, input lag pole])``, shape
+        (N, 2n+2[+1][+1]), column-major.
 
         Also returns where no branch has engaged since the start or the last anchor (the
         output still holds the measurement it was pinned to).
@@ -304,7 +425,7 @@ class ModelSpec:
         p, _, rate, _, _ = self._parts(theta)
         n = structure.degree
         m_left, c_left, m_right, c_right = structure.split(p)
-        ud = shift_input(u, self.delay)
+        ud = self.backlash_input(theta, u)
         s = self.coordinate(u)
         grow = 0.0 if s is None else rate * s
         xi1 = ud + (c_left + grow)  # eq. (16)
@@ -322,7 +443,7 @@ class ModelSpec:
         np.maximum.accumulate(last, out=last)  # the last engagement (or pin) at or before t
         source = np.where(last < 0, 0, last)
         never = (last < 0) | pinned[source]
-        columns = structure.n_backlash + int(s is not None)
+        columns = structure.n_backlash + int(s is not None) + int(self.input_lag)
         jac = np.empty((u.size, columns), order="F")
 
         def held(engaged_value: FloatArray, column: int) -> None:
@@ -343,7 +464,10 @@ class ModelSpec:
         held(np.where(f1, dleft, 0.0), n)
         held(np.where(f2, dright, 0.0), 2 * n + 1)
         if s is not None:  # d/dk: the c-derivative times s(t) on whichever branch is engaged
-            held(np.where(f1, dleft * s, np.where(f2, dright * s, 0.0)), columns - 1)
+            held(np.where(f1, dleft * s, np.where(f2, dright * s, 0.0)), structure.n_backlash)
+        if self.input_lag:  # d/da: the branch slope in its input (eqs. 16-17) times dv/da
+            dv = self._input_sensitivity(theta, u, ud)
+            held(np.where(f1, dleft * dv, np.where(f2, -dright * dv, 0.0)), columns - 1)
         return jac, never
 
     def jacobian(
@@ -357,22 +481,28 @@ class ModelSpec:
         """``dy/dtheta`` of the free-run simulation ``out`` (the start state held fixed;
         ``anchors`` as in :meth:`simulate`, whose pinned states are held fixed too)."""
         structure = self.structure
-        p, offset, _, low, high = self._parts(theta)
-        x0 = 0.0 if y_start is None else (float(y_start) - offset) / self._gain(p)
+        p, _offset, _, low, high = self._parts(theta)
+        x0 = (
+            0.0
+            if y_start is None
+            else float(self.unread(theta, np.array([y_start]))[0]) / self._gain(p)
+        )
         pins = None if structure.cascade else anchors
         jx, never = self._backlash_sensitivity(theta, u, out.x, x0, pins)
         jac = np.zeros((u.size, self.n_parameters), order="F")
         n_bl = structure.n_backlash
         i_off, i_drift, i_low, i_high = self._index()
+        i_lag, i_period = self._extra_index()
+        extra = [(i, j) for i, j in ((i_drift, n_bl), (i_lag, jx.shape[1] - 1)) if i is not None]
         if structure.cascade:
             a, b = structure.linear_part(p)
             num = np.concatenate([[0.0], a])
             den = np.concatenate([[1.0], b])
             for col in range(n_bl):
                 jac[:, col] = signal.lfilter(num, den, jx[:, col])  # (A/B) dx/dp
-            if i_drift is not None:
-                jac[:, i_drift] = signal.lfilter(num, den, jx[:, -1])
-            y_lin = out.y_free - offset
+            for col, source in extra:  # drift rate, input lag pole
+                jac[:, col] = signal.lfilter(num, den, jx[:, source])
+            y_lin = out.load  # z = G x (without the periodic error)
             col = n_bl
             for i in range(2, structure.na + 1):
                 shifted = np.zeros_like(out.x)
@@ -386,8 +516,22 @@ class ModelSpec:
                 col += 1
         else:
             jac[:, :n_bl] = jx[:, :n_bl]
-            if i_drift is not None:
-                jac[:, i_drift] = jx[:, -1]
+            for col, source in extra:
+                jac[:, col] = jx[:, source]
+        periodic = self.periodic_error(theta)
+        if periodic is not None and i_period is not None:
+            z = out.load
+            slope = np.zeros_like(z)
+            for j in range(1, periodic.harmonics + 1):
+                w = 2.0 * np.pi * j / periodic.period
+                c, s = periodic.cos[j - 1], periodic.sin[j - 1]
+                cos_wz, sin_wz = np.cos(w * z), np.sin(w * z)
+                slope += w * (s * cos_wz - c * sin_wz)  # E'(z)
+                jac[:, i_period + 2 * j - 1] = cos_wz  # dE/dcos_j
+                jac[:, i_period + 2 * j] = sin_wz  # dE/dsin_j
+                jac[:, i_period] += (c * sin_wz - s * cos_wz) * (w * z / periodic.period)  # dE/dP
+            load = [k for k in range(i_period) if k not in (i_off, i_low, i_high)]
+            jac[:, load] *= (1.0 + slope)[:, None]  # dy/dz dz/dtheta
         if i_off is not None:
             jac[:, i_off] = 1.0
             if not structure.cascade:
@@ -411,6 +555,8 @@ class ModelSpec:
         offset: bool | None = None,
         drift: DriftBasis | None = None,
         saturation: tuple[bool, bool] | None = None,
+        input_lag: bool | None = None,
+        harmonics: int | None = None,
     ) -> ModelSpec:
         """A spec with some parts replaced (``orders`` is ``(na, nb)``)."""
         s = self.structure
@@ -421,14 +567,17 @@ class ModelSpec:
             self.offset if offset is None else offset,
             self.drift if drift is None else drift,
             self.saturation if saturation is None else saturation,
+            self.input_lag if input_lag is None else input_lag,
+            self.harmonics if harmonics is None else harmonics,
         )
 
     def embed(self, model: AugmentedModel) -> FloatArray:
         """Parameters of ``model`` placed in this (larger) spec; new parts start neutral.
 
         Higher branch coefficients and linear terms start at 0, an offset at the model's,
-        a drift rate at 0. Saturation limits have no neutral value and must be set by the
-        caller (they are NaN here).
+        a drift rate, an input lag's pole and harmonic coefficients at 0. Saturation limits
+        and a new period have no neutral value and must be set by the caller (they are NaN
+        here).
         """
         old = ModelSpec.of(model)
         s_new, s_old = self.structure, old.structure
@@ -465,4 +614,5 @@ class ModelSpec:
             theta[i_low] = sat.low
         if i_high is not None and sat is not None and sat.high is not None:
             theta[i_high] = sat.high
+        self._put_extras(theta, model)
         return theta

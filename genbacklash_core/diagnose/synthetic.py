@@ -12,18 +12,35 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
-from genbacklash_core._typing import FloatArray
+from genbacklash_core._typing import BoolArray, FloatArray
 from genbacklash_core.backlash import GeneralBacklash
 from genbacklash_core.cascade import Cascade
 from genbacklash_core.errors import GenBacklashError
 from genbacklash_core.linear import LinearBlock
+from genbacklash_core.scenarios import (
+    OPERATION_BACKLASH,
+    STRAIGHT_BACKLASH,
+    HiddenEffects,
+    OperationRecord,
+    OperationSettings,
+    operation_record,
+)
 
 from .model import AugmentedModel, Drift, Saturation
 
-__all__ = ["EFFECT_NAMES", "SyntheticCase", "random_walk_input", "synthetic_case"]
+__all__ = [
+    "EFFECT_NAMES",
+    "OPERATION_EFFECTS",
+    "OperationCase",
+    "SyntheticCase",
+    "operation_case",
+    "random_walk_input",
+    "synthetic_case",
+]
 
 EFFECT_NAMES = (
     "curved_branches",
@@ -260,3 +277,185 @@ def synthetic_case(
     y = clean + rng.normal(0.0, noise_std, n_samples)
     notes.append(f"SNR {ratio:.0f}")
     return SyntheticCase(u, y, clean, model, tuple(effects), noise_std, "; ".join(notes))
+
+
+# --------------------------------------------------------------------------- operation records
+
+OPERATION_EFFECTS = (*EFFECT_NAMES, "input_lag", "periodic_error")
+
+
+@dataclass(frozen=True, eq=False)
+class OperationCase:
+    """A drivetrain in normal operation with effects hidden in it (see :func:`operation_case`).
+
+    Attributes
+    ----------
+    u, y : ndarray
+        The node's samples: the held command and the reading, one per reading that arrived.
+    breaks : ndarray of bool
+        The sample rule (:func:`~genbacklash_core.samples.sample_breaks`).
+    record : OperationRecord
+        The simulated record with its truth.
+    effects : tuple of str
+        The catalog effects hidden in it, in the order given.
+    description : str
+        One line naming the drivetrain, the effects and their strengths.
+    """
+
+    u: FloatArray
+    y: FloatArray
+    breaks: BoolArray
+    record: OperationRecord
+    effects: tuple[str, ...]
+    description: str
+
+    def without(self, effect: str) -> FloatArray:
+        """The noise-free output of the same record with ``effect`` taken out (every other
+        effect, the motion and the stamps unchanged), at the readings that arrived."""
+        if effect not in self.effects:
+            raise GenBacklashError(f"{effect!r} is not hidden in this record")
+        record = self.record
+        settings = record.settings
+        hidden = record.hidden if record.hidden is not None else HiddenEffects()
+        if effect == "curved_branches":
+            m = settings.model
+            settings = replace(settings, model=GeneralBacklash.ideal(1.0, m.c_left, m.c_right))
+        elif effect == "gap_drift":
+            settings = replace(settings, wear=0.0)
+        elif effect == "time_delay":
+            hidden = replace(hidden, delay=0.0)
+        elif effect == "input_lag":
+            hidden = replace(hidden, input_lag=0.0)
+        elif effect == "linear_dynamics":
+            hidden = replace(hidden, load_lag=0.0)
+        elif effect == "output_offset":
+            hidden = replace(hidden, offset=0.0)
+        elif effect == "saturation":
+            hidden = replace(hidden, limit=(None, None))
+        else:  # periodic_error
+            hidden = replace(hidden, period=0.0, harmonics=())
+        other = operation_record(settings, record.seed, hidden=hidden)
+        return np.asarray(other.x_all[record.received], dtype=np.float64)
+
+    def sizes(self) -> dict[str, float]:
+        """How much each hidden effect moves the output: the RMS change of the noise-free
+        output when it alone is taken out. "Named in the order of size" is this order."""
+        clean = self.record.x_all[self.record.received]
+        return {
+            effect: float(np.sqrt(np.mean((clean - self.without(effect)) ** 2)))
+            for effect in self.effects
+        }
+
+
+def operation_case(
+    effects: Sequence[str], seed: int, duration: float = 30.0, *, noise: float | None = None
+) -> OperationCase:
+    """A record of a drivetrain in normal operation with the named effects hidden in it.
+
+    The drivetrain of :mod:`genbacklash_core.scenarios` (smooth moves, dwells and jogs, 100 Hz
+    commands held, a 1 kHz encoder quantised to 4096 counts per revolution with 2% of the
+    readings lost) with the play of :data:`~genbacklash_core.scenarios.STRAIGHT_BACKLASH`
+    (2.6 and 2.9 degrees) scaled by 0.8-1.6, plus each named effect at a random strength:
+
+    * ``curved_branches``: quadratic and cubic branch terms (0.6-1.6 times those of
+      :data:`~genbacklash_core.scenarios.OPERATION_BACKLASH`);
+    * ``linear_dynamics``: a first-order load lag of 3-10 ms after the backlash;
+    * ``time_delay``: a dead time of 3-8 ms;
+    * ``output_offset``: an encoder zero 0.15-0.6 rad away (larger than the dead zones);
+    * ``gap_drift``: both dead zones growing 50-150% over the record;
+    * ``saturation``: an output limit cutting 5-15% of the output range on one side (of the
+      range the first 70% of the record reaches);
+    * ``input_lag``: the servo's first-order lag of 5-20 ms before the backlash;
+    * ``periodic_error``: a runout of 0.15-0.4 degrees with period 0.25-0.8 rad of load
+      travel, with a second harmonic of up to half its size on half the records.
+
+    Parameters
+    ----------
+    effects : sequence of str
+        Names from :data:`OPERATION_EFFECTS` (empty: a clean record).
+    seed : int
+        Seeds every choice (strengths, motion, stamps, noise, losses).
+    duration : float
+        Seconds (1000 readings per second).
+    noise : float, optional
+        Encoder noise before quantisation, radians; default drawn from ``[0, 0.0005]``.
+
+    Examples
+    --------
+    >>> case = operation_case(["input_lag"], seed=2, duration=3.0)
+    >>> case.effects, case.u.size == case.y.size == case.breaks.size
+    (('input_lag',), True)
+    """
+    unknown = [name for name in effects if name not in OPERATION_EFFECTS]
+    if unknown:
+        raise GenBacklashError(f"unknown effects {unknown}; known: {', '.join(OPERATION_EFFECTS)}")
+    rng = np.random.default_rng([int(seed), 14])
+    scale = float(rng.uniform(0.8, 1.6))
+    model = GeneralBacklash(
+        (1.0,), STRAIGHT_BACKLASH.c_left * scale, (1.0,), STRAIGHT_BACKLASH.c_right * scale
+    )
+    notes = [f"straight branches, c_L {model.c_left:.4f}, c_R {model.c_right:.4f} rad"]
+    if "curved_branches" in effects:
+        k = float(rng.uniform(0.6, 1.6))
+        ref = OPERATION_BACKLASH
+        model = GeneralBacklash(
+            (1.0, ref.m_left[1] * k, ref.m_left[2] * k),
+            model.c_left,
+            (1.0, ref.m_right[1] * k, ref.m_right[2] * k),
+            model.c_right,
+        )
+        notes.append(f"curved branches ({k:.2f} x the operation drivetrain's curvature)")
+    wear = 0.0
+    if "gap_drift" in effects:
+        wear = float(rng.uniform(0.5, 1.5))
+        notes.append(f"gaps growing {100 * wear:.0f}% over the record")
+    level = float(rng.uniform(0.0, 5e-4)) if noise is None else float(noise)
+    settings = OperationSettings(duration=duration, model=model, wear=wear, noise=level)
+    hidden: dict[str, Any] = {}
+    if "time_delay" in effects:
+        hidden["delay"] = float(rng.uniform(0.003, 0.008))
+        notes.append(f"dead time {1e3 * hidden['delay']:.1f} ms")
+    if "input_lag" in effects:
+        hidden["input_lag"] = float(rng.uniform(0.005, 0.02))
+        notes.append(f"servo lag {1e3 * hidden['input_lag']:.1f} ms")
+    if "linear_dynamics" in effects:
+        hidden["load_lag"] = float(rng.uniform(0.003, 0.01))
+        notes.append(f"load lag {1e3 * hidden['load_lag']:.1f} ms")
+    if "output_offset" in effects:
+        hidden["offset"] = float(rng.choice([-1.0, 1.0]) * rng.uniform(0.15, 0.6))
+        notes.append(f"output offset {hidden['offset']:+.3f} rad")
+    if "periodic_error" in effects:
+        period = float(rng.uniform(0.25, 0.8))
+        amplitude = float(np.deg2rad(rng.uniform(0.15, 0.4)))
+        harmonics = [(amplitude, float(rng.uniform(-np.pi, np.pi)))]
+        if rng.uniform() < 0.5:
+            harmonics.append((amplitude * float(rng.uniform(0.2, 0.5)), float(rng.uniform(-3, 3))))
+        hidden["period"] = period
+        hidden["harmonics"] = tuple(harmonics)
+        notes.append(
+            f"periodic error {np.rad2deg(amplitude):.2f} deg, period {period:.3f} rad"
+            + (
+                f", second harmonic {np.rad2deg(harmonics[1][0]):.2f} deg"
+                if len(harmonics) > 1
+                else ""
+            )
+        )
+    draw_limit = "saturation" in effects
+    side = float(rng.uniform()) < 0.5
+    depth = float(rng.uniform(0.05, 0.15))
+    if draw_limit:
+        # the limit cuts into the range the first 70% of the record reaches: the part a
+        # diagnosis fits on (a limit first reached in the held-out part cannot be seen there)
+        free = operation_record(settings, seed, hidden=HiddenEffects(**hidden)).x_all
+        free = free[: int(0.7 * free.size)]
+        cut = depth * float(np.ptp(free))
+        if side:
+            hidden["limit"] = (None, float(np.max(free)) - cut)
+            notes.append(f"upper output limit {hidden['limit'][1]:+.3f} rad")
+        else:
+            hidden["limit"] = (float(np.min(free)) + cut, None)
+            notes.append(f"lower output limit {hidden['limit'][0]:+.3f} rad")
+    record = operation_record(settings, seed, hidden=HiddenEffects(**hidden))
+    notes.append(f"encoder noise {level:.2g} rad, 4096 counts/rev, 2% of readings lost")
+    u, y, breaks = record.series()
+    return OperationCase(u, y, breaks, record, tuple(effects), "; ".join(notes))

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
 from typing import Any
@@ -43,7 +44,13 @@ DATA is a CSV with header columns u (command) and y (measured position), optiona
 first part of the record (1 - --validation) is the estimation segment: the starting model -
 the ideal backlash of the paper's eq. (1), or --start, or the structure the node parameters
 (--params-file, --param) set with model/degree/na/nb - is fitted there. The rest is held out:
-the model is simulated free-run over it and the *gap* is the NRMSE there.
+the model is simulated free-run over it and the *gap* is the NRMSE there. The *floor* is the
+gap that quantisation (the readings' grid) and noise (read off the dwells, where the command
+stands still) allow; a gap within 1.3 times it leaves nothing to explain.
+
+For a bag, the samples are the node's: each encoder reading that arrived, with the latest
+command at its stamp; a reading whose stamp is not one encoder period after the one before (a
+lost reading, a gap) breaks the chain, as in the node, and no fit pairs samples across it.
 
 Then, in a loop: the estimation residual is tested (Ljung-Box whiteness, prewhitened input
 cross-correlation, Billings-Voon higher-order correlations, mean and trend, an FIR
@@ -67,8 +74,9 @@ examples:
   genbacklash diagnose run.mcap --command /cmd --encoder /enc --params-file config/params.yaml
 
 --json prints {"steps": [{"effect", "evidence", "gap_before", "gap_after"}, ...],
-"gap_initial", "gap_final", "model"}; model is the identify JSON plus delay, offset, drift and
-saturation. Exit status 0 when the diagnosis ran, 2 for bad input.
+"gap_initial", "gap_final", "gap_floor", "model"}; model is the identify JSON plus delay,
+offset, drift, saturation, input_lag and periodic_error; gap_floor is the gap quantisation and
+noise allow (null when not measured). Exit status 0 when the diagnosis ran, 2 for bad input.
 """
 
 
@@ -134,6 +142,14 @@ def _model_lines(result: Diagnosis) -> list[str]:
             value = getattr(model.saturation, side)
             if value is not None:
                 lines.append(f"  {'limit ' + side:<14}{value:>12.5f}")
+    if model.input_lag:
+        tau = -1.0 / math.log(model.input_lag)
+        lines.append(f"  {'input lag':<14}{model.input_lag:>12.5f}  pole ({tau:.1f} samples)")
+    if model.periodic is not None:
+        periodic = model.periodic
+        lines.append(f"  {'period':<14}{periodic.period:>12.5f}")
+        for j, amplitude in enumerate(periodic.amplitudes, 1):
+            lines.append(f"  {f'harmonic {j}':<14}{amplitude:>12.5f}  amplitude")
     return lines
 
 
@@ -144,6 +160,8 @@ def _text(result: Diagnosis) -> str:
         f"{split.n_estimation}..{split.n_samples - 1}",
         f"starting model: {result.reports[0].describe()}",
     ]
+    if result.floor is not None:
+        lines.append(f"floor: {result.floor.describe()}")
     for i, step in enumerate(result.steps, 1):
         lines.append(
             f"step {i}: {step.effect} - gap {step.gap_before:.4f} -> {step.gap_after:.4f}\n"
@@ -198,7 +216,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     if args.report:
         from genbacklash_ros.reports.diagnose import write_report
 
-        for path in write_report(result, series.u, series.y, args.report):
+        for path in write_report(result, series.u, series.y, args.report, series.breaks):
             print(f"wrote {path}", file=sys.stderr)
     return EXIT_OK
 

@@ -22,9 +22,11 @@ from genbacklash_core.diagnose.context import StepErrorShape, build_context
 from genbacklash_core.diagnose.settings import DiagnoseSettings
 
 __all__ = [
+    "gap_map",
     "plot_correlations",
     "plot_fit_steps",
     "plot_gap_breakdown",
+    "plot_gap_map",
     "plot_gap_steps",
     "plot_step_error",
     "summary_markdown",
@@ -32,6 +34,7 @@ __all__ = [
 ]
 
 _WINDOW = 600  # validation samples shown in the measured-vs-simulated panels
+_BINS = 8  # travel bins and time slices of the gap map
 
 
 def _labels(result: Diagnosis) -> list[str]:
@@ -75,8 +78,19 @@ def plot_gap_steps(result: Diagnosis) -> Figure:
             va="bottom",
             fontsize=9,
         )
+    if result.floor is not None:
+        floor = result.floor
+        ax.axhline(floor.gap, color="C3", ls="--", lw=1.0)
+        ax.annotate(
+            f"floor {floor.gap:.4f}" + ("" if floor.known else " (quantisation only)"),
+            (len(gaps) - 0.5, floor.gap),
+            ha="right",
+            va="bottom",
+            fontsize=8,
+            color="C3",
+        )
     ax.set_ylabel("validation gap (NRMSE)")
-    ax.set_title("Gap per step")
+    ax.set_title("Gap per step (dashed: what quantisation and noise allow)")
     ax.grid(True, axis="y", alpha=0.3)
     fig.tight_layout()
     return fig
@@ -118,6 +132,99 @@ def plot_gap_breakdown(result: Diagnosis) -> Figure:
     ax.grid(True, axis="x", alpha=0.3)
     fig.tight_layout()
     return fig
+
+
+def gap_map(
+    result: Diagnosis, y: np.ndarray, bins: int = _BINS
+) -> dict[str, list[tuple[str, list[float]]]]:
+    """Where the gap sits in the travel and in time, for the start and after each step.
+
+    The validation samples are cut into ``bins`` equal ranges of the measured position
+    (``"travel"``) and ``bins`` equal slices of time (``"time"``); for each, the contribution
+    to the gap: ``sqrt(sum of squared errors there / spread)``, the same units as the gap
+    (the contributions add up in squares to it). Returns ``{"travel": [(range label,
+    [per model]), ...], "time": [...]}``, models in the order start, step 1, ...
+    """
+    val = result.split.validation
+    yy = np.asarray(y, dtype=np.float64)
+    y_val = yy[val]
+    spread = float(np.sum((y_val - np.mean(y_val)) ** 2))
+    errors = [(y_val - report.y_sim[val]) ** 2 for report in result.reports]
+    edges = np.linspace(float(np.min(y_val)), float(np.max(y_val)), bins + 1)
+    where = np.clip(np.searchsorted(edges, y_val, side="right") - 1, 0, bins - 1)
+    slices = np.minimum(np.arange(y_val.size) * bins // y_val.size, bins - 1)
+    start = val.start
+
+    def contributions(mask: np.ndarray) -> list[float]:
+        return [float(np.sqrt(np.sum(e[mask]) / spread)) if spread > 0 else 0.0 for e in errors]
+
+    travel = [
+        (f"{edges[b]:+.3f} .. {edges[b + 1]:+.3f}", contributions(where == b)) for b in range(bins)
+    ]
+    n_val = y_val.size
+    time = [
+        (
+            f"{start + b * n_val // bins}..{start + (b + 1) * n_val // bins - 1}",
+            contributions(slices == b),
+        )
+        for b in range(bins)
+    ]
+    return {"travel": travel, "time": time}
+
+
+def plot_gap_map(result: Diagnosis, y: np.ndarray) -> Figure:
+    """The gap's contributions per range of travel and per slice of time, start and after each
+    step (see :func:`gap_map`), with the floor spread evenly over the bins for comparison."""
+    mapped = gap_map(result, y)
+    labels = _labels(result)
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.0))
+    for ax, aspect, title in zip(
+        axes, ("travel", "time"), ("position (measured)", "validation samples"), strict=True
+    ):
+        groups = mapped[aspect]
+        x = np.arange(len(groups))
+        width = 0.8 / len(labels)
+        for i, label in enumerate(labels):
+            ax.bar(
+                x + (i - (len(labels) - 1) / 2) * width,
+                [values[i] for _, values in groups],
+                width,
+                label=label,
+                color="C7" if i == 0 else f"C{i - 1}",
+            )
+        if result.floor is not None:
+            ax.axhline(
+                result.floor.gap / np.sqrt(len(groups)),
+                color="C3",
+                ls="--",
+                lw=1.0,
+                label="floor, spread evenly",
+            )
+        ax.set_xticks(x, [name for name, _ in groups], rotation=35, ha="right", fontsize=7)
+        ax.set_xlabel(title)
+        ax.set_ylabel("contribution to the gap")
+        ax.set_yscale("log")
+        ax.set_title(f"Where the gap sits: {aspect}", fontsize=10)
+        ax.grid(True, axis="y", alpha=0.3)
+    axes[0].legend(fontsize="small")
+    fig.tight_layout()
+    return fig
+
+
+def _map_lines(result: Diagnosis, y: np.ndarray) -> list[str]:
+    """The gap map as Markdown tables."""
+    mapped = gap_map(result, y)
+    labels = _labels(result)
+    lines: list[str] = []
+    for aspect, first in (("travel", "position range"), ("time", "validation samples")):
+        lines += [
+            f"| {first} | " + " | ".join(labels) + " |",
+            "|---|" + "---|" * len(labels),
+        ]
+        for name, values in mapped[aspect]:
+            lines.append(f"| {name} | " + " | ".join(f"{v:.4f}" for v in values) + " |")
+        lines.append("")
+    return lines
 
 
 def _correlation_row(axes: np.ndarray, analysis: ResidualAnalysis, label: str) -> None:
@@ -180,8 +287,9 @@ def plot_step_error(shape: StepErrorShape, title: str = "starting model") -> Fig
     return fig
 
 
-def summary_markdown(result: Diagnosis, figures: list[str]) -> str:
-    """The readable summary: steps with evidence, the gaps, where the gap sits, the model."""
+def summary_markdown(result: Diagnosis, figures: list[str], y: np.ndarray | None = None) -> str:
+    """The readable summary: steps with evidence, the gaps against the floor, where the gap
+    sits (in the travel and in time, when ``y`` is given), the model."""
     split = result.split
     lines = [
         "# Backlash model diagnosis",
@@ -192,6 +300,13 @@ def summary_markdown(result: Diagnosis, figures: list[str]) -> str:
         "",
         f"**Gap: {result.gap_initial:.4f} -> {result.gap_final:.4f}** "
         f"({', '.join(result.effects) or 'no effect named'}).",
+        "",
+        (
+            "The floor: " + result.floor.describe() + ". "
+            f"The final gap is {result.gap_final / result.floor.gap:.1f} times it."
+            if result.floor is not None and result.floor.gap > 0
+            else "The floor (what quantisation and noise allow) was not measured."
+        ),
         "",
         "## Steps",
         "",
@@ -211,6 +326,14 @@ def summary_markdown(result: Diagnosis, figures: list[str]) -> str:
     lines += [f"Stopped: {result.reason}.", "", "## Where the gap sits", ""]
     lines += [f"* start: {result.reports[0].describe()}"]
     lines += [f"* final: {result.reports[-1].describe()}", ""]
+    if y is not None:
+        lines += [
+            "Contribution to the gap (they add up in squares to it) per range of the measured "
+            "position and per slice of the validation segment, for the start and after each "
+            "step:",
+            "",
+        ]
+        lines += _map_lines(result, y)
     lines += ["## Residual tests (estimation data)", ""]
     lines += [f"* start: {result.rounds[0].analysis.summary()}"]
     lines += [f"* final: {result.rounds[-1].analysis.summary()}", ""]
@@ -262,19 +385,26 @@ def _html(markdown: str) -> str:
 
 
 def write_report(
-    result: Diagnosis, u: np.ndarray, y: np.ndarray, out_dir: str | Path
+    result: Diagnosis,
+    u: np.ndarray,
+    y: np.ndarray,
+    out_dir: str | Path,
+    breaks: np.ndarray | None = None,
 ) -> list[Path]:
-    """Write the plots, ``summary.md`` and ``report.html`` into ``out_dir``; return the paths."""
+    """Write the plots, ``summary.md`` and ``report.html`` into ``out_dir``; return the paths
+    (``breaks``: the sample rule the diagnosis ran with)."""
     directory = Path(out_dir)
     directory.mkdir(parents=True, exist_ok=True)
     uu = np.asarray(u, dtype=np.float64)
     yy = np.asarray(y, dtype=np.float64)
     est = result.split.estimation
-    context = build_context(uu[est], yy[est], result.initial_fit, DiagnoseSettings())
+    b_est = None if breaks is None else np.asarray(breaks, dtype=bool)[est]
+    context = build_context(uu[est], yy[est], result.initial_fit, DiagnoseSettings(), b_est)
     figures = {
         "fit_steps.png": plot_fit_steps(result, yy),
         "gap_steps.png": plot_gap_steps(result),
         "gap_breakdown.png": plot_gap_breakdown(result),
+        "gap_map.png": plot_gap_map(result, yy),
         "correlations.png": plot_correlations(result),
         "step_error.png": plot_step_error(context.step_error),
     }
@@ -284,7 +414,7 @@ def write_report(
         fig.savefig(path, dpi=110)
         plt.close(fig)
         written.append(path)
-    markdown = summary_markdown(result, list(figures))
+    markdown = summary_markdown(result, list(figures), yy)
     (directory / "summary.md").write_text(markdown, encoding="utf-8")
     (directory / "report.html").write_text(_html(markdown), encoding="utf-8")
     written += [directory / "summary.md", directory / "report.html"]

@@ -25,6 +25,7 @@ from genbacklash_core.diagnose import (
     synthetic_case,
 )
 from genbacklash_core.diagnose.effects import CATALOG, time_delay
+from genbacklash_core.diagnose.synthetic import OPERATION_EFFECTS
 from genbacklash_core.samples import sample_breaks
 
 N = 2000  # short records keep the suite fast; bench/diagnose.py sweeps N = 5000
@@ -42,14 +43,14 @@ SINGLE = [
 
 def _check_contract(result: Diagnosis) -> None:
     data = json.loads(json.dumps(result.to_dict()))
-    assert set(data) == {"steps", "gap_initial", "gap_final", "model"}
+    assert set(data) == {"steps", "gap_initial", "gap_final", "gap_floor", "model"}
     for step in data["steps"]:
         assert set(step) == {"effect", "evidence", "gap_before", "gap_after"}
         assert step["effect"] in effect_names()
         assert step["gap_after"] < step["gap_before"]
     model = data["model"]
     assert {"model", "backlash", "iterations", "converged", "fit"} <= set(model)
-    assert {"delay", "offset", "drift", "saturation"} <= set(model)
+    assert {"delay", "offset", "drift", "saturation", "input_lag", "periodic_error"} <= set(model)
     assert set(model["backlash"]) == {"m_left", "c_left", "m_right", "c_right"}
     assert ("linear" in model) == (model["model"] == "cascade")
     assert AugmentedModel.from_dict(data) == result.model
@@ -124,7 +125,9 @@ def _record(effects: list[str], seed: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def test_the_catalog_is_open_and_the_names_are_the_contract() -> None:
-    assert effect_names() == EFFECT_NAMES
+    # the first six names are the contract of GUIDE §4; the two new ones follow them
+    assert effect_names()[: len(EFFECT_NAMES)] == EFFECT_NAMES
+    assert effect_names() == OPERATION_EFFECTS
     assert len({effect.name for effect in CATALOG}) == len(CATALOG)
     u, y = _record(["time_delay"], 13)
     only_delay = diagnose(u, y, catalog=(time_delay.EFFECT,))

@@ -11,8 +11,10 @@ from __future__ import annotations
 from . import (
     curved_branches,
     gap_drift,
+    input_lag,
     linear_dynamics,
     output_offset,
+    periodic_error,
     saturation,
     time_delay,
 )
@@ -27,13 +29,16 @@ CATALOG: tuple[Effect, ...] = (
     output_offset.EFFECT,
     gap_drift.EFFECT,
     saturation.EFFECT,
+    input_lag.EFFECT,
+    periodic_error.EFFECT,
 )
 
 
 def effect_names() -> tuple[str, ...]:
     """Names of the registered effects, in catalog order.
 
-    >>> effect_names()
-    ('curved_branches', 'linear_dynamics', 'time_delay', 'output_offset', 'gap_drift', 'saturation')
+    >>> effect_names()  # doctest: +NORMALIZE_WHITESPACE
+    ('curved_branches', 'linear_dynamics', 'time_delay', 'output_offset', 'gap_drift',
+     'saturation', 'input_lag', 'periodic_error')
     """
     return tuple(effect.name for effect in CATALOG)

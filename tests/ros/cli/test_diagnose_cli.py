@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from genbacklash_core.diagnose import StartStructure, synthetic_case
@@ -24,7 +25,7 @@ def test_json_contract(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> No
     data = _csv(tmp_path, ["time_delay"], 41)
     assert main(["diagnose", str(data), "--json"]) == EXIT_OK
     result = json.loads(capsys.readouterr().out)
-    assert set(result) == {"steps", "gap_initial", "gap_final", "model"}
+    assert set(result) == {"steps", "gap_initial", "gap_final", "gap_floor", "model"}
     assert [step["effect"] for step in result["steps"]] == ["time_delay"]
     step = result["steps"][0]
     assert set(step) == {"effect", "evidence", "gap_before", "gap_after"}
@@ -46,6 +47,7 @@ def test_text_output_and_report(tmp_path: Path, capsys: pytest.CaptureFixture[st
         "fit_steps.png",
         "gap_steps.png",
         "gap_breakdown.png",
+        "gap_map.png",
         "correlations.png",
         "step_error.png",
         "summary.md",
@@ -127,6 +129,41 @@ def test_diagnose_reads_a_bag(tmp_path: Path, capsys: pytest.CaptureFixture[str]
     assert main([*args, "--json"]) == EXIT_OK
     result = json.loads(capsys.readouterr().out)
     assert [step["effect"] for step in result["steps"]] == ["curved_branches"]
+
+
+def test_an_operation_bag_is_read_as_the_node_reads_it(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The drivetrain in operation, as a bag: the samples diagnose works on are the node's
+    (the command held at each reading's stamp, a break after every lost reading); a clean
+    record names nothing and the report says what the floor is and where the gap sits."""
+    from genbacklash_core.scenarios import STRAIGHT_BACKLASH, OperationSettings, operation_record
+    from genbacklash_ros.bags.bagio import read_aligned
+    from genbacklash_ros.bags.simbags import COMMAND_TOPIC, ENCODER_TOPIC, write_operation_bag
+
+    settings = OperationSettings(duration=8.0, model=STRAIGHT_BACKLASH, loss=0.03)
+    bag = tmp_path / "operation"
+    write_operation_bag(bag, settings, seed=3)
+    u, y, breaks = operation_record(settings, 3).series()
+    series = read_aligned(bag, COMMAND_TOPIC, ENCODER_TOPIC, joint="drive_joint")
+    np.testing.assert_array_equal(series.u, u)
+    np.testing.assert_array_equal(series.y, y)
+    np.testing.assert_array_equal(series.breaks, breaks)
+    assert 100 < int(np.sum(breaks)) < 500  # ~3% lost: each loss breaks the chain
+    args = ["diagnose", str(bag), "--command", COMMAND_TOPIC, "--encoder", ENCODER_TOPIC]
+    args += ["--joint", "drive_joint"]
+    assert main([*args, "--json"]) == EXIT_OK
+    result = json.loads(capsys.readouterr().out)
+    assert result["steps"] == []
+    assert 0.0 < result["gap_floor"] and result["gap_initial"] < 2.0 * result["gap_floor"]
+    out_dir = tmp_path / "report"
+    assert main([*args, "--report", str(out_dir)]) == EXIT_OK
+    captured = capsys.readouterr()
+    assert "floor: quantisation and noise allow a gap of" in captured.out
+    summary = (out_dir / "summary.md").read_text(encoding="utf-8")
+    assert "The floor: quantisation and noise allow" in summary
+    assert "| position range | start |" in summary and "| validation samples | start |" in summary
+    assert (out_dir / "gap_map.png").stat().st_size > 0
 
 
 def test_validation_fraction_is_checked(capsys: pytest.CaptureFixture[str]) -> None:

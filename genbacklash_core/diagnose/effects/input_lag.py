@@ -1,0 +1,113 @@
+"""``input_lag``: the servo lags the command before the gear - a first-order lag before the
+backlash.
+
+The motor does not follow the command at once: the backlash sees ``v(t) = a v(t-1) + (1 - a)
+u(t - d)`` instead of ``u(t - d)``. Unlike :mod:`.linear_dynamics` (a lag *after* the
+backlash, eq. 30), the output stops the moment the lagged motor turns back, and it holds
+exactly while the motor crosses the play; a lag after the backlash keeps the output moving
+after the backlash output stopped. Both leave an error step response that decays, so both
+are tried and the BIC on the estimation data decides.
+
+Signature: for trial poles ``a`` the change ``y_sim(a) - y_sim(0)`` of the model's free-run
+output, regressed on the residual beyond the model's Jacobian (a trial-direction test: the
+score test at ``a = 0`` sees only the first-order part ``u(t-1) - u(t)``, which a held command
+makes spiky). The best pole's F-test, Bonferroni-corrected over the trial poles, must pass
+the screening thresholds.
+Augmentation: refit with the input lag from the best trial poles; the BIC picks.
+"""
+
+from __future__ import annotations
+
+import math
+
+from genbacklash_core.diagnose.context import Context
+from genbacklash_core.diagnose.fit import ModelFit, best_fit, fit_model
+from genbacklash_core.diagnose.model import AugmentedModel
+from genbacklash_core.diagnose.spec import ModelSpec
+from genbacklash_core.diagnose.stats import NestedTest, nested_f_test
+from genbacklash_core.errors import GenBacklashError
+
+from ._base import Detection, format_p
+
+__all__ = ["EFFECT", "InputLag"]
+
+_POLES = (0.5, 0.7, 0.8, 0.9, 0.95, 0.98)  # trial poles (time constants 1.4 .. 50 samples)
+_SCREEN_STEPS = 8  # Levenberg-Marquardt steps per start before the best are finished
+_FINALISTS = 2
+
+
+def _trial(context: Context, spec: ModelSpec, pole: float) -> NestedTest:
+    """How much of the residual the change of the simulated output with pole ``a`` explains
+    beyond the model's Jacobian."""
+    theta = spec.embed(context.fit.model)
+    theta[spec.names().index("input_lag_pole")] = pole
+    anchors = context.anchors
+    moved = spec.simulate(theta, context.u, context.y_start, anchors, context.y).y
+    return nested_f_test(context.residual, context.jacobian, moved - context.simulation.y)
+
+
+class InputLag:
+    """Detector and augmentation of the servo's lag before the backlash."""
+
+    name = "input_lag"
+
+    def applicable(self, model: AugmentedModel) -> bool:
+        """Only while the model has no input lag and no linear block: once a linear block
+        follows the backlash its orders absorb a lag before it wherever a branch is engaged,
+        and the two differ only while the play is crossed (a servo lag found first may still
+        be followed by a load lag)."""
+        return model.input_lag == 0.0 and not model.cascade
+
+    def detect(self, context: Context) -> Detection:
+        """Trial-direction tests of a few poles; the best one counts (Bonferroni)."""
+        spec = context.spec.extended(input_lag=True)
+        tests = {pole: _trial(context, spec, pole) for pole in _POLES}
+        pole = max(tests, key=lambda a: tests[a].share)
+        test = tests[pole]
+        p_value = min(1.0, len(_POLES) * test.test.p_value)
+        settings = context.settings
+        fires = p_value < settings.screen_alpha and test.share >= settings.min_share
+        coefficient = float(test.coefficients[0])
+        evidence = (
+            f"lagging the input by a first-order servo lag (pole {pole:.2f}, time constant "
+            f"{-1.0 / math.log(pole):.1f} samples) changes the simulated output in a way that "
+            f"explains {100 * test.share:.1f}% of the residual beyond the model's own "
+            f"parameters (F = {test.test.statistic:.1f}, {format_p(p_value)} over "
+            f"{len(_POLES)} trial poles; it wants {coefficient:.2f} of that change): "
+            + ("the motor lags the command" if fires else "no sign of a servo lag")
+        )
+        return Detection(self.name, fires, test.share, settings.min_share, evidence, {"pole": pole})
+
+    def augment(self, context: Context, detection: Detection) -> ModelFit | None:
+        """Refit with the input lag from the best trial poles; the BIC picks."""
+        spec = context.spec.extended(input_lag=True)
+        base = spec.embed(context.fit.model)
+        index = spec.names().index("input_lag_pole")
+        guess = float(detection.hints.get("pole", 0.9))
+        poles = sorted({guess, *(p for p in _POLES if abs(p - guess) <= 0.15)})
+        screened: list[ModelFit] = []
+        for pole in poles:
+            start = base.copy()
+            start[index] = pole
+            try:
+                screened.append(
+                    fit_model(
+                        (spec, start),
+                        context.u,
+                        context.y,
+                        max_iterations=_SCREEN_STEPS,
+                        breaks=context.breaks,
+                    )
+                )
+            except GenBacklashError:
+                continue  # an invalid start on this record
+        screened.sort(key=lambda fit: fit.bic)
+        return best_fit(
+            [fit.model for fit in screened[:_FINALISTS]],
+            context.u,
+            context.y,
+            breaks=context.breaks,
+        )
+
+
+EFFECT = InputLag()
