@@ -71,18 +71,14 @@ from genbacklash_core.diagnose.synthetic import OPERATION_EFFECTS, operation_cas
 SEED = 51_000
 
 
-@dataclass(frozen=True)
-class Outcome:
-    kind: str  # "single", "clean", "pair"
+class Judged:
+    """What both kinds of outcome report: the first name right, the gap shrink."""
+
     hidden: tuple[str, ...]
     named: tuple[str, ...]
     gap_initial: float
-    gap_first: float  # after the first step (= initial when nothing was named)
-    gap_final: float
-    gap_truth: float  # the true model's validation gap: the noise floor
-    seconds: float
-    description: str
-    input_kind: str
+    gap_first: float
+    gap_truth: float
 
     @property
     def first_right(self) -> bool:
@@ -97,6 +93,20 @@ class Outcome:
         """Share of the gap above the noise floor that the first step removed."""
         excess = self.gap_initial - self.gap_truth
         return (self.gap_initial - self.gap_first) / excess if excess > 0 else float("nan")
+
+
+@dataclass(frozen=True)
+class Outcome(Judged):
+    kind: str  # "single", "clean", "pair"
+    hidden: tuple[str, ...]
+    named: tuple[str, ...]
+    gap_initial: float
+    gap_first: float  # after the first step (= initial when nothing was named)
+    gap_final: float
+    gap_truth: float  # the true model's validation gap: the noise floor
+    seconds: float
+    description: str
+    input_kind: str
 
 
 def run_case(kind: str, effects: tuple[str, ...], seed: int, n: int, input_kind: str) -> Outcome:
@@ -297,7 +307,7 @@ OPERATION_SECONDS = 30.0
 
 
 @dataclass(frozen=True)
-class OperationOutcome:
+class OperationOutcome(Judged):
     kind: str  # "single", "clean", "pair"
     hidden: tuple[str, ...]  # largest first (by the RMS change of the output it causes)
     sizes: tuple[float, ...]
@@ -310,19 +320,6 @@ class OperationOutcome:
     seconds: float
     samples: int
     description: str
-
-    @property
-    def first_right(self) -> bool:
-        return bool(self.named) and self.named[0] == self.hidden[0]
-
-    @property
-    def shrink(self) -> float:
-        return 1.0 - self.gap_first / self.gap_initial
-
-    @property
-    def excess_closed(self) -> float:
-        excess = self.gap_initial - self.gap_truth
-        return (self.gap_initial - self.gap_first) / excess if excess > 0 else float("nan")
 
     @property
     def both(self) -> bool:

@@ -94,6 +94,20 @@ def start_node(params: Path, log: Path, domain: int) -> subprocess.Popen[bytes]:
     return subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=log.open("wb"))
 
 
+def stop_node(node: subprocess.Popen[bytes], log: Path) -> int:
+    """SIGINT the node and its exit status; fail the test if it does not exit within 30 s."""
+    import signal
+
+    import pytest
+
+    node.send_signal(signal.SIGINT)
+    try:
+        return node.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        node.kill()
+        pytest.fail(f"the node did not exit within 30 s of SIGINT:\n{log.read_text()}")
+
+
 def wait_for(predicate: Any, timeout: float) -> bool:
     """Poll ``predicate`` until it is true or ``timeout`` seconds passed; its last value."""
     deadline = time.monotonic() + timeout

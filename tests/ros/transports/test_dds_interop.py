@@ -32,7 +32,7 @@ import pytest
 
 from genbacklash_core import paper_example
 
-from ._dds import Subscriber, diagnostic_values, start_node, wait_for
+from ._dds import Subscriber, diagnostic_values, start_node, stop_node, wait_for
 
 pytest.importorskip("cyclonedds", reason="cyclonedds is not installed (pip install .[dds])")
 
@@ -77,15 +77,6 @@ def _ros2(*args: str, timeout: float = 30) -> subprocess.CompletedProcess[str]:
         env=_ros_env(),
         check=False,
     )
-
-
-def _stop(node: subprocess.Popen[bytes], log: Path) -> int:
-    node.send_signal(signal.SIGINT)
-    try:
-        return node.wait(timeout=30)
-    except subprocess.TimeoutExpired:
-        node.kill()
-        pytest.fail(f"the node did not exit within 30 s of SIGINT:\n{log.read_text()}")
 
 
 @dataclass
@@ -142,7 +133,7 @@ def interop(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Interop]:
             echo.kill()
             out, err = echo.communicate()
         echoed = subprocess.CompletedProcess(echo.args, echo.returncode, out, err)
-        returncode = _stop(node, log)
+        returncode = stop_node(node, log)
     finally:
         for process in (echo, node):
             if process.poll() is None:
@@ -263,7 +254,7 @@ def test_namespaced_node_is_listed_and_names_a_wrong_type_publisher(tmp_path: Pa
         wrong.send_signal(signal.SIGINT)
         wrong.wait(10)
         assert TYPE_HASH_WARNING not in (wrong.stderr.read() if wrong.stderr else "")
-        assert _stop(node, log) == 0, log.read_text()
+        assert stop_node(node, log) == 0, log.read_text()
     finally:
         sub.close()
         for process in (wrong, node):

@@ -12,7 +12,6 @@ import json
 import math
 import os
 import random
-import signal
 import subprocess
 import sys
 import time
@@ -38,7 +37,7 @@ from genbacklash_ros.transports.dds_types import (
     MultiArrayLayout_,
 )
 
-from ._dds import Received, Subscriber, diagnostic_values, start_node, wait_for
+from ._dds import Received, Subscriber, diagnostic_values, start_node, stop_node, wait_for
 
 HERE = Path(__file__).parent
 TRUTH = paper_example(1).model
@@ -60,15 +59,6 @@ def _write_params(path: Path, checkpoint: Path) -> Path:
         "    publish_rate: 10.0\n"
     )
     return path
-
-
-def _stop_node(node: subprocess.Popen[bytes], log: Path) -> int:
-    node.send_signal(signal.SIGINT)
-    try:
-        return node.wait(timeout=30)
-    except subprocess.TimeoutExpired:
-        node.kill()
-        pytest.fail(f"the node did not exit within 30 s of SIGINT:\n{log.read_text()}")
 
 
 @dataclass
@@ -107,7 +97,7 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Run]:
         summary = json.loads(player.stdout.decode().strip().splitlines()[-1])
         # the node keeps up: wait until (almost) every command came back
         wait_for(lambda: len(sub.got.compensated) >= summary["sent"], 10)
-        returncode = _stop_node(node, log)
+        returncode = stop_node(node, log)
         wait_for(lambda: False, 1.0)  # the final estimate and diagnostics
     finally:
         if node.poll() is None:
@@ -222,7 +212,7 @@ def test_restarts_from_the_checkpoint(run: Run) -> None:
         assert wait_for(lambda: len(sub.got.compensated) >= 3, 10), log.read_text()
         sent = [s.data[0] for _, s in sub.got.compensated]
         assert sent != [0.5, 1.0, 1.5], "the commands passed through uncompensated"
-        assert _stop_node(node, log) == 0, log.read_text()
+        assert stop_node(node, log) == 0, log.read_text()
     finally:
         if node.poll() is None:
             node.kill()
