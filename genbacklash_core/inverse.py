@@ -595,6 +595,8 @@ def _step(
         if push != direction and options.smoothing > 0:
             offset = v - (v_prev - offset)  # the whole jump from the last smoothed command
             ramp = options.smoothing
+            if not math.isfinite(offset):  # a jump beyond the float range: taken at once
+                offset, ramp = 0.0, 0
         direction = push
     if ramp > 0:
         offset -= offset / ramp  # deliver 1/ramp of what is left; exactly 0 at the last

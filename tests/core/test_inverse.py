@@ -401,7 +401,18 @@ def test_property_limits_rate_and_finite_always_hold(
     u = compensate(model, x_d[:n], options, confidence[:n], state=state)
     assert np.all(np.isfinite(u))
     assert np.all((options.u_min <= u) & (u <= options.u_max))
-    assert np.all(np.abs(np.diff(np.concatenate([[state.u], u]))) <= options.max_rate)
+    with np.errstate(over="ignore"):  # commands near +-1.8e308 apart: an infinite step
+        steps = np.abs(np.diff(np.concatenate([[state.u], u])))
+    assert np.all(steps <= options.max_rate)
+
+
+def test_a_jump_beyond_the_float_range_is_taken_at_once() -> None:
+    """Gap-crossing smoothing ramps a jump from the last command; a jump from +2.7e301 to
+    -1.8e308 overflows, and is then taken at once rather than ramping a NaN (hypothesis found
+    it with another seed)."""
+    options = CompensatorOptions(smoothing=1, gate_low=0.0, gate_high=0.0)
+    u = compensate(IDEAL, [2.7390461837125416e301, -1.7976928609576974e308], options, [0.0, 0.0])
+    assert np.all(np.isfinite(u))
 
 
 def test_rate_limit_bounds_the_gap_crossing() -> None:
