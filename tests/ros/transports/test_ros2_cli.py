@@ -128,6 +128,7 @@ def test_fed_node_answers_and_ros2_topic_echo_reads_it(launched: Launched) -> No
         stdout=subprocess.PIPE,
         text=True,
     )
+    echoes: dict[str, subprocess.Popen[str]] = {}
     try:
         echoes = {
             topic: subprocess.Popen(
@@ -142,7 +143,10 @@ def test_fed_node_answers_and_ros2_topic_echo_reads_it(launched: Launched) -> No
         seen = {topic: echo.communicate(timeout=60)[0] for topic, echo in echoes.items()}
         out, _ = player.communicate(timeout=120)
     finally:
-        player.kill()
+        for process in (player, *echoes.values()):
+            if process.poll() is None:
+                process.kill()
+                process.wait()
     assert player.returncode == 0, out
     summary = json.loads(out.strip().splitlines()[-1])
     names = ",".join(paper_example(1).model.parameter_names)
