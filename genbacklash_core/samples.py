@@ -46,6 +46,8 @@ __all__ = [
     "as_breaks",
     "breaks_to_rows",
     "bridge_lost",
+    "lift_bridged",
+    "missing_readings",
     "monotone_paths",
     "nominal_period",
     "restart_points",
@@ -226,6 +228,41 @@ def monotone_paths(values: ArrayLike, start: ArrayLike, stop: ArrayLike) -> Bool
     return np.asarray((i1 >= i0) & ((rises == 0) | (falls == 0)), dtype=bool)
 
 
+def missing_readings(times_ns: ArrayLike, period_ns: float) -> FloatArray:
+    """Per reading, how many readings were lost just before it: ``round((t[k] - t[k-1]) /
+    period) - 1`` (0 for the first; negative for a clock that went back).
+
+    >>> missing_readings([0, 10, 40, 50], 10.0).tolist()
+    [0.0, 0.0, 2.0, 0.0]
+    """
+    t = np.asarray(times_ns, dtype=np.float64)
+    out = np.zeros(t.size)
+    if t.size > 1:
+        out[1:] = np.rint(np.diff(t) / period_ns) - 1.0
+    return out
+
+
+def lift_bridged(
+    breaks: ArrayLike,
+    missing: ArrayLike,
+    monotone: ArrayLike,
+    *,
+    max_missing: int = MAX_BRIDGED,
+) -> BoolArray:
+    """The bridging rule, for a backlash alone (see the module notes): ``breaks`` with those
+    lifted where 1 to ``max_missing`` readings were lost just before (``missing``) and the
+    input over them was monotone (``monotone``, e.g. from :func:`monotone_paths`). A caller
+    passes the breaks that lost readings can explain -- not those of readings taken out.
+
+    >>> lift_bridged([True, True, True, True], [0, 1, 2, 30], [True, True, False, True]).tolist()
+    [True, False, True, True]
+    """
+    b = np.asarray(breaks, dtype=bool)
+    m = np.asarray(missing, dtype=np.float64)
+    lift = b & np.asarray(monotone, dtype=bool) & (m >= 1.0) & (m <= max_missing)
+    return np.asarray(b & ~lift, dtype=bool)
+
+
 def bridge_lost(
     breaks: BoolArray,
     held: ArrayLike,
@@ -238,8 +275,9 @@ def bridge_lost(
     For a backlash alone (see the module notes). ``held`` is the input at every encoder
     instant, lost ones included, and ``index[k]`` the instant of sample ``k``. A break at
     ``k`` is lifted when at most ``max_missing`` instants lie between samples ``k-1`` and
-    ``k`` and ``held`` is monotone from the one to the other (:func:`monotone_paths`). Any
-    other break -- the first sample, a reading taken out, a longer gap -- stays.
+    ``k`` and ``held`` is monotone from the one to the other (:func:`lift_bridged`,
+    :func:`monotone_paths`). Any other break -- the first sample, a reading taken out, a
+    longer gap -- stays.
 
     Examples
     --------
@@ -250,16 +288,13 @@ def bridge_lost(
     >>> bridge_lost(breaks, held, index, max_missing=3).tolist()
     [True, False, False, False, True]
     """
-    b = np.asarray(breaks, dtype=bool).copy()
+    b = np.asarray(breaks, dtype=bool)
     at = np.asarray(index, dtype=np.intp)
     if at.shape != b.shape:
         raise GenBacklashError(f"index and breaks differ in shape: {at.shape} and {b.shape}")
     if b.size < 2:
-        return b
-    k = np.flatnonzero(b[1:]) + 1
-    gap = at[k] - at[k - 1] - 1
-    near = (gap >= 1) & (gap <= max_missing)
-    k = k[near]
-    if k.size:
-        b[k] = ~monotone_paths(held, at[k - 1], at[k])
-    return b
+        return b.copy()
+    monotone = np.zeros(b.size, dtype=bool)
+    monotone[1:] = monotone_paths(held, at[:-1], at[1:])
+    missing = missing_readings(at, 1.0)
+    return lift_bridged(b, missing, monotone, max_missing=max_missing)

@@ -42,7 +42,7 @@ from typing import Any, Literal, NamedTuple
 import numpy as np
 
 from genbacklash_core import GenBacklashError
-from genbacklash_core.samples import MAX_BRIDGED, monotone_paths
+from genbacklash_core.samples import lift_bridged, missing_readings, monotone_paths
 from genbacklash_ros.bags.rosbags_types import from_rosbags, jazzy_typestore, to_rosbags
 from genbacklash_ros.node.messages import (
     CommandType,
@@ -807,15 +807,12 @@ def _bridged(
     cmd_u: np.ndarray,
     keep: np.ndarray,
 ) -> np.ndarray:
-    """``breaks`` with those lifted that at most ``MAX_BRIDGED`` lost readings made along
-    monotone commands (``k``: the command in force at each reading)."""
-    j = np.flatnonzero(breaks[1:] & keep[1:] & keep[:-1]) + 1
-    missing = np.rint(np.diff(et)[j - 1] / period) - 1
-    j = j[(missing >= 1) & (missing <= MAX_BRIDGED)]
-    out = breaks.copy()
-    if j.size:
-        out[j] = ~monotone_paths(cmd_u, k[j - 1], k[j])
-    return out
+    """``breaks`` with those lifted that lost readings made along monotone commands (``k``:
+    the command in force at each reading; :func:`~genbacklash_core.samples.lift_bridged`)."""
+    monotone = np.zeros(et.size, dtype=bool)
+    both = keep[1:] & keep[:-1]  # a reading before the first command holds none
+    monotone[1:][both] = monotone_paths(cmd_u, k[:-1][both], k[1:][both])
+    return lift_bridged(breaks, missing_readings(et, period), monotone)
 
 
 def _increasing(times: list[int], values: list[float]) -> tuple[np.ndarray, np.ndarray]:

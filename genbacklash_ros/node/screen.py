@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from genbacklash_core import Estimate
-from genbacklash_core.samples import MAX_BRIDGED
+from genbacklash_core.samples import lift_bridged, missing_readings
 from genbacklash_ros.node.align import AlignedBatch
 from genbacklash_ros.node.health import HealthEvent, StreamHealth
 from genbacklash_ros.node.sample_rule import keep_breaks, link_breaks
@@ -72,21 +72,18 @@ def bridged(
     previous: int | None,
     monotone: np.ndarray,
 ) -> np.ndarray:
-    """``breaks`` (of stamp gaps only) with those lifted that at most
-    :data:`~genbacklash_core.samples.MAX_BRIDGED` lost readings made where the commands in
-    force were monotone (:func:`~genbacklash_core.samples.bridge_lost`: a backlash alone is
-    rate independent, so the readings around such a gap are consecutive states).
+    """``breaks`` (of stamp gaps only) with those lifted that lost readings made where the
+    commands in force were monotone: the rule of
+    :func:`~genbacklash_core.samples.lift_bridged` (a backlash alone is rate independent, so
+    the readings around such a gap are consecutive states), the first sample linked to the
+    stamp ``previous`` (None: it stays a break).
 
     >>> bridged(np.array([False, True, True]), np.array([10, 30, 60]), 10.0, 0,
     ...         np.array([True, True, False])).tolist()
     [False, False, True]
     """
-    start = np.concatenate(([held[0] if previous is None else previous], held[:-1]))
-    missing = np.rint((held - start) / period) - 1.0
-    lift = breaks & monotone & (missing >= 1.0) & (missing <= MAX_BRIDGED)
-    if previous is None:
-        lift[0] = False
-    return np.asarray(breaks & ~lift, dtype=bool)
+    linked = np.concatenate(([held[0] if previous is None else previous], held))
+    return lift_bridged(breaks, missing_readings(linked, period)[1:], monotone)
 
 
 class Screen:
