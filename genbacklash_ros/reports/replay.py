@@ -309,6 +309,21 @@ def _mark_phases(ax: Axes, truth: BagTruth | None, *, label: bool = True) -> Non
             )
 
 
+def _finish_zoom(
+    fig: Figure, top: Axes, bottom: Axes, window: tuple[float, float], ylabel: str
+) -> None:
+    """Label the zoomed lower panel of a two-panel time plot, grid both, lay out."""
+    lo, hi = window
+    bottom.set_xlim(lo, hi)
+    bottom.set_title(f"Zoom: {lo:.2f} - {hi:.2f} s", fontsize="medium")
+    bottom.set_xlabel("time [s]")
+    bottom.set_ylabel(ylabel)
+    bottom.legend(loc="best", fontsize="small")
+    for ax in (top, bottom):
+        ax.grid(True, alpha=0.3)
+    fig.tight_layout()
+
+
 def _no_data(ax: Axes, text: str) -> None:
     ax.text(0.5, 0.5, text, ha="center", va="center", transform=ax.transAxes, color="0.4")
 
@@ -389,14 +404,7 @@ def plot_motion(result: ReplayResult, data: ReportData | None = None) -> Figure:
         )
     if not (np.any(c_in) or np.any(e_in)):
         _no_data(bottom, "nothing in the window")
-    bottom.set_xlim(lo, hi)
-    bottom.set_title(f"Zoom: {lo:.2f} - {hi:.2f} s", fontsize="medium")
-    bottom.set_xlabel("time [s]")
-    bottom.set_ylabel("position [rad]")
-    bottom.legend(loc="best", fontsize="small")
-    for ax in (top, bottom):
-        ax.grid(True, alpha=0.3)
-    fig.tight_layout()
+    _finish_zoom(fig, top, bottom, (lo, hi), "position [rad]")
     return fig
 
 
@@ -597,14 +605,7 @@ def plot_tracking_error(result: ReplayResult, data: ReportData | None = None) ->
             label="measured: encoder - command",
         )
     bottom.axhline(0.0, color="k", lw=0.6)
-    bottom.set_xlim(lo, hi)
-    bottom.set_title(f"Zoom: {lo:.2f} - {hi:.2f} s", fontsize="medium")
-    bottom.set_xlabel("time [s]")
-    bottom.set_ylabel("load - command [rad]")
-    bottom.legend(loc="best", fontsize="small")
-    for ax in (top, bottom):
-        ax.grid(True, alpha=0.3)
-    fig.tight_layout()
+    _finish_zoom(fig, top, bottom, (lo, hi), "load - command [rad]")
     return fig
 
 
