@@ -19,7 +19,7 @@ import numpy as np
 from genbacklash_core._typing import FloatArray
 from genbacklash_core.backlash import GeneralBacklash
 from genbacklash_core.diagnose.context import Context
-from genbacklash_core.diagnose.fit import ModelFit
+from genbacklash_core.diagnose.fit import ModelFit, fit_model
 from genbacklash_core.diagnose.model import AugmentedModel
 from genbacklash_core.diagnose.spec import ModelSpec, shift_input
 from genbacklash_core.diagnose.stats import NestedTest, nested_f_test
@@ -162,6 +162,25 @@ def fresh_start(context: Context, spec: ModelSpec) -> tuple[ModelSpec, FloatArra
         current.saturation,
     )
     return spec, spec.embed(plain)
+
+
+def screen_starts(
+    context: Context,
+    starts: list[tuple[ModelSpec, FloatArray]],
+    steps: int,
+) -> list[ModelFit]:
+    """A few Levenberg-Marquardt ``steps`` from each start on the estimation data, best BIC
+    first; a start invalid on this record is skipped. The finalists are then fitted fully."""
+    fits: list[ModelFit] = []
+    for start in starts:
+        try:
+            fits.append(
+                fit_model(start, context.u, context.y, max_iterations=steps, breaks=context.breaks)
+            )
+        except GenBacklashError:
+            continue  # an invalid start on this record
+    fits.sort(key=lambda fit: fit.bic)
+    return fits
 
 
 def score_test(context: Context, spec: ModelSpec, theta: FloatArray) -> NestedTest:

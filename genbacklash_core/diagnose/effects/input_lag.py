@@ -21,13 +21,12 @@ from __future__ import annotations
 import math
 
 from genbacklash_core.diagnose.context import Context
-from genbacklash_core.diagnose.fit import ModelFit, best_fit, fit_model
+from genbacklash_core.diagnose.fit import ModelFit, best_fit
 from genbacklash_core.diagnose.model import AugmentedModel
 from genbacklash_core.diagnose.spec import ModelSpec
 from genbacklash_core.diagnose.stats import NestedTest, nested_f_test
-from genbacklash_core.errors import GenBacklashError
 
-from ._base import Detection, format_p
+from ._base import Detection, format_p, screen_starts
 
 __all__ = ["EFFECT", "InputLag"]
 
@@ -85,23 +84,12 @@ class InputLag:
         index = spec.names().index("input_lag_pole")
         guess = float(detection.hints.get("pole", 0.9))
         poles = sorted({guess, *(p for p in _POLES if abs(p - guess) <= 0.15)})
-        screened: list[ModelFit] = []
+        starts = []
         for pole in poles:
             start = base.copy()
             start[index] = pole
-            try:
-                screened.append(
-                    fit_model(
-                        (spec, start),
-                        context.u,
-                        context.y,
-                        max_iterations=_SCREEN_STEPS,
-                        breaks=context.breaks,
-                    )
-                )
-            except GenBacklashError:
-                continue  # an invalid start on this record
-        screened.sort(key=lambda fit: fit.bic)
+            starts.append((spec, start))
+        screened = screen_starts(context, starts, _SCREEN_STEPS)
         return best_fit(
             [fit.model for fit in screened[:_FINALISTS]],
             context.u,

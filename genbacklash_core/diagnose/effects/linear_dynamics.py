@@ -24,9 +24,16 @@ from genbacklash_core.diagnose.context import Context
 from genbacklash_core.diagnose.fit import ModelFit, fit_model
 from genbacklash_core.diagnose.model import AugmentedModel
 from genbacklash_core.diagnose.spec import ModelSpec
-from genbacklash_core.errors import GenBacklashError
 
-from ._base import Detection, format_p, fresh_start, late_input, paper_start, screened_fir
+from ._base import (
+    Detection,
+    format_p,
+    fresh_start,
+    late_input,
+    paper_start,
+    screen_starts,
+    screened_fir,
+)
 
 __all__ = ["EFFECT", "LinearDynamics", "minimum_phase"]
 
@@ -134,21 +141,7 @@ class LinearDynamics:
             paper = paper_start(context, paper_spec)
             if paper is not None:
                 starts.append(paper)
-        screened: list[ModelFit] = []
-        for start in starts:
-            try:
-                screened.append(
-                    fit_model(
-                        start,
-                        context.u,
-                        context.y,
-                        max_iterations=_SCREEN_STEPS,
-                        breaks=context.breaks,
-                    )
-                )
-            except GenBacklashError:
-                continue  # an invalid start on this record
-        screened.sort(key=lambda fit: fit.bic)
+        screened = screen_starts(context, starts, _SCREEN_STEPS)
         chosen = [fit for fit in screened if minimum_phase(fit.model)][:_FINALISTS]
         chosen += [fit for fit in screened[:1] if fit not in chosen]
         finals = [
