@@ -90,7 +90,11 @@ def test_a_blocked_refit_does_not_hold_up_compensated_commands() -> None:
     ident = GatedIdentifier()
     pipe = BacklashPipeline(FLOATS, worker=lambda _: ThreadWorker(ident))  # type: ignore[arg-type]
     try:
-        outputs = drive(pipe, 1, 2001)  # 2 s: ~30 batches handed over
+        outputs = drive(pipe, 1, 201)  # the first batches handed over
+        # the worker thread takes the first batch when the scheduler runs it (no timing
+        # assumed); from then on it blocks, and the handlers go on without it
+        assert ident.entered.wait(WAIT_S), "the worker never started the first batch"
+        outputs += drive(pipe, 201, 2001)  # 2 s in all: ~30 batches handed over
         assert ident.entered.is_set() and not ident.gate.is_set()  # still in the first call
         assert len(sent(outputs)) == 2000  # every command answered meanwhile
         assert not pipe.estimate.available  # nothing adopted before it is ready
