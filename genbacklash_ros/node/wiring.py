@@ -28,6 +28,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from genbacklash_ros.node.messages import DiagnosticArray, DiagnosticStatus, KeyValue
 
 __all__ = [
+    "READER_DEPTH",
     "TYPE_CHOICES",
     "WIRING_KEY",
     "annotate",
@@ -49,6 +50,14 @@ TYPE_CHOICES: Mapping[str, Mapping[str, str]] = {
         "std_msgs/msg/Float64": "float64",
     },
 }
+
+#: History depth of the node's ``command`` and ``encoder`` subscriptions, in both transports
+#: (4 s at 500 Hz, 2 s at 1 kHz). The middleware's receive thread stores and acknowledges
+#: samples into this cache while the Python side is busy (a refit's hand-over, a loaded
+#: machine descheduling the process); with ROS 2's depth of 10 (5 for sensor data) a stall of
+#: 20 ms at 500 Hz overwrote commands before the node took them. Depth is local to the reader,
+#: not part of QoS matching, so peers match as before.
+READER_DEPTH = 2000
 
 #: The diagnostics key that carries the wiring problems (``ok`` when there are none).
 WIRING_KEY = "wiring"

@@ -78,6 +78,7 @@ from genbacklash_ros.node.messages import (
 )
 from genbacklash_ros.node.parameters import NODE_NAME, NodeParameters
 from genbacklash_ros.node.pipeline import BacklashPipeline, Output
+from genbacklash_ros.node.wiring import READER_DEPTH
 from genbacklash_ros.transports.dds_convert import DDS_TYPES, from_dds, to_dds
 from genbacklash_ros.transports.dds_types import dds_topic
 from genbacklash_ros.transports.ros_graph import (
@@ -122,12 +123,6 @@ SENSOR_QOS = Qos(
 )
 """ROS 2's sensor-data QoS (``qos_profile_sensor_data``): KEEP_LAST 5, BEST_EFFORT."""
 
-READER_DEPTH = 2000
-"""History depth of the node's command and encoder readers (4 s at 500 Hz). Cyclone's receive
-thread stores and acknowledges samples into this cache while the Python loop is busy (a refit,
-a loaded machine); with ROS 2's depth of 10 (5 for sensor data) a stall of 20 ms at 500 Hz
-overwrote commands before the loop took them. Depth is local to the reader, not part of QoS
-matching, so ROS 2 peers match as before."""
 
 
 def _deep(qos: Qos) -> Qos:

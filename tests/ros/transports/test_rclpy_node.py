@@ -82,6 +82,30 @@ def test_destroy_node_is_clean(ros_args: list[str]) -> None:
 
 
 @needs_rclpy
+def test_subscriptions_keep_a_deep_history_with_ros_default_matching(ros_args: list[str]) -> None:
+    """A depth of 10 lost 2 % of a 1 kHz command stream while a loaded machine descheduled
+    the process; the subscriptions keep READER_DEPTH samples, with ROS 2's reliability and
+    durability (so peers match as before)."""
+    from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+
+    from genbacklash_ros.node.wiring import READER_DEPTH
+    from genbacklash_ros.transports import rclpy_node
+
+    node = rclpy_node.BacklashIdentifierNode()
+    try:
+        subs = {s.topic_name: s.qos_profile for s in node.subscriptions}
+        command, encoder = subs["/command"], subs["/encoder"]
+        assert command.depth == encoder.depth == READER_DEPTH
+        assert command.reliability == QoSProfile(depth=1).reliability
+        assert command.reliability == ReliabilityPolicy.RELIABLE
+        assert encoder.reliability == qos_profile_sensor_data.reliability
+        assert encoder.durability == qos_profile_sensor_data.durability
+    finally:
+        node.finish()
+        node.destroy_node()
+
+
+@needs_rclpy
 def test_node_rejects_bad_parameters_with_the_reason(ros_args: list[str]) -> None:
     from rclpy.parameter import Parameter
 
