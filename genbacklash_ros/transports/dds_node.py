@@ -124,7 +124,6 @@ SENSOR_QOS = Qos(
 """ROS 2's sensor-data QoS (``qos_profile_sensor_data``): KEEP_LAST 5, BEST_EFFORT."""
 
 
-
 def _deep(qos: Qos) -> Qos:
     return Qos(*(p for p in qos if not isinstance(p, Policy.History.KeepLast))) + Qos(
         Policy.History.KeepLast(READER_DEPTH)
