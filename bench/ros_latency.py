@@ -49,6 +49,7 @@ import numpy as np
 from _common import OUTPUT_DIR, ROOT, command_line, machine_description, md_table, write_section
 
 from genbacklash_core import paper_example
+from genbacklash_core.scenarios import OperationRecord
 
 sys.path.insert(0, str(ROOT))
 from tests.ros.transports._ros2 import colcon_build, ros2_cli_missing, workspace_env
@@ -91,8 +92,60 @@ class Played:
     node_commands: int  # the node's own count at the end; -1 without its diagnostics
 
 
-def play(rate: float, n: int) -> Played:
-    """Publish ``n`` ticks at ``rate``; what came back, per tick."""
+@dataclass(frozen=True)
+class Feed:
+    """What the player publishes, in time order: event ``i`` at ``at_ns[i]`` after the start is
+    command ``index[i]`` (value ``value[i]``; a ping ``index[i]`` follows it) or, where
+    ``is_encoder[i]``, an encoder reading ``value[i]`` (stamped when it is published)."""
+
+    at_ns: np.ndarray
+    is_encoder: np.ndarray
+    value: np.ndarray
+    index: np.ndarray
+    commands: int
+    warm_commands: int  # commands of the warm-up (not measured)
+    command_period_s: float
+
+
+def paper_feed(rate: float, warm: int, n: int) -> Feed:
+    """Example 1 (uniform input): a command and its reading at every tick."""
+    data = paper_example(1).generate(SEED, n_samples=n)
+    k = np.arange(n)
+    at = np.repeat(np.round(k * 1e9 / rate).astype(np.int64), 2)
+    return Feed(
+        at_ns=at,
+        is_encoder=np.tile([False, True], n),
+        value=np.column_stack([data.u, data.y]).ravel(),
+        index=np.repeat(k, 2),
+        commands=n,
+        warm_commands=warm,
+        command_period_s=1.0 / rate,
+    )
+
+
+def operation_feed(record: OperationRecord, warmup_s: float) -> Feed:
+    """A drivetrain in operation: commands at their (jittered) 100 Hz times, the 1 kHz
+    readings that were not lost at their sampling instants."""
+    t_enc = record.sample_t_ns[record.received]
+    n_cmd = record.command_t_ns.size
+    at = np.concatenate([record.command_t_ns, t_enc])
+    is_encoder = np.concatenate([np.zeros(n_cmd, bool), np.ones(t_enc.size, bool)])
+    value = np.concatenate([record.command_u, record.y_all[record.received]])
+    index = np.concatenate([np.arange(n_cmd), np.full(t_enc.size, -1)])
+    order = np.argsort(at, kind="stable")
+    return Feed(
+        at_ns=at[order] - at.min(),
+        is_encoder=is_encoder[order],
+        value=value[order],
+        index=index[order],
+        commands=n_cmd,
+        warm_commands=int(np.searchsorted(record.command_t_ns, warmup_s * 1e9)),
+        command_period_s=1.0 / record.settings.command_rate,
+    )
+
+
+def play(feed: Feed) -> Played:
+    """Publish ``feed`` in real time; what came back, per command."""
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.executors import SingleThreadedExecutor
@@ -102,7 +155,7 @@ def play(rate: float, n: int) -> Played:
 
     from genbacklash_ros.node.wiring import READER_DEPTH
 
-    data = paper_example(1).generate(SEED, n_samples=n)
+    n = feed.commands
     rclpy.init()
     node = rclpy.create_node("ros_latency_player")
     sent = np.zeros(n, dtype=np.int64)
@@ -160,24 +213,31 @@ def play(rate: float, n: int) -> Played:
                 raise RuntimeError("the node's or the echo's endpoints did not match in 60 s")
             time.sleep(0.05)
         time.sleep(1.0)  # let discovery settle both ways
-        period_ns = round(1e9 / rate)
         start = time.monotonic_ns()
         late = 0
-        for k in range(n):
-            tick = start + k * period_ns
+        for at, is_encoder, value, k in zip(
+            feed.at_ns.tolist(),
+            feed.is_encoder.tolist(),
+            feed.value.tolist(),
+            feed.index.tolist(),
+            strict=True,
+        ):
+            tick = start + at
             while (wait := tick - time.monotonic_ns()) > 0:
                 time.sleep(wait / 1e9)
-            if time.monotonic_ns() - tick > period_ns:
+            if time.monotonic_ns() - tick > 1_000_000:
                 late += 1
-            cmd = Float64MultiArray(data=[float(data.u[k]), float(k)])
-            sent[k] = time.monotonic_ns()
-            command.publish(cmd)
-            reading = JointState()
-            reading.header.stamp = node.get_clock().now().to_msg()
-            reading.name = ["j"]
-            reading.position = [float(data.y[k])]
-            encoder.publish(reading)
-            ping.publish(Float64MultiArray(data=[float(k)]))
+            if is_encoder:
+                reading = JointState()
+                reading.header.stamp = node.get_clock().now().to_msg()
+                reading.name = ["j"]
+                reading.position = [value]
+                encoder.publish(reading)
+            else:
+                cmd = Float64MultiArray(data=[value, float(k)])
+                sent[k] = time.monotonic_ns()
+                command.publish(cmd)
+                ping.publish(Float64MultiArray(data=[float(k)]))
         span = (sent[-1] - sent[0]) / 1e9
         time.sleep(2.5)  # replies in flight, and the node's next 1 Hz diagnostics
     finally:
@@ -218,10 +278,17 @@ LOAD_NOTE = (
 )
 
 
-def run(rate: float, warmup_s: float, seconds: float, load: bool) -> str:
+@dataclass(frozen=True)
+class Launched:
+    played: Played
+    node_status: int
+    clean: bool  # the launch log says the node finished, with no traceback
+
+
+def launch_and_play(feed: Feed, load: bool, seconds: float) -> Launched:
+    """Build the package, launch the node and the echo (and the busy process with ``load``),
+    play ``feed`` to them, stop them with SIGINT."""
     domain = 201 + (os.getpid() % 31)
-    warm = round(warmup_s * rate)
-    n = warm + round(seconds * rate)
     with tempfile.TemporaryDirectory(prefix="ros_latency_") as tmp_name:
         tmp = Path(tmp_name)
         built = colcon_build(tmp / "ws")
@@ -241,14 +308,13 @@ def run(rate: float, warmup_s: float, seconds: float, load: bool) -> str:
             start_new_session=True,
         )
         busy = subprocess.Popen([sys.executable, "-c", _BUSY]) if load else None
-        lifetime = warmup_s + seconds + 120
         echo_proc = subprocess.Popen(
-            [sys.executable, __file__, "--role", "echo", "--lifetime", f"{lifetime:.0f}"],
+            [sys.executable, __file__, "--role", "echo", "--lifetime", f"{seconds + 120:.0f}"],
             env=env,
         )
         os.environ["ROS_DOMAIN_ID"] = str(domain)
         try:
-            played = play(rate, n)
+            played = play(feed)
         finally:
             os.killpg(launch.pid, signal.SIGINT)
             echo_proc.send_signal(signal.SIGINT)
@@ -258,6 +324,33 @@ def run(rate: float, warmup_s: float, seconds: float, load: bool) -> str:
                 busy.kill()
                 busy.wait()
         launch_log = (tmp / "launch.log").read_text(errors="replace")
+    clean = "process has finished cleanly" in launch_log and "Traceback" not in launch_log
+    return Launched(played, node_status, clean)
+
+
+def first_estimate_s(played: Played) -> float:
+    """Seconds from the first command to the first estimate (inf without one)."""
+    if played.first_estimate_ns < 0:
+        return float("inf")
+    return (played.first_estimate_ns - int(played.sent_ns[0])) / 1e9
+
+
+def commands_lost(played: Played) -> int:
+    """Commands the node did not receive (its own count); -1 without its diagnostics."""
+    n = played.sent_ns.size
+    return n - played.node_commands if played.node_commands >= 0 else -1
+
+
+def mark(ok: bool) -> str:
+    return "**met**" if ok else "**not met**"
+
+
+def run(rate: float, warmup_s: float, seconds: float, load: bool) -> str:
+    """Example 1 at ``rate``: one section."""
+    warm = round(warmup_s * rate)
+    n = warm + round(seconds * rate)
+    result = launch_and_play(paper_feed(rate, warm, n), load, warmup_s + seconds)
+    played, node_status, clean = result.played, result.node_status, result.clean
     truth = paper_example(1).model.parameters()
     error = (
         float(np.max(np.abs(np.array(played.last_estimate) - truth)))
@@ -276,14 +369,9 @@ def run(rate: float, warmup_s: float, seconds: float, load: bool) -> str:
     ratio = [f"{a / b:.1f}x" if b > 0 else "n/a" for a, b in zip(ours[2:], ref[2:], strict=True)]
     rows.append(["ratio node / echo", "", "", *ratio])
     table = md_table(["path", "replies", "lost", "median", "p90", "p99", "max"], rows)
-    clean = "process has finished cleanly" in launch_log and "Traceback" not in launch_log
     intro = __doc__.split("\n", 5)[5].strip()
-    first_s = (
-        (played.first_estimate_ns - int(played.sent_ns[0])) / 1e9
-        if played.first_estimate_ns >= 0
-        else float("inf")
-    )
-    commands_lost = n - played.node_commands if played.node_commands >= 0 else -1
+    first_s = first_estimate_s(played)
+    lost = commands_lost(played)
     summary = {
         "rate": rate,
         "load": load,
@@ -298,17 +386,11 @@ def run(rate: float, warmup_s: float, seconds: float, load: bool) -> str:
     OUTPUT_DIR.mkdir(parents=True, exist_ok=True)
     name = "ros_latency_load" if load else "ros_latency"
     (OUTPUT_DIR / f"{name}.json").write_text(json.dumps(summary, indent=1))
-
-    def mark(ok: bool) -> str:
-        return "**met**" if ok else "**not met**"
-
-    lost_text = (
-        f"{commands_lost:,} of {n:,}" if commands_lost >= 0 else "unknown (no diagnostics came)"
-    )
+    lost_text = f"{lost:,} of {n:,}" if lost >= 0 else "unknown (no diagnostics came)"
     if load:
         title = f"### With a CPU-bound process beside it ({rate:g} Hz, rclpy)"
         targets = f"""Issue 15 targets from this run (a CPU-bound process beside the node): 0
-commands lost on the reliable command topic, {mark(commands_lost == 0)} ({lost_text}, the
+commands lost on the reliable command topic, {mark(lost == 0)} ({lost_text}, the
 node's own count); the first estimate within 2 s of the first command,
 {mark(first_s <= 2.0)} ({first_s:.2f} s);
 compensated-command latency p99 <= 10 ms, {mark(ours[4] <= 10.0)} ({ours[4]:.1f} ms, the plain
@@ -341,6 +423,98 @@ Command: `{command_line()}`
 """
 
 
+def run_operation(seeds: list[int], warmup_s: float, seconds: float, load: bool) -> str:
+    """A drivetrain in operation, one launch per seed: one section with a row per seed."""
+    from genbacklash_core import GeneralBacklash
+    from genbacklash_core.identify import nrmse
+    from genbacklash_core.scenarios import OperationSettings, operation_record
+    from genbacklash_ros.node.parameters import NodeParameters
+
+    degree = NodeParameters().degree
+    rows = []
+    verdicts: list[bool] = []
+    for seed in seeds:
+        record = operation_record(OperationSettings(duration=warmup_s + seconds), seed)
+        feed = operation_feed(record, warmup_s)
+        result = launch_and_play(feed, load, warmup_s + seconds)
+        played = result.played
+        w = slice(feed.warm_commands, None)
+        ours = stats(played.sent_ns[w], played.command_back_ns[w])
+        ref = stats(played.sent_ns[w], played.ping_back_ns[w])
+        if played.last_estimate is not None:
+            model = GeneralBacklash.from_parameters(played.last_estimate, degree)
+            fit = nrmse(record.x_all, model.simulate(record.u_all, record.x_all[0]))
+            gap = max(
+                abs(model.c_left - record.truth.c_left), abs(model.c_right - record.truth.c_right)
+            )
+        else:
+            fit = gap = float("nan")
+        first_s = first_estimate_s(played)
+        lost = commands_lost(played)
+        ok = (
+            lost == 0
+            and first_s <= 10.0
+            and fit <= 0.02
+            and ours[4] <= (10.0 if load else 5.0)
+            and result.clean
+        )
+        verdicts.append(ok)
+        rows.append(
+            [
+                str(seed),
+                f"{feed.commands:,}",
+                f"{int(feed.is_encoder.sum()):,}",
+                f"{lost:,}" if lost >= 0 else "?",
+                f"{first_s:.2f} s",
+                f"{fit:.5f}",
+                f"{gap:.4f}",
+                f"{ours[2]:.3f} / {ref[2]:.3f} ms",
+                f"{ours[4]:.3f} / {ref[4]:.3f} ms",
+                f"{ours[1]:,}",
+                "clean" if result.clean else "NOT clean",
+            ]
+        )
+    table = md_table(
+        [
+            "seed",
+            "commands",
+            "readings",
+            "commands lost",
+            "first estimate",
+            "free-run NRMSE vs truth",
+            "max gap error (rad)",
+            "median node / echo",
+            "p99 node / echo",
+            "replies lost",
+            "exit on SIGINT",
+        ],
+        rows,
+    )
+    p99_target = 10.0 if load else 5.0
+    beside = " (a CPU-bound process beside it)" if load else ""
+    return f"""### A drivetrain in operation through rclpy{beside}
+
+Machine: {machine_description()}{LOAD_NOTE if load else ""}.
+
+The same three processes, fed `genbacklash_core.scenarios.operation_record` (seeds
+{", ".join(map(str, seeds))}; {warmup_s + seconds:g} s each, one launch per seed): point-to-point
+moves with dwells and jogs, commands at 100 Hz (jittered) held by the drivetrain, a 1 kHz
+encoder quantised to 4096 counts per revolution with 2 % of its readings lost, a curved
+degree-2 backlash with 2.6-2.9 degrees of play. The player publishes each command at its
+time (a ping after it) and each reading that was not lost at its sampling instant, stamped
+when published. Latency is measured on the commands after the first {warmup_s:g} s. The
+estimate (the node's defaults: degree {degree}, windowed) is judged by its free-run NRMSE
+against the noise-free load over the whole record and by its gaps against the truth.
+
+{table}
+
+All seeds within the targets (0 commands lost, first estimate within 10 s, NRMSE <= 0.02, p99
+<= {p99_target:g} ms, a clean exit): {mark(all(verdicts))} ({sum(verdicts)} of {len(verdicts)}).
+
+Command: `{command_line()}`
+"""
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--role", choices=("player", "echo"), default="player")
@@ -351,18 +525,35 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--load", action="store_true", help="a CPU-bound process beside the node (own section)"
     )
+    parser.add_argument(
+        "--scenario",
+        choices=("paper", "operation"),
+        default="paper",
+        help="paper: Example 1 at --rate; operation: a drivetrain in operation (own section)",
+    )
+    parser.add_argument(
+        "--seeds", type=int, nargs="+", default=[0, 1, 2], help="operation: one launch each"
+    )
     parser.add_argument("--quick", action="store_true", help="3 s warm-up, 5 s measured")
     args = parser.parse_args(argv)
     if args.role == "echo":
         return echo(args.lifetime)
-    name = "ros_latency_load" if args.load else "ros_latency"
+    name = (
+        "ros_latency"
+        + ("_operation" if args.scenario == "operation" else "")
+        + ("_load" if args.load else "")
+    )
     if reason := ros2_cli_missing():
         # run_all goes on: the section says why it has no numbers
         write_section(name, f"## ROS 2 latency\n\nSkipped: {reason}.")
         return 0
     if args.quick:
         args.warmup, args.seconds = 3.0, 5.0
-    write_section(name, run(args.rate, args.warmup, args.seconds, args.load))
+    if args.scenario == "operation":
+        text = run_operation(args.seeds, args.warmup, args.seconds, args.load)
+    else:
+        text = run(args.rate, args.warmup, args.seconds, args.load)
+    write_section(name, text)
     return 0
 
 
