@@ -62,6 +62,7 @@ LAUNCH = ("ros2", "launch", "genbacklash_ros", "backlash_identifier.launch.py")
 def echo(lifetime_s: float) -> int:
     """The reference: ping -> pong, nothing else."""
     import rclpy
+    from rclpy.executors import ExternalShutdownException
     from std_msgs.msg import Float64MultiArray
 
     rclpy.init()
@@ -72,7 +73,7 @@ def echo(lifetime_s: float) -> int:
     try:
         while rclpy.ok() and time.monotonic() < end:
             rclpy.spin_once(node, timeout_sec=0.5)
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, ExternalShutdownException):  # SIGINT: rclpy shut the context
         pass
     finally:
         node.destroy_node()

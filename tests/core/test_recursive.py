@@ -22,6 +22,7 @@ from genbacklash_core import (
     paper_example,
     track,
 )
+from genbacklash_core.recursive import memory_regression
 
 from ._helpers import drifting_gap_data, tracking_lag
 
@@ -176,6 +177,39 @@ def test_refit_takes_the_latest_rows() -> None:
     assert _error(refit.parameters, EX1.model.parameters()) < 0.03
 
 
+def test_holds_re_read_the_branch_at_their_anchor() -> None:
+    """A row inside the gap holds the value the last engaged branch left (eqs. 20-21): with
+    its anchor it is one more reading of that branch; after a lost reading it has none."""
+    data = EX1.generate(3, n_samples=4000)
+    breaks = np.zeros(data.u.size, dtype=bool)
+    lost = np.arange(2000, 4000, 53)
+    breaks[lost] = True
+    ident = RecursiveIdentifier(3, settings=RecursiveSettings(forgetting=1.0))  # keeps all
+    ident.update_many(data.u, data.y, breaks)
+    rows, stamps = ident.memory.rows()
+    held = rows[:, 5] != 0.0
+    assert np.count_nonzero(held) > 100
+    truth = EX1.model
+    u_a, d_a = rows[held, 4], rows[held, 5]
+    branch = np.where(d_a < 0.0, truth.left(u_a), truth.right(u_a))
+    miss = rows[held, 3] - branch
+    assert np.sqrt(np.mean(miss**2)) < 1.3 * data.noise_std  # the reading's noise, no more
+    # the anchor is a row since the last lost reading, never one before it
+    checked = 0
+    for k in np.flatnonzero(held):
+        since = lost[lost <= stamps[k]]
+        start = since[-1] if since.size else -1
+        anchors = np.flatnonzero((stamps > start) & (stamps < stamps[k]))
+        assert np.any(rows[anchors, 1] == rows[k, 4]), (stamps[k], start)
+        checked += start >= 0
+    assert checked > 50
+    p = ident.estimate.parameters
+    used = memory_regression(Structure(3), p, rows, holds=False)[2]
+    # with holds the regression takes more rows than the engaged ones alone
+    with_holds = memory_regression(Structure(3), p, rows)[2]
+    assert np.count_nonzero(with_holds) > np.count_nonzero(used)
+
+
 # --------------------------------------------------------------------------- drift
 
 
@@ -188,9 +222,10 @@ def test_tracks_a_growing_gap() -> None:
     judged = (7_000, 12_000)
     lag_left = tracking_lag(samples, values[:, 3], c_left, judged)
     lag_right = tracking_lag(samples, values[:, 7], c_right, judged)
-    # forgetting 0.998: each branch remembers 500 rows; one row per sample on this input, so
-    # the memory spans ~1000 samples and a linear drift is tracked ~500 samples behind
-    assert 200 < lag_left < 800 and 200 < lag_right < 800, (lag_left, lag_right)
+    # each branch remembers 1 / (1 - forgetting) rows, about one per sample on this input, so
+    # the memory spans ~1300 samples; the holds' readings of recent anchors (the play
+    # operator holds the value a branch left) bring the lag below half of that
+    assert 50 < lag_left < 800 and 50 < lag_right < 800, (lag_left, lag_right)
     assert trace[-1].state is EstimatorState.CONVERGED
     assert abs(trace[-1].parameters[3] - c_left[-1]) < 0.03
     assert abs(trace[-1].parameters[7] - c_right[-1]) < 0.03
@@ -228,8 +263,9 @@ def test_holds_without_excitation_and_recovers(kind: str) -> None:
     assert before.state is EstimatorState.CONVERGED
     during = track(ident, u[1500:4500], y[1500:4500], every=500)
     # the rows queued before the input stopped are taken at the next block boundary (64
-    # samples); after that nothing moves and the memory is not flooded by the rest
-    assert np.all(np.abs(during[0].parameters - before.parameters) < before.std())
+    # samples) and move the estimate within its uncertainty (up to 1.2 std over seeds 4-9);
+    # after that nothing moves and the memory is not flooded by the rest
+    assert np.all(np.abs(during[0].parameters - before.parameters) < 2.0 * before.std())
     for est in during:
         np.testing.assert_array_equal(est.parameters, during[0].parameters)
         np.testing.assert_array_equal(est.covariance, during[0].covariance)  # no wind-up
