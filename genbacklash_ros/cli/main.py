@@ -383,6 +383,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         code: int = args.func(args)
+        sys.stdout.flush()  # a buffered stdout (no PYTHONUNBUFFERED) fails here, not at exit
     except GenBacklashError as err:
         print(f"genbacklash {args.command}: error: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -152,13 +153,19 @@ def test_demo_runs_as_a_console_script(tmp_path: Path) -> None:
     assert json.loads((out / "result.json").read_text())["model"] == "cascade"
 
 
-def test_closed_stdout_ends_quietly(tmp_path: Path) -> None:
-    """`genbacklash identify DATA | head -1`: the reader leaves early; no traceback."""
+@pytest.mark.parametrize("unbuffered", [True, False])
+def test_closed_stdout_ends_quietly(tmp_path: Path, unbuffered: bool) -> None:
+    """`genbacklash identify DATA | head -1`: the reader leaves early; no traceback, with a
+    buffered stdout too (its last flush failed at the interpreter's exit, status 120)."""
     data = _simulate(tmp_path, 1)
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}
+    if unbuffered:
+        env["PYTHONUNBUFFERED"] = "1"
     proc = subprocess.Popen(
         [sys.executable, "-m", "genbacklash_ros.cli.main", "identify", str(data)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
+        env=env,
     )
     assert proc.stdout is not None and proc.stderr is not None
     proc.stdout.close()  # as `head` does once it has its line, before the table is printed
