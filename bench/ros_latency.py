@@ -546,7 +546,8 @@ def main(argv: list[str] | None = None) -> int:
     )
     if reason := ros2_cli_missing():
         # run_all goes on: the section says why it has no numbers
-        write_section(name, f"## ROS 2 latency\n\nSkipped: {reason}.")
+        level = "##" if name == "ros_latency" else "###"  # the others are its subsections
+        write_section(name, f"{level} ROS 2 latency ({name})\n\nSkipped: {reason}.")
         return 0
     if args.quick:
         args.warmup, args.seconds = 3.0, 5.0

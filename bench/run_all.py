@@ -25,11 +25,20 @@ BENCHMARKS = (
     "diagnose",
     "replay",
     "dds_latency",
+    "ros_latency",
+    "ros_latency_load",
+    "ros_latency_operation",
     "soak",
     "faults",
     "restart",
     "fleet",
 )
+# sections written by another script's run with arguments (the ROS 2 ones need the bundle
+# sourced; without it they write a section that says so)
+RUNS = {
+    "ros_latency_load": ("ros_latency", ["--load", "--rate", "500", "--warmup", "4"]),
+    "ros_latency_operation": ("ros_latency", ["--scenario", "operation", "--seeds", "0", "1", "2"]),
+}
 
 
 def main() -> None:
@@ -41,8 +50,11 @@ def main() -> None:
     for name in BENCHMARKS:
         print(f"== {name} ==", file=sys.stderr, flush=True)
         t0 = time.perf_counter()
+        script, arguments = RUNS.get(name, (name, []))
         subprocess.run(
-            [sys.executable, str(BENCH_DIR / f"{name}.py"), *extra], check=True, cwd=ROOT
+            [sys.executable, str(BENCH_DIR / f"{script}.py"), *arguments, *extra],
+            check=True,
+            cwd=ROOT,
         )
         durations[name] = time.perf_counter() - t0
     total = time.perf_counter() - started
