@@ -70,7 +70,9 @@ class WindowedSettings:
         (pairs of consecutive readings whose input moved), filed by branch and input region
         (:class:`~genbacklash_core.memory.RowMemory`): old rows are forgotten only where
         new ones cover the same region, and dwells, held commands and lost readings add
-        nothing. For the cascade: the most recent ``W`` samples. Larger: more accurate
+        nothing. For the cascade: the most recent ``W`` samples, where a dwell counts only
+        up to twice the linear block's settling horizon (its later samples repeat a steady
+        state: a joint at rest does not push the moves out). Larger: more accurate
         (std ~ 1/sqrt(W)); smaller: tracks drift with less lag (~ W/2 rows).
     bins : int
         Input regions per branch of the row memory (backlash alone).
@@ -997,7 +999,7 @@ class WindowedIdentifier:
         self._advice_key: tuple[int, bool, str] | None = None  # what the advice was made for
         self._advice = ""
         self._rows = 0  # rows taken (memory mode)
-        self._idle = 0  # samples since the last informative row
+        self._idle = 0  # samples since the last informative row (cascade: stored sample)
         self._structure = self._template
         self._sign_known_now = self._sign_known
         self._p: FloatArray | None = None  # equation-error estimate (warm start)
@@ -1008,6 +1010,10 @@ class WindowedIdentifier:
         self._state = EstimatorState.WARMING_UP
         self._reason = "warming up"
         self._samples = 0
+        self._kept = 0  # samples stored in the window (cascade: settled dwells left out)
+        self._still = 0  # samples the input has held its value, up to the latest (cascade)
+        self._held_u = math.nan  # that value
+        self._settling: tuple[FloatArray, int] | None = None  # (p, its dwell horizon)
         self._last_fit_at = 0
         self._last_fit_rows = 0
         self._next_fit = self.min_samples
@@ -1033,8 +1039,40 @@ class WindowedIdentifier:
         return len(self._ring) if self._memory is None else len(self._memory)
 
     def _progress(self) -> int:
-        """The counter fits are scheduled on: rows taken (backlash alone) or samples."""
-        return self._samples if self._memory is None else self._rows
+        """The counter fits are scheduled on: rows taken (backlash alone) or samples
+        stored (cascade)."""
+        return self._kept if self._memory is None else self._rows
+
+    def _dwell_horizon(self) -> int | None:
+        """Samples of a dwell the cascade's window stores: twice the linear block's settling
+        horizon at the current estimate (to 1e-4 of a step); ``None`` before an estimate."""
+        p = self._p
+        if p is None:
+            return None
+        if self._settling is None or not np.array_equal(self._settling[0], p):
+            self._settling = (p.copy(), 2 * settling_samples(self._structure, p))
+        return self._settling[1]
+
+    def _unsettled(self, uu: FloatArray) -> BoolArray:
+        """Which samples the cascade's window stores: all but those of a dwell (the input
+        held at one value) past :meth:`_dwell_horizon`. After that the linear block has
+        settled (eqs. 30-31 at a fixed point): the samples repeat one steady state, and
+        leaving them out keeps the window's series that of the same dynamics (a reading
+        lost among them changes nothing either: the state did not move)."""
+        n = uu.size
+        same = np.empty(n, dtype=bool)
+        same[0] = uu[0] == self._held_u
+        np.equal(uu[1:], uu[:-1], out=same[1:])
+        index = np.arange(n)
+        change = np.where(same, -1, index)
+        np.maximum.accumulate(change, out=change)
+        run = np.where(change >= 0, index - change, self._still + index + 1)  # 0: it moved
+        self._still = int(min(run[-1], 1 << 40))
+        self._held_u = float(uu[-1])
+        horizon = self._dwell_horizon()
+        if horizon is None:
+            return np.ones(n, dtype=bool)
+        return np.asarray(run <= horizon)
 
     def seed(self, estimate: Estimate) -> Estimate:
         """Continue from a saved ``estimate`` (e.g. a checkpoint's) instead of a cold start.
@@ -1103,7 +1141,8 @@ class WindowedIdentifier:
         )
         self._needs_cold = False
         self._restarted = False  # the next fit continues from the seed (steadiness test)
-        self._samples = self._last_fit_at = estimate.samples
+        self._samples = estimate.samples
+        self._last_fit_at = self._samples if self._memory is not None else self._kept
         self._last_fit_rows = self._seed_rows = self._rows
         self._next_fit = self._progress() + self.min_samples
         self._rebuild()
@@ -1194,14 +1233,23 @@ class WindowedIdentifier:
             bb[0] = True
             self._break_next = False
         if self._memory is None:
+            stored = self._unsettled(uu)
+            if stored.any():  # idle: samples since the last one stored
+                self._idle = int(uu.size - 1 - np.flatnonzero(stored)[-1])
+            else:
+                self._idle += int(uu.size)
+            if not stored.all():  # a settled dwell: counted as seen, not stored
+                self._samples += int(uu.size - np.count_nonzero(stored))
+                uu, yy, bb = uu[stored], yy[stored], bb[stored]
             start = 0
             while start < uu.size:
-                take = min(uu.size - start, self._next_fit - self._samples)
+                take = min(uu.size - start, self._next_fit - self._kept)
                 part = slice(start, start + take)
                 self._ring.extend(uu[part], yy[part], bb[part])
                 self._samples += take
+                self._kept += take
                 start += take
-                if self._samples >= self._next_fit:
+                if self._kept >= self._next_fit:
                     self._fit()
             return self._publish()
         # memory mode: rows are pairs of consecutive samples whose input moved
@@ -1261,7 +1309,7 @@ class WindowedIdentifier:
             return state, reason, 0.0
         s = self.settings
         confidence = self._base_confidence
-        if self._memory is None or state not in (
+        if state not in (
             EstimatorState.CONVERGED,
             EstimatorState.CONVERGING,
             EstimatorState.NO_EXCITATION,
@@ -1305,7 +1353,7 @@ class WindowedIdentifier:
                 self._estimate = est = Estimate.empty(
                     self._structure, self._samples, self._excitation, self._state, reason
                 )
-        if self._memory is not None and self._reported is not None:
+        if self._reported is not None:  # held and aged by the samples without information
             held = self._idle >= self.settings.idle_samples
             was_held = est.state is EstimatorState.NO_EXCITATION and self._state in (
                 EstimatorState.CONVERGED,
@@ -1327,7 +1375,7 @@ class WindowedIdentifier:
         if self._needs_cold and self._cold_failures:  # back off while cold starts fail,
             # but retry at least every W/8 samples: slow references excite the system slowly
             k = min(s.refit_every * 2 ** min(self._cold_failures, 10), max(s.window // 8, 1))
-        self._last_fit_at = self._samples
+        self._last_fit_at = self._samples if self._memory is not None else self._kept
         self._last_fit_rows = self._rows
         self._next_fit = self._progress() + k
 

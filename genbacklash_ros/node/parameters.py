@@ -199,7 +199,8 @@ PARAMETER_SPECS: tuple[ParameterSpec, ...] = (
         _WINDOWED.window,
         "Windowed method: regression rows remembered (a backlash alone: pairs of consecutive "
         "readings whose input moved, forgotten only where new rows cover the same input "
-        "region; a cascade: samples). More: more accurate; fewer: tracks wear faster.",
+        "region; a cascade: samples, a dwell's only until the dynamics settle). More: more "
+        "accurate; fewer: tracks wear faster.",
         20,
         10_000_000,
         unit="rows",

@@ -254,6 +254,34 @@ def test_freezes_without_excitation_and_recovers() -> None:
     assert _error(after.parameters, EX1.model.parameters()) < 0.03
 
 
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_cascade_at_rest_keeps_its_window(seed: int) -> None:
+    """A dwell far longer than the window: its samples past the linear block's settling
+    horizon repeat a steady state and are not stored, so the moves before it stay in the
+    window; the estimate holds (``no_excitation``, the confidence aged, not dropped) and
+    the fits after it still have the moves before it."""
+    ex = paper_example(3)
+    data = ex.generate(seed=seed, n_samples=3400)
+    u = np.concatenate([data.u[:3000], np.full(20_000, data.u[2999]), data.u[3000:]])
+    rng = np.random.default_rng(seed)
+    y = ex.model.simulate(u) + rng.normal(0.0, data.noise_std, u.size)
+    ident = WindowedIdentifier(3, 2, 2)
+    before = ident.update_many(u[:3000], y[:3000])
+    assert before.state is EstimatorState.CONVERGED
+    during = ident.update_many(u[3000:23_000], y[3000:23_000])
+    assert during.state is EstimatorState.NO_EXCITATION
+    assert "no information" in during.reason
+    np.testing.assert_array_equal(during.parameters, before.parameters)
+    assert 0.0 < during.confidence < before.confidence
+    assert during.samples == 23_000
+    window, _ = ident._ring.window()
+    moves = int(np.count_nonzero(np.diff(window)))
+    assert moves > 0.9 * window.size  # the dwell took a few dozen samples of the window
+    after = ident.update_many(u[23_000:], y[23_000:])
+    assert after.state is EstimatorState.CONVERGED
+    assert _error(after.parameters, ex.model.parameters()) < 0.015
+
+
 def test_keeps_the_rest_of_a_branch_when_the_input_sweeps_only_part_of_it() -> None:
     """Memory by input region: 4000 samples sweeping only the upper part of the right
     branch replace the rows of that region only; the rest of both branches stays, so the
