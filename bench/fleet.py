@@ -40,6 +40,22 @@ from genbacklash_ros.fleet.synthetic import SyntheticFleetSpec, write_synthetic_
 GAP_LIMIT = 0.15
 
 
+# CPU seconds of one fleet job per second of bag (60 s bags, one Dask worker process on an
+# idle core of this machine: reading 0.8 s, identify with standard deviations 0.03 s,
+# diagnose 2.2 s), and of writing the synthetic archive; for the first estimate only.
+_CPU_PER_BAG_SECOND = 0.05
+_WRITE_PER_BAG_SECOND = 0.014
+
+
+def _minutes(seconds: float) -> str:
+    return f"{seconds / 60:.1f} min" if seconds >= 90 else f"{seconds:.0f} s"
+
+
+def _stage(text: str) -> None:
+    """A progress line on stderr with the wall-clock time (also where tqdm draws no bar)."""
+    print(f"{time.strftime('%H:%M:%S')} {text}", file=sys.stderr, flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="6 x 4 x 20 s (smoke test)")
@@ -55,22 +71,39 @@ def main() -> None:
     spec = SyntheticFleetSpec(drivetrains=n, days=d, seconds=s, corrupt=bad, no_motion=bad)
     machine = machine_description()
     started = time.perf_counter()
+    bags_total = n * d
+    # The plan with a first estimate; each stage then shows a bar with its rate and ETA
+    # (tqdm, on a terminal), and the 2-worker stage's estimate comes from the 1-worker run.
+    guess = bags_total * s * _CPU_PER_BAG_SECOND
+    _stage(
+        f"{n} x {d} x {s:g} s = {bags_total} bags; archive, then 1 worker, then 2: roughly "
+        f"{_minutes(bags_total * s * _WRITE_PER_BAG_SECOND + 1.5 * guess)} on an idle machine "
+        f"(~{_CPU_PER_BAG_SECOND * 60:.1f} s of CPU per 60 s bag)"
+    )
     work = Path(tempfile.mkdtemp(prefix="genbacklash-bench-fleet-"))
     try:
         t0 = time.perf_counter()
+        _stage(f"[1/3] writing the archive ({bags_total} bags)")
         fleet = write_synthetic_fleet(work / "archive", spec, progress=True)
         generate_s = time.perf_counter() - t0
         size = sum(f.stat().st_size for f in (work / "archive").rglob("*") if f.is_file())
         runs = {}
-        for workers in (1, 2):
+        for step, workers in enumerate((1, 2), 2):
             db = work / f"fleet-{workers}.db"
+            if workers == 1:
+                eta = f"estimate {_minutes(guess)}"
+            else:
+                done = runs[1][0]
+                eta = f"estimate {_minutes(done.seconds / 2 / 0.8)} (1 worker took "
+                eta += f"{_minutes(done.seconds)}; at 80 % scaling)"
+            _stage(f"[{step}/3] {bags_total} bags on {workers} Dask worker(s): {eta}")
             t0 = time.perf_counter()
             with ResultStore(db) as store, fleet_client(workers=workers) as client:
                 cluster_s = time.perf_counter() - t0
                 run = run_fleet(work / "archive", store, FleetSettings(), client, progress=True)
                 rows = store.results()
             runs[workers] = (run, cluster_s, rows)
-            print(f"{workers} worker(s): {run.summary()}", file=sys.stderr)
+            _stage(f"{workers} worker(s): {run.summary()}")
         summary = summarise(runs[2][2], gap_limit=GAP_LIMIT)
     finally:
         shutil.rmtree(work, ignore_errors=True)

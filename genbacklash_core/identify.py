@@ -33,7 +33,12 @@ from .data import (
 )
 from .errors import GenBacklashError, NonFiniteInputError
 from .play import play_operator
-from .refine import RefinementResult, refine_parameters, simulate_parameters
+from .refine import (
+    RefinementResult,
+    branch_support,
+    refine_parameters,
+    simulate_parameters,
+)
 from .samples import as_breaks, breaks_to_rows, restart_points
 from .simulate import play_bounds
 from .structure import Structure
@@ -312,6 +317,28 @@ def _cascade_regression(
     return phi, target
 
 
+def _undetermined(structure: Structure, phi: FloatArray) -> str:
+    """Which branch a singular backlash regression (eq. 22) leaves undetermined, in words.
+
+    A branch's ``n + 1`` parameters need rows engaging it (``f1`` or ``f2`` = 1, eqs. 27-28)
+    at ``n + 1`` distinct inputs at least; a branch that has them and still makes the
+    regression singular is named as collinear.
+    """
+    n = structure.degree
+    said = []
+    for name, first in (("left", 0), ("right", n + 1)):
+        engaged = phi[:, first + 1] != 0.0  # the f1 (or -f2) column of eq. (22)
+        inputs = np.unique(phi[engaged, first]).size  # u f1 (u f2) on those rows
+        if not engaged.any():
+            said.append(f"the {name} branch never engaged (eq. {27 if first == 0 else 28})")
+        elif inputs <= n:
+            said.append(
+                f"the {name} branch engaged at only {inputs} distinct input(s) for its "
+                f"{n + 1} parameters"
+            )
+    return " and ".join(said) or "collinear regressors (eq. 22)"
+
+
 @dataclass
 class _IterationOutcome:
     """Working state of :func:`_iterate` (internal, mutable)."""
@@ -356,11 +383,13 @@ def _iterate(
         out.iterations = iteration
         phi, target = regression(structure, p, u, y, breaks)  # step (b): internal variables
         theta = _solve_least_squares(phi, target) if target.size >= phi.shape[1] else None
+        damped = False  # whether eq. (29) left some parameters undetermined this step
         if theta is None and target.size > 0 and not structure.cascade:
             # (a cascade's singular regression means a structure that does not fit, e.g. a
             # dead time it lacks: GUIDE §2; it ends there with that reason)
             theta = _solve_damped(phi, target, structure.theta(p))
             out.damped += 1
+            damped = True
         if theta is None:  # step (a) impossible
             out.reason = (
                 f"iteration {iteration}: the regression became singular (a branch is never "
@@ -389,6 +418,15 @@ def _iterate(
         if out.valid:
             out.last_valid = p.copy()
         if settled <= tol * max(1.0, float(np.max(np.abs(p)))):  # step (c)
+            if damped:
+                # A damped step carries what eq. (29) does not determine: an iterate whose
+                # branch no row engages is its own fixed point without being an estimate.
+                out.reason = (
+                    f"iteration {iteration}: the iteration settled with "
+                    f"{_undetermined(structure, phi)}: eq. (29) does not determine that "
+                    "branch (its parameters were carried over, not estimated)"
+                )
+                return out
             if problem is None:
                 out.converged = True
                 out.period = period
@@ -514,6 +552,14 @@ def _candidate(
     else:
         anchors = restart_points(breaks)
         fit = nrmse(y, simulate_parameters(structure, p_final, u, x0, anchors, y)[1])
+    if converged and (
+        missing := branch_support(
+            structure, p_final, u, y, x0, None if structure.cascade else restart_points(breaks)
+        )
+    ):
+        # Settled or not, an estimate whose branch the data never reach is no estimate of it.
+        converged = False
+        reason += f"; but the data do not determine the model (under-determined): {missing}"
     if converged and not fit < _USELESS_FIT:
         converged = False
         reason += (

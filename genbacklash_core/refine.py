@@ -35,7 +35,13 @@ from .samples import restart_points
 from .simulate import play_bounds
 from .structure import Structure
 
-__all__ = ["RefinementResult", "refine_output_error", "simulate_parameters"]
+__all__ = [
+    "RefinementResult",
+    "branch_support",
+    "refine_output_error",
+    "simulate_parameters",
+    "simulation_jacobian",
+]
 
 
 @dataclass(frozen=True)
@@ -100,6 +106,65 @@ def simulate_parameters(
     return x, np.asarray(y, dtype=np.float64)
 
 
+def _engaged(
+    structure: Structure,
+    p: FloatArray,
+    u: FloatArray,
+    x: FloatArray,
+    x0: float,
+    anchors: BoolArray | None = None,
+) -> tuple[BoolArray, BoolArray]:
+    """Where the free-run simulation ``x`` follows the left and the right branch.
+
+    Samples pinned to the measurement (``anchors``) follow neither.
+    """
+    left, right = structure.branches(p, u)
+    x_prev = np.concatenate([[x0], x[:-1]])
+    f1 = (left - x_prev) * structure.sign <= 0.0  # eq. (18): left branch engaged
+    f2 = ((x_prev - right) * structure.sign <= 0.0) & ~f1  # eq. (19)
+    if anchors is not None:
+        f1 &= ~anchors
+        f2 &= ~anchors
+    return f1, f2
+
+
+def branch_support(
+    structure: Structure,
+    p: FloatArray,
+    u: FloatArray,
+    y: FloatArray,
+    x0: float,
+    anchors: BoolArray | None = None,
+) -> str | None:
+    """Why the data do not determine a branch of the model ``p``, or None when they do.
+
+    A branch's ``n + 1`` parameters (eq. 23) enter the free-run simulation only where it is
+    engaged (eqs. 18-19), and there only through its values at those inputs: they are
+    determined when the simulation follows the branch at ``n + 1`` distinct inputs at least.
+
+    >>> s = Structure(1)
+    >>> u = np.array([0.0, 1.0, 2.0, 1.0, 0.5, 0.0])
+    >>> branch_support(s, np.array([1.0, 0.1, 1.0, 0.1]), u, u, 0.0) is None
+    True
+    >>> print(branch_support(s, np.array([1.0, 0.1, 1.0, 0.1]), u[:4], u[:4], 0.0))
+    ... # doctest: +NORMALIZE_WHITESPACE
+    the left branch is followed at 1 distinct inputs by the free-run simulation;
+    its 2 parameters need 2
+    """
+    x = simulate_parameters(structure, p, u, x0, anchors, y)[0]
+    f1, f2 = _engaged(structure, p, u, x, x0, anchors)
+    needed = structure.degree + 1
+    said = []
+    for name, engaged in (("left", f1), ("right", f2)):
+        inputs = np.unique(u[engaged]).size
+        if inputs < needed:
+            said.append(
+                f"the {name} branch is followed at {inputs} distinct inputs by the free-run "
+                f"simulation; its {needed} parameters need {needed}"
+            )
+    return "; ".join(said) or None
+
+
 def _backlash_sensitivity(
     structure: Structure,
     p: FloatArray,
@@ -115,13 +180,8 @@ def _backlash_sensitivity(
     """
     n = structure.degree
     m_left, c_left, m_right, c_right = structure.split(p)
-    left, right = structure.branches(p, u)
-    x_prev = np.concatenate([[x0], x[:-1]])
-    f1 = (left - x_prev) * structure.sign <= 0.0  # eq. (18): left branch engaged
-    f2 = ((x_prev - right) * structure.sign <= 0.0) & ~f1  # eq. (19)
+    f1, f2 = _engaged(structure, p, u, x, x0, anchors)
     pinned = np.zeros(u.size, dtype=bool) if anchors is None else anchors
-    f1 &= ~pinned
-    f2 &= ~pinned
     last = np.where(f1 | f2 | pinned, np.arange(u.size), -1)
     np.maximum.accumulate(last, out=last)  # index of the last engagement at or before t
     never = last < 0  # before the first engagement the output is x0: no sensitivity
@@ -179,6 +239,31 @@ def _jacobian(
         jac[:, col] = -signal.lfilter([1.0], den, _shift(y, j))  # dy/db_j
         col += 1
     return jac
+
+
+def simulation_jacobian(
+    structure: Structure,
+    p: FloatArray,
+    u: FloatArray,
+    y: FloatArray,
+    x0: float,
+    breaks: BoolArray | None = None,
+) -> tuple[FloatArray, FloatArray]:
+    """The free-run simulation ``y_sim`` of ``p`` and its Jacobian ``dy_sim/dp``, shape (N, P).
+
+    The refinement's own (analytic) sensitivities, at ``p``; with ``breaks`` a backlash alone
+    restarts at the reading after each break (:func:`simulate_parameters`), and holds no
+    sensitivity there until a branch engages again.
+
+    >>> s = Structure(1)
+    >>> u = np.array([0.0, 1.0, 2.0, 1.0])
+    >>> y_sim, jac = simulation_jacobian(s, np.array([1.0, 0.1, 1.0, 0.1]), u, u, 0.0)
+    >>> y_sim.tolist(), jac[:, 3].tolist()  # dy/dc_R = -m_R1 while the right branch leads
+    ([0.0, 0.9, 1.9, 1.1], [0.0, -1.0, -1.0, 0.0])
+    """
+    anchors = None if structure.cascade else restart_points(breaks)
+    x, y_sim = simulate_parameters(structure, p, u, x0, anchors, y)
+    return y_sim, _jacobian(structure, p, u, x, y_sim, x0, anchors)
 
 
 _OVERFLOW = "the simulation error or its Jacobian overflows float64: the model is far out of scale"

@@ -25,7 +25,7 @@ from genbacklash_core.identify import nrmse
 from genbacklash_core.samples import as_breaks
 
 from .model import AugmentedModel
-from .spec import ModelSpec, anchors_of
+from .spec import ModelSpec, SimulationOutput, anchors_of
 
 __all__ = ["ModelFit", "best_fit", "bic", "fit_model"]
 
@@ -98,7 +98,7 @@ def _levenberg_marquardt(
     max_iterations: int,
     tol: float,
     anchors: BoolArray | None = None,
-) -> tuple[FloatArray, float, int, bool, str]:
+) -> tuple[FloatArray, SimulationOutput, float, int, bool, str]:
     y_start = float(y[0])
     u_range = (float(np.min(u)), float(np.max(u)))
     s = spec.coordinate(u)
@@ -130,14 +130,14 @@ def _levenberg_marquardt(
                     break
             damping *= 4.0
         if not improved:
-            return theta, cost, accepted, accepted > 0, "no step lowers the simulation error"
+            return theta, out, cost, accepted, accepted > 0, "no step lowers the simulation error"
         decrease = (cost - cost_new) / max(cost, 1e-300)
         theta, out, residual, cost = candidate, out_new, res_new, cost_new
         accepted += 1
         damping = max(damping / 5.0, 1e-12)
         if decrease < tol:
-            return theta, cost, accepted, True, "relative cost decrease below tolerance"
-    return theta, cost, accepted, False, f"stopped after {max_iterations} steps"
+            return theta, out, cost, accepted, True, "relative cost decrease below tolerance"
+    return theta, out, cost, accepted, False, f"stopped after {max_iterations} steps"
 
 
 def fit_model(
@@ -201,10 +201,10 @@ def fit_model(
     if (problem := spec.problem(theta, (float(uu.min()), float(uu.max())), s_max)) is not None:
         raise GenBacklashError(f"cannot fit from an invalid start: {problem}")
     anchors = anchors_of(None if breaks is None else as_breaks(breaks, uu.size))
-    theta, cost, steps, converged, reason = _levenberg_marquardt(
+    theta, out, cost, steps, converged, reason = _levenberg_marquardt(
         spec, theta, uu, yy, max_iterations=max_iterations, tol=tol, anchors=anchors
     )
-    y_fit = spec.simulate(theta, uu, float(yy[0]), anchors, yy).y
+    y_fit = out.y  # the simulation of the final theta (the fit's own, not run again)
     return ModelFit(spec.model(theta), cost, uu.size, nrmse(yy, y_fit), steps, converged, reason)
 
 

@@ -445,10 +445,17 @@ class ModelSpec:
         never = (last < 0) | pinned[source]
         columns = structure.n_backlash + int(s is not None) + int(self.input_lag)
         jac = np.empty((u.size, columns), order="F")
+        # The output holds the value of the last engaged branch: every column is a value at
+        # ``source``. Gather the inputs there once and compute the columns on the gathered
+        # samples (the same products, element by element, as computing then gathering).
+        left_on = f1[source] & ~never
+        right_on = f2[source] & ~never
+        xi1 = xi1[source]
+        xi2 = xi2[source]
 
-        def held(engaged_value: FloatArray, column: int) -> None:
-            np.take(engaged_value, source, out=jac[:, column])
-            jac[never, column] = 0.0
+        def held(value: FloatArray, on: BoolArray, column: int) -> None:
+            jac[:, column] = 0.0  # where that branch is not the one held
+            np.copyto(jac[:, column], value, where=on)
 
         power1 = np.ones_like(xi1)
         power2 = np.ones_like(xi2)
@@ -459,15 +466,18 @@ class ModelSpec:
             dright -= i * m_right[i - 1] * power2  # dR/dc_R
             power1 = power1 * xi1
             power2 = power2 * xi2
-            held(np.where(f1, power1, 0.0), i - 1)  # dL/dm_Li = xi1^i
-            held(np.where(f2, power2, 0.0), n + i)  # dR/dm_Ri = xi2^i
-        held(np.where(f1, dleft, 0.0), n)
-        held(np.where(f2, dright, 0.0), 2 * n + 1)
+            held(power1, left_on, i - 1)  # dL/dm_Li = xi1^i
+            held(power2, right_on, n + i)  # dR/dm_Ri = xi2^i
+        held(dleft, left_on, n)
+        held(dright, right_on, 2 * n + 1)
         if s is not None:  # d/dk: the c-derivative times s(t) on whichever branch is engaged
-            held(np.where(f1, dleft * s, np.where(f2, dright * s, 0.0)), structure.n_backlash)
+            s_held = s[source]
+            held(dleft * s_held, left_on, structure.n_backlash)
+            np.copyto(jac[:, structure.n_backlash], dright * s_held, where=right_on)
         if self.input_lag:  # d/da: the branch slope in its input (eqs. 16-17) times dv/da
-            dv = self._input_sensitivity(theta, u, ud)
-            held(np.where(f1, dleft * dv, np.where(f2, -dright * dv, 0.0)), columns - 1)
+            dv = self._input_sensitivity(theta, u, ud)[source]
+            held(dleft * dv, left_on, columns - 1)
+            np.copyto(jac[:, columns - 1], -dright * dv, where=right_on)
         return jac, never
 
     def jacobian(

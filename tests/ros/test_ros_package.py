@@ -46,6 +46,7 @@ def test_package_xml_format_3_ament_python() -> None:
         "python3-numpy",
         "python3-scipy",
         "python3-yaml",
+        "python3-sqlalchemy",
     ):
         assert dep in exec_deps, dep
 

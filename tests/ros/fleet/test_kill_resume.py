@@ -1,5 +1,10 @@
 """A fleet run killed with SIGKILL half-way resumes without loss or duplicates (for real: a
-subprocess, kill -9 once rows are in, the same command again)."""
+subprocess, kill -9 once rows are in, the same command again).
+
+The runs skip the diagnosis (``--no-diagnose``): what is tested is the database across a kill,
+not the analysis, and without it a bag takes ~0.1 s instead of ~0.8 s. The archive has 18
+bags so that well over a second of work remains when the kill lands after the third row.
+"""
 
 from __future__ import annotations
 
@@ -27,12 +32,12 @@ def _rows(db: Path) -> list[tuple[int, str, str, str]]:
 
 
 def test_kill_9_then_rerun(tmp_path: Path) -> None:
-    spec = SyntheticFleetSpec(drivetrains=2, days=4, seconds=4.0, corrupt=1, no_motion=0, seed=3)
+    spec = SyntheticFleetSpec(drivetrains=3, days=6, seconds=4.0, corrupt=1, no_motion=0, seed=3)
     fleet = write_synthetic_fleet(tmp_path / "archive", spec)
     db = tmp_path / "fleet.db"
     command = [
         *(sys.executable, "-m", "genbacklash_ros.cli.main", "fleet", str(tmp_path / "archive")),
-        *("--db", str(db), "--threads", "--workers", "1", "--no-progress"),
+        *("--db", str(db), "--threads", "--workers", "1", "--no-progress", "--no-diagnose"),
     ]
     child = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
@@ -53,5 +58,5 @@ def test_kill_9_then_rerun(tmp_path: Path) -> None:
     corrupt = next(b.relpath for b in fleet.bags if b.kind == "corrupt")
     assert [r[2] for r in after if r[1] == corrupt] == ["unreadable"]
     assert main(command[3:]) == 0 and _rows(db) == after  # idempotent
-    assert main([*command[3:], "--no-diagnose"]) == 0  # other settings: a row per bag more
+    assert main([*command[3:], "--max-nrmse", "0.05"]) == 0  # other settings: a row per bag more
     assert len(_rows(db)) == 2 * len(fleet.bags)
