@@ -13,7 +13,9 @@ messages of every complete chunk, then raises :class:`BagError` saying where the
 so that a replay can keep (and properly close) what it wrote so far.
 
 :class:`BagWriter` writes a rosbag2 directory with one MCAP file
-(``rosbags.rosbag2.Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)``) from our
+(``rosbags.rosbag2.Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)``, its MCAP
+records written by foxglove-sdk's compiled writer where installed:
+:mod:`~genbacklash_ros.bags.fast_mcap`) from our
 messages (:func:`~genbacklash_ros.bags.rosbags_types.to_rosbags` + ``serialize_cdr``) or from raw
 CDR bytes. :func:`align` is the batch form of the pipeline's alignment (one sample per
 encoder message, the command held), used by ``genbacklash identify`` on bags.
@@ -639,6 +641,15 @@ class BagWriter:
     ----------
     path : str or Path
         The bag directory to create; it must not exist.
+    compiled : bool
+        Write the MCAP file with foxglove-sdk's compiled writer
+        (:mod:`~genbacklash_ros.bags.fast_mcap`) when it is installed; False: with rosbags'
+        pure-Python writer. The files hold the same records either way.
+
+    Attributes
+    ----------
+    compiled : bool
+        Whether the compiled writer is in use.
 
     Notes
     -----
@@ -647,8 +658,10 @@ class BagWriter:
     exception leaves the block, so that what was written stays a valid bag.
     """
 
-    def __init__(self, path: str | Path) -> None:
+    def __init__(self, path: str | Path, *, compiled: bool = True) -> None:
         from rosbags.rosbag2 import StoragePlugin, Writer
+
+        from genbacklash_ros.bags import fast_mcap
 
         self.path = Path(path)
         if self.path.exists():
@@ -659,7 +672,10 @@ class BagWriter:
             raise BagError(f"cannot write {self.path}: {_one_line(err)}") from err
         self._store = jazzy_typestore()
         try:
-            self._writer: Any = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
+            # foxglove-sdk's compiled MCAP writer where it is installed, else rosbags' own
+            self.compiled = compiled and fast_mcap.AVAILABLE
+            kind = fast_mcap.FoxgloveWriter if self.compiled else Writer
+            self._writer: Any = kind(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
             self._writer.open()
         except Exception as err:
             raise BagError(f"cannot create {self.path}: {_one_line(err)}") from err

@@ -272,6 +272,7 @@ class StreamHealth:
         "_silence",
         "_still_since",
         "_stuck",
+        "_stuck_branches",
         "_stuck_why",
         "faults",
     )
@@ -299,6 +300,9 @@ class StreamHealth:
         self._still_since: int | None = None  # time of the first of equal readings
         self._stuck = False
         self._stuck_why = ""
+        # the branches at the last command judged: (model, command, L(u), R(u)); a dwell
+        # asks for the same command at every still reading
+        self._stuck_branches: tuple[GeneralBacklash, float, float, float] | None = None
         self._sat_since: int | None = None  # time of the first of saturated commands
         self._fed_t: int | None = None  # the last sample fed (spike prediction)
         self._fed_y: float | None = None
@@ -699,8 +703,13 @@ class StreamHealth:
         if held is None:
             return ""
         u = held
-        with np.errstate(all="ignore"):
-            left, right = float(model.left([u])[0]), float(model.right([u])[0])
+        memo = self._stuck_branches
+        if memo is not None and memo[0] is model and memo[1] == u:
+            left, right = memo[2], memo[3]
+        else:
+            with np.errstate(all="ignore"):
+                left, right = float(model.left([u])[0]), float(model.right([u])[0])
+            self._stuck_branches = (model, u, left, right)
         move = max(min(left, right) - value, value - max(left, right))
         if not (math.isfinite(move) and move > max(STUCK_SIGMAS * scale, 1e-3 * abs(value))):
             return ""
