@@ -108,4 +108,4 @@ class FoxgloveWriter(Writer):
     """rosbags' rosbag2 :class:`~rosbags.rosbag2.Writer` with :class:`FoxgloveMcap` as its
     MCAP storage (use ``storage_plugin=StoragePlugin.MCAP``)."""
 
-    STORAGE_PLUGINS = {StoragePlugin.MCAP: FoxgloveMcap}  # type: ignore[dict-item]  # noqa: RUF012
+    STORAGE_PLUGINS = {StoragePlugin.MCAP: FoxgloveMcap}  # noqa: RUF012
