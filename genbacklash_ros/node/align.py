@@ -126,6 +126,12 @@ class Aligner:
         """The time of a message (see the pipeline's notes)."""
         return header_ns if self._use_header and header_ns else int(receive_ns)
 
+    def times_of(self, header_ns: np.ndarray, receive_ns: np.ndarray) -> np.ndarray:
+        """:meth:`time_of` of many messages (int64 arrays; a header stamp of 0: none)."""
+        if not self._use_header:
+            return receive_ns
+        return np.where(header_ns != 0, header_ns, receive_ns)
+
     @property
     def pending(self) -> int:
         """Encoder readings not yet taken."""
@@ -154,6 +160,39 @@ class Aligner:
             self._enc_y.append(value)
             self._enc_mark.append(self._mark_next)
             self._mark_next = False
+
+    def add_commands(self, stamps: np.ndarray, values: np.ndarray) -> None:
+        """Accepted commands in order, as :meth:`add_command` for each (the caller keeps the
+        history within ``MAX_COMMANDS``: :meth:`room`)."""
+        if stamps.size:
+            self.cmd_t.extend(stamps.tolist())
+            self.cmd_u.extend(values.tolist())
+            self.last_cmd_ns = self.cmd_t[-1]
+
+    @property
+    def room(self) -> int:
+        """Commands :meth:`add_commands` may add before the history needs trimming."""
+        return MAX_COMMANDS - len(self.cmd_t)
+
+    def add_readings(self, stamps: np.ndarray, values: np.ndarray) -> None:
+        """Accepted encoder readings in order, none stuck, each after the one before (and
+        after :attr:`last_enc_ns`): as :meth:`add_reading` for each."""
+        n = int(stamps.size)
+        if n == 0:
+            return
+        t = stamps.tolist()
+        last = self.last_enc_ns
+        if last is not None:
+            self._period.add_many(np.diff(stamps, prepend=last).tolist())
+        else:
+            self._period.add_many(np.diff(stamps).tolist())
+        self.last_enc_ns = t[-1]
+        self.last_y = float(values[-1])
+        self._enc_t.extend(t)
+        self._enc_y.extend(values.tolist())
+        self._enc_mark.append(self._mark_next)
+        self._enc_mark.extend([False] * (n - 1))
+        self._mark_next = False
 
     def reading_taken_out(self) -> None:
         """A reading was rejected (invalid, not finite): the next one breaks the chain."""

@@ -130,6 +130,8 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Literal, TypeAlias
 
+import numpy as np
+
 from genbacklash_core import Estimate, GenBacklashError, OnlineIdentifier
 from genbacklash_ros.node.align import Aligner
 from genbacklash_ros.node.checkpoint import Checkpoint, CheckpointError, save_checkpoint, warm_start
@@ -151,9 +153,9 @@ from genbacklash_ros.node.health import SILENCE_UNKNOWN_NS as SILENCE_UNKNOWN_NS
 from genbacklash_ros.node.health import SPIKE_MAX_SHARE as SPIKE_MAX_SHARE
 from genbacklash_ros.node.health import SPIKE_SIGMAS as SPIKE_SIGMAS
 from genbacklash_ros.node.health import STILL_HOLD_NS as STILL_HOLD_NS
+from genbacklash_ros.node.health import STUCK_INPUT_NS, Drop, HealthEvent, StreamHealth
 from genbacklash_ros.node.health import STUCK_NS as STUCK_NS
 from genbacklash_ros.node.health import STUCK_SIGMAS as STUCK_SIGMAS
-from genbacklash_ros.node.health import Drop, HealthEvent, StreamHealth
 from genbacklash_ros.node.identify import (
     EstimateInUse,
     Identified,
@@ -188,6 +190,7 @@ __all__ = [
     "DIAGNOSTICS_PERIOD_NS",
     "FAULT_HOLD_NS",
     "BacklashPipeline",
+    "BatchOutputs",
     "CheckpointWriter",
     "Output",
     "PipelineStats",
@@ -252,6 +255,34 @@ class PipelineStats:
     checkpoint_errors: int
     dropped: MappingProxyType[str, int]
     last_problem: str
+
+
+@dataclass(frozen=True, slots=True)
+class BatchOutputs:
+    """What :meth:`BacklashPipeline.on_batch` made of a batch of messages.
+
+    Attributes
+    ----------
+    accepted : numpy.ndarray of bool
+        Per message: a command the pipeline accepted (it has a compensated command).
+    stamps : numpy.ndarray of int64
+        Per message: an accepted command's time (0 for the others).
+    sent : numpy.ndarray of float
+        Per message: an accepted command's compensated value (NaN for the others).
+    outputs : list of (int, Output)
+        The periodic outputs (estimates, diagnostics), each with the index of the message
+        that made it due, in order; compensated commands are in ``sent`` instead.
+    """
+
+    accepted: np.ndarray
+    stamps: np.ndarray
+    sent: np.ndarray
+    outputs: list[tuple[int, Output]]
+
+
+def _no_fault() -> bool:
+    """No fault is active (the batch form runs commands only then)."""
+    return False
 
 
 def _order_text(stream: str, stamp: int, last: int) -> str:
@@ -500,6 +531,195 @@ class BacklashPipeline:
         outputs: list[Output] = []
         self._advance(stamp, outputs, heavy=False)
         return stamp, sent, outputs
+
+    def on_batch(
+        self,
+        is_command: np.ndarray,
+        header_ns: np.ndarray,
+        values: np.ndarray,
+        receive_ns: np.ndarray,
+    ) -> BatchOutputs:
+        """Many messages already read, in the order they came: the batch form of
+        :meth:`on_command_value` and :meth:`on_encoder_value`, with the same results.
+
+        Parameters
+        ----------
+        is_command : numpy.ndarray of bool
+            Per message: a command (else an encoder reading).
+        header_ns : numpy.ndarray of int64
+            Header stamps (0: none).
+        values : numpy.ndarray of float
+            The values read.
+        receive_ns : numpy.ndarray of int64
+            Receive times.
+
+        Returns
+        -------
+        BatchOutputs
+
+        Notes
+        -----
+        Stretches of messages that make nothing happen but bookkeeping -- in order, on time,
+        finite, no fault, no feed, no periodic output due, no stuck reading -- are taken in
+        numpy steps by the stages' batch methods (:meth:`Aligner.add_readings`,
+        :meth:`StreamHealth.quiet_readings`, ...); each message that does make something
+        happen goes through the per-message path. The compensated commands and the estimates
+        are those of the per-message path to the last bit (tests/ros/node/test_batch.py).
+        With a thread worker the results are taken at the start of each stretch.
+        """
+        n = int(values.size)
+        kinds = np.asarray(is_command, dtype=bool)
+        heads = np.asarray(header_ns, dtype=np.int64)
+        vals = np.asarray(values, dtype=np.float64)
+        rx = np.asarray(receive_ns, dtype=np.int64)
+        accepted = np.zeros(n, dtype=bool)
+        stamps = np.zeros(n, dtype=np.int64)
+        sent = np.full(n, math.nan)
+        outputs: list[tuple[int, Output]] = []
+        window = 4 * self._batch + 64
+        i = 0
+        while i < n:
+            j = min(n, i + window)
+            i += self._quiet(kinds[i:j], heads[i:j], vals[i:j], rx[i:j], i, accepted, stamps, sent)
+            if i >= n:
+                break
+            if i < j:  # this message makes something happen: the per-message path
+                head, value, received = int(heads[i]), float(vals[i]), int(rx[i])
+                if kinds[i]:
+                    taken = self.on_command_value(head, value, received)
+                    outs: list[Output] = []
+                    if taken is not None:
+                        stamps[i], sent[i], outs = taken
+                        accepted[i] = True
+                else:
+                    outs = self.on_encoder_value(head, value, received)
+                outputs.extend((i, out) for out in outs)
+                i += 1
+        return BatchOutputs(accepted, stamps, sent, outputs)
+
+    def _quiet(
+        self,
+        kinds: np.ndarray,
+        heads: np.ndarray,
+        vals: np.ndarray,
+        rx: np.ndarray,
+        offset: int,
+        accepted: np.ndarray,
+        stamps: np.ndarray,
+        sent: np.ndarray,
+    ) -> int:
+        """Take the leading messages that make nothing happen but bookkeeping in one step
+        (see :meth:`on_batch`); how many they were."""
+        self._take_results()
+        clock, align, health = self._clock, self._align, self._health
+        due = clock.next_due
+        now = clock.now
+        if due is None or now is None or now >= due:
+            return 0
+        times = align.times_of(heads, rx)
+        bad = np.flatnonzero(~np.isfinite(vals) | (np.maximum.accumulate(times) >= due))
+        cut = int(bad[0]) if bad.size else int(vals.size)
+        if cut == 0:
+            return 0
+        cmd = np.flatnonzero(kinds[:cut])
+        enc = np.flatnonzero(~kinds[:cut])
+        est = self._use.current
+        if cmd.size:
+            cut = min(cut, self._quiet_commands(cmd, enc, times, vals, rx, est))
+        enc = enc[enc < cut]
+        if enc.size:
+            cut = min(cut, self._quiet_readings(enc, cmd, times, vals, est))
+        if cut == 0:
+            return 0
+        cmd, enc = cmd[cmd < cut], enc[enc < cut]
+        self._silence.arrived_many(kinds[:cut], rx[:cut])
+        led = self._ledger
+        if cmd.size:
+            comp = self._comp
+            values = vals[cmd]
+            last_y = align.last_y
+            sent_now = [
+                comp.command(v, est, passing=_no_fault, last_y=last_y) for v in values.tolist()
+            ]
+            health.accept_commands()
+            align.add_commands(times[cmd], values)
+            led.commands += int(cmd.size)
+            led.compensated += int(cmd.size)
+            accepted[offset + cmd] = True
+            stamps[offset + cmd] = times[cmd]
+            sent[offset + cmd] = sent_now
+        if enc.size:
+            last = align.last_enc_ns
+            previous = align.last_y
+            assert last is not None and previous is not None
+            readings = times[enc], vals[enc]
+            health.accept_readings(*readings, last, previous, int(rx[enc[-1]]))
+            align.add_readings(*readings)
+            led.encoders += int(enc.size)
+        clock.tick(int(times[:cut].max()))
+        return cut
+
+    def _quiet_commands(
+        self,
+        cmd: np.ndarray,
+        enc: np.ndarray,
+        times: np.ndarray,
+        vals: np.ndarray,
+        rx: np.ndarray,
+        est: Estimate,
+    ) -> int:
+        """Where the commands at ``cmd`` (indices in the stretch) stop being quiet."""
+        first = int(cmd[0])
+        align = self._align
+        if self._in_loop or not self._comp.ready(est):
+            return first
+        t = times[cmd]
+        last = align.last_cmd_ns
+        order = np.diff(t, prepend=t[0] - 1 if last is None else last) <= 0
+        if order.any():
+            return int(cmd[np.argmax(order)])
+        if cmd.size > align.room:
+            return int(cmd[align.room])
+        known = self._health.last_encoder_receive
+        last_rx = np.full(cmd.size, -1 if known is None else known, dtype=np.int64)
+        if enc.size:
+            before = np.searchsorted(enc, cmd) - 1  # the last reading before each command
+            seen = before >= 0
+            last_rx[seen] = rx[enc[before[seen]]]
+        count = self._health.quiet_commands(vals[cmd], rx[cmd], last_rx, self._comp.options)
+        return int(cmd[count]) if count < cmd.size else int(vals.size)
+
+    def _quiet_readings(
+        self, enc: np.ndarray, cmd: np.ndarray, times: np.ndarray, vals: np.ndarray, est: Estimate
+    ) -> int:
+        """Where the encoder readings at ``enc`` (indices in the stretch) stop being quiet."""
+        align = self._align
+        last, previous = align.last_enc_ns, align.last_y
+        if last is None or previous is None:
+            return int(enc[0])
+        t = times[enc]
+        order = np.diff(t, prepend=last) <= 0
+        limit = enc.size
+        if order.any():
+            limit = int(np.argmax(order))
+        feed = self._feed_at_count - align.pending - 1  # this reading would feed
+        limit = max(0, min(limit, feed))
+        if limit == 0:
+            return int(enc[0])
+        end = int(enc[limit]) if limit < enc.size else int(vals.size)  # judged by itself
+        t, enc = t[:limit], enc[:limit]
+
+        def held(which: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            known_t = np.asarray(align.cmd_t, dtype=np.int64)
+            all_t = np.concatenate((known_t, times[cmd]))
+            all_u = np.concatenate((np.asarray(align.cmd_u, dtype=np.float64), vals[cmd]))
+            k = np.searchsorted(all_t, t[which] - STUCK_INPUT_NS, side="right") - 1
+            available = known_t.size + np.searchsorted(cmd, enc[which])
+            k = np.minimum(k, available - 1)
+            return all_u[np.maximum(k, 0)], k >= 0
+
+        count = self._health.quiet_readings(t, vals[enc], last, previous, held, est)
+        return int(enc[count]) if count < enc.size else end
 
     def on_encoder(self, msg: object, receive_ns: int) -> list[Output]:
         """An encoder message received at ``receive_ns``: any periodic outputs now due."""

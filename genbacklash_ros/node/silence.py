@@ -39,6 +39,8 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import numpy as np
+
 from genbacklash_ros.node.messages import DiagnosticStatus
 
 __all__ = ["SILENT_STREAM_NS", "SilenceReport", "SilentStreams"]
@@ -110,6 +112,21 @@ class SilentStreams:
         """An encoder reading whose value was read, received at ``receive_ns``."""
         self._encoder.arrived(receive_ns)
         self._command.other_arrived(receive_ns)
+
+    def arrived_many(self, is_command: np.ndarray, receive_ns: np.ndarray) -> None:
+        """Messages whose values were read, in order (``is_command``, ``receive_ns``: bool
+        and int arrays, one entry per message): the same as :meth:`command` or
+        :meth:`encoder` for each, in one step."""
+        for own, mine in ((self._command, is_command), (self._encoder, ~is_command)):
+            index = np.flatnonzero(mine)
+            last = int(index[-1]) if index.size else -1
+            if last >= 0:
+                own.arrived(int(receive_ns[last]))
+            others = mine.size - last - 1  # the other stream's messages after this one's last
+            if others:
+                if own.since is None:
+                    own.since = int(receive_ns[last + 1]) if own.last is None else own.last
+                own.others += others
 
     def report(self, command_type: str, encoder_type: str) -> SilenceReport:
         """The silent streams now (``command_type``, ``encoder_type``: the parameters'
