@@ -676,18 +676,19 @@ class BacklashPipeline:
         t = times[cmd]
         last = align.last_cmd_ns
         order = np.diff(t, prepend=t[0] - 1 if last is None else last) <= 0
-        if order.any():
-            return int(cmd[np.argmax(order)])
-        if cmd.size > align.room:
-            return int(cmd[align.room])
+        limit = min(int(np.argmax(order)) if order.any() else cmd.size, max(align.room, 0))
+        end = int(cmd[limit]) if limit < cmd.size else int(vals.size)  # judged by itself
+        if limit == 0:
+            return end
+        cmd, enc_before = cmd[:limit], enc
         known = self._health.last_encoder_receive
         last_rx = np.full(cmd.size, -1 if known is None else known, dtype=np.int64)
-        if enc.size:
-            before = np.searchsorted(enc, cmd) - 1  # the last reading before each command
+        if enc_before.size:
+            before = np.searchsorted(enc_before, cmd) - 1  # the last reading before each
             seen = before >= 0
-            last_rx[seen] = rx[enc[before[seen]]]
+            last_rx[seen] = rx[enc_before[before[seen]]]
         count = self._health.quiet_commands(vals[cmd], rx[cmd], last_rx, self._comp.options)
-        return int(cmd[count]) if count < cmd.size else int(vals.size)
+        return int(cmd[count]) if count < cmd.size else end
 
     def _quiet_readings(
         self, enc: np.ndarray, cmd: np.ndarray, times: np.ndarray, vals: np.ndarray, est: Estimate
