@@ -489,11 +489,20 @@ class BagReader:
         if reader is None:
             raise BagError(f"{self.path} is not open")
         connections = [c for c in reader.connections if c.topic in wanted]
+        # one bag: its own reader's stream (already in log-time order), without the merge
+        # AnyReader puts over several bags
+        sources = reader.readers
+        stream = (sources[0] if len(sources) == 1 else reader).messages(connections=connections)
         count = 0
         try:
-            for conn, log_time, raw in reader.messages(connections=connections):
+            for conn, log_time, raw in stream:
                 count += 1
-                yield RawMessage(conn.topic, int(log_time), conn.msgtype, bytes(raw))
+                yield RawMessage(
+                    conn.topic,
+                    int(log_time),
+                    conn.msgtype,
+                    raw if type(raw) is bytes else bytes(raw),
+                )
         except GeneratorExit:
             raise
         except Exception as err:  # rosbags' reader errors
