@@ -161,37 +161,35 @@ class Aligner:
             self._enc_mark.append(self._mark_next)
             self._mark_next = False
 
-    def add_commands(self, stamps: np.ndarray, values: np.ndarray) -> None:
+    def add_commands(self, stamps: list[int], values: list[float]) -> None:
         """Accepted commands in order, as :meth:`add_command` for each (the caller keeps the
-        history within ``MAX_COMMANDS``: :meth:`room`)."""
-        if stamps.size:
-            self.cmd_t.extend(stamps.tolist())
-            self.cmd_u.extend(values.tolist())
-            self.last_cmd_ns = self.cmd_t[-1]
+        history within ``MAX_COMMANDS``: :attr:`room`)."""
+        if stamps:
+            self.cmd_t.extend(stamps)
+            self.cmd_u.extend(values)
+            self.last_cmd_ns = stamps[-1]
 
     @property
     def room(self) -> int:
         """Commands :meth:`add_commands` may add before the history needs trimming."""
         return MAX_COMMANDS - len(self.cmd_t)
 
-    def add_readings(self, stamps: np.ndarray, values: np.ndarray) -> None:
-        """Accepted encoder readings in order, none stuck, each after the one before (and
-        after :attr:`last_enc_ns`): as :meth:`add_reading` for each."""
-        n = int(stamps.size)
-        if n == 0:
+    def add_readings(self, stamps: list[int], values: list[float], steps: list[int]) -> None:
+        """Accepted encoder readings in order, none stuck, each after the one before (the
+        first after :attr:`last_enc_ns`, ``steps`` the differences): as :meth:`add_reading`
+        for each."""
+        if not stamps:
             return
-        t = stamps.tolist()
-        last = self.last_enc_ns
-        if last is not None:
-            self._period.add_many(np.diff(stamps, prepend=last).tolist())
+        if self.last_enc_ns is not None:
+            self._period.add_many(steps)
         else:
-            self._period.add_many(np.diff(stamps).tolist())
-        self.last_enc_ns = t[-1]
-        self.last_y = float(values[-1])
-        self._enc_t.extend(t)
-        self._enc_y.extend(values.tolist())
+            self._period.add_many(steps[1:])
+        self.last_enc_ns = stamps[-1]
+        self.last_y = values[-1]
+        self._enc_t.extend(stamps)
+        self._enc_y.extend(values)
         self._enc_mark.append(self._mark_next)
-        self._enc_mark.extend([False] * (n - 1))
+        self._enc_mark.extend([False] * (len(stamps) - 1))
         self._mark_next = False
 
     def reading_taken_out(self) -> None:

@@ -96,7 +96,6 @@ from __future__ import annotations
 
 import bisect
 import math
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import NamedTuple, TypeAlias
 
@@ -460,140 +459,73 @@ class StreamHealth:
             return ReadingCheck(False, None, self._found())
         return self._watch_stuck(stamp, last, value, commands, inputs, estimate)
 
-    def quiet_commands(
-        self,
-        values: np.ndarray,
-        receive_ns: np.ndarray,
-        last_rx: np.ndarray,
-        options: CompensatorOptions,
-    ) -> int:
-        """How many of the leading accepted commands :meth:`check_command` would pass without
-        finding anything and without a fault to pass them through (the batch form's test).
+    # ------------------------------------------------------------------ batch form
 
-        ``values`` and ``receive_ns`` are the commands' values and receive times,
-        ``last_rx`` the receive time of the last encoder reading accepted before each (-1:
-        none yet).
-        """
-        n = int(values.size)
-        if n == 0 or self._cmd_back or self.faults:
-            return 0
-        hit = (values >= options.u_max) | (values <= options.u_min)
-        hit |= (last_rx >= 0) & (receive_ns - last_rx > self._silence)
-        found = np.flatnonzero(hit)
-        return int(found[0]) if found.size else n
-
-    def accept_commands(self) -> None:
-        """Commands :meth:`quiet_commands` passed, accepted: what :meth:`check_command`
-        would have kept of them (none was saturated)."""
-        self._sat_since = None
+    @property
+    def silence_ns(self) -> int:
+        """The encoder gap that counts as a silence now (ns)."""
+        return self._silence
 
     @property
     def last_encoder_receive(self) -> int | None:
         """The receive time of the last accepted encoder reading (None: none yet)."""
         return self._last_enc_rx
 
-    def quiet_readings(
-        self,
-        stamps: np.ndarray,
-        values: np.ndarray,
-        last: int,
-        previous: float,
-        held: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
-        estimate: Estimate,
-    ) -> int:
-        """How many of the leading accepted encoder readings :meth:`check_reading` would pass
-        without finding anything: no gap, no rate window to close, no stuck encoder (the batch
-        form's test; it changes nothing but what :meth:`check_reading` would change too).
+    @property
+    def rate_window(self) -> tuple[int | None, int]:
+        """Where the current rate window started (None: at the next reading) and how many
+        gaps it holds: a reading closes it ``LOSS_WINDOW_NS`` after its start once it holds
+        ``LOSS_WINDOW_READINGS`` gaps."""
+        return self._gaps_from, len(self._gaps)
 
-        Parameters
-        ----------
-        stamps, values : numpy.ndarray
-            The readings' times (int64, increasing, the first after ``last``) and values.
-        last : int
-            The stream's last accepted time.
-        previous : float
-            The stream's last accepted reading.
-        held : callable
-            ``held(indices) -> (inputs, known)``: the command in force ``STUCK_INPUT_NS``
-            before each of those readings (:func:`_held_input` as the pipeline's command
-            lists stand when the reading comes), and whether there is one.
-        estimate : Estimate
-            The estimate in use.
+    @property
+    def still_since(self) -> int | None:
+        """The time of the reading before the current run of equal readings (None: the
+        last reading changed)."""
+        return self._still_since
 
-        Returns
-        -------
-        int
-            The readings before the first one :meth:`check_reading` must judge itself (a
-            reading close to the stuck limit counts as such: the margin keeps the batch and
-            the per-message path alike to the last bit).
-        """
-        n = int(stamps.size)
-        if n == 0 or self._enc_back or self._stuck:
-            return 0
-        gaps = np.diff(stamps, prepend=last)
-        cut = n
-        over = np.flatnonzero(gaps > self._silence)
-        if over.size:
-            cut = int(over[0])
-        start = self._gaps_from
-        count = len(self._gaps) + np.arange(1, n + 1)
-        window = (stamps - (last if start is None else start) >= LOSS_WINDOW_NS) & (
-            count >= LOSS_WINDOW_READINGS
-        )
-        if start is None:
-            window[0] = False  # the first reading starts the window
-        closing = np.flatnonzero(window[:cut])
-        if closing.size:
-            cut = int(closing[0])
-        if cut == 0:
-            return 0
-        ys = values[:cut]
-        equal = ys == np.concatenate(([previous], ys[:-1]))
-        if not equal.any():
-            return cut
-        t = stamps[:cut]
-        index = np.arange(cut)
-        changed = np.maximum.accumulate(np.where(equal, -1, index))
-        first = last if self._still_since is None else self._still_since
-        since = np.where(changed >= 0, t[np.maximum(changed, 0)], first)
-        candidates = np.flatnonzero(equal & (t - since >= STUCK_NS))
-        if candidates.size == 0:
-            return cut
-        model = estimate.model
-        scale = self._scale
-        if not self._trusted(estimate) or scale is None or not isinstance(model, GeneralBacklash):
-            return cut  # _stuck_reason finds nothing without a trusted backlash
-        inputs, known = held(candidates)
-        y = ys[candidates]
-        with np.errstate(all="ignore"):
-            left, right = model.left(inputs), model.right(inputs)
-            move = np.maximum(np.minimum(left, right) - y, y - np.maximum(left, right))
-            limit = np.maximum(STUCK_SIGMAS * scale, 1e-3 * np.abs(y))
-            maybe = known & ~(move <= 0.5 * limit)  # NaN: maybe; the reading judges itself
-        judged = np.flatnonzero(maybe)
-        return int(candidates[judged[0]]) if judged.size else cut
+    def commands_quiet(self) -> bool:
+        """Commands checked now find nothing by themselves but a late command or a
+        saturated one: no fault is active and no run of commands from the past is going."""
+        return not self.faults and not self._cmd_back
+
+    def readings_quiet(self) -> bool:
+        """Readings checked now are judged by their gap, rate window and stillness only: the
+        encoder is not stuck and no run of readings from the past is going."""
+        return not self._stuck and not self._enc_back
+
+    def stuck_reason(self, value: float, held: float | None, est: Estimate) -> str:
+        """Why an unchanged reading ``value`` is stuck ("" when the model allows it), ``held``
+        being the command in force ``STUCK_INPUT_NS`` before the reading: the test
+        :meth:`check_reading` makes of a reading ``STUCK_NS`` into a still run."""
+        return self._stuck_reason(value, held, est)
+
+    def accept_commands(self) -> None:
+        """Commands that :meth:`check_command` would pass without finding anything (none
+        saturated, none late), accepted."""
+        if self._cmd_back:
+            self._cmd_back.clear()
+        self._sat_since = None
 
     def accept_readings(
-        self, stamps: np.ndarray, values: np.ndarray, last: int, previous: float, receive_ns: int
+        self, last: int, gaps: list[int], receive_ns: int, still_since: int | None
     ) -> None:
-        """Readings :meth:`quiet_readings` passed, accepted: what :meth:`check_reading` would
-        have kept of them (``receive_ns``: the last one's receive time)."""
-        n = int(stamps.size)
-        if n == 0:
+        """Readings that :meth:`check_reading` would pass without finding anything (no gap
+        beyond the silence, no rate window closed, none stuck), accepted after the stream's
+        last time ``last``: their ``gaps`` to the reading before each, the last one's
+        receive time and the start of the still run it ends in (None: it changed)."""
+        if not gaps:
             return
-        self._gaps.extend(np.diff(stamps, prepend=last).tolist())
+        if self._enc_back:
+            self._enc_back.clear()
         if self._gaps_from is None:
             self._gaps_from = last
+        self._gaps.extend(gaps)
         self._enc_rejects = 0
         self._last_enc_rx = receive_ns
-        if values[-1] != (values[-2] if n > 1 else previous):
-            self._still_since, self._stuck = None, False
-            return
-        changed = np.flatnonzero(values != np.concatenate(([previous], values[:-1])))
-        if changed.size:  # the still run began after the reading that changed last
-            self._still_since = int(stamps[changed[-1]])
-        elif self._still_since is None:
-            self._still_since = last
+        self._still_since = still_since
+        if still_since is None:
+            self._stuck = False
 
     def jumped_back(self, stream: str, stamp: int, last: int) -> int | None:
         """Whether a message of ``stream`` (``"command"`` or ``"encoder"``) at ``stamp``, not

@@ -39,8 +39,6 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-import numpy as np
-
 from genbacklash_ros.node.messages import DiagnosticStatus
 
 __all__ = ["SILENT_STREAM_NS", "SilenceReport", "SilentStreams"]
@@ -113,19 +111,24 @@ class SilentStreams:
         self._encoder.arrived(receive_ns)
         self._command.other_arrived(receive_ns)
 
-    def arrived_many(self, is_command: np.ndarray, receive_ns: np.ndarray) -> None:
-        """Messages whose values were read, in order (``is_command``, ``receive_ns``: bool
-        and int arrays, one entry per message): the same as :meth:`command` or
-        :meth:`encoder` for each, in one step."""
-        for own, mine in ((self._command, is_command), (self._encoder, ~is_command)):
-            index = np.flatnonzero(mine)
-            last = int(index[-1]) if index.size else -1
+    def arrived_many(
+        self, command: tuple[int, int, int] | None, encoder: tuple[int, int, int] | None
+    ) -> None:
+        """Messages of both streams whose values were read, in one step: the same as
+        :meth:`command` and :meth:`encoder` for each in turn. Per stream, ``(receive time of
+        its last message, messages of the other stream after it, receive time of the first
+        of those)``; for a stream without messages, ``(-1, messages of the other stream,
+        receive time of the first)`` -- None when the stream had none and neither had the
+        other after it."""
+        for own, seen in ((self._command, command), (self._encoder, encoder)):
+            if seen is None:
+                continue
+            last, others, first_other = seen
             if last >= 0:
-                own.arrived(int(receive_ns[last]))
-            others = mine.size - last - 1  # the other stream's messages after this one's last
+                own.arrived(last)
             if others:
                 if own.since is None:
-                    own.since = int(receive_ns[last + 1]) if own.last is None else own.last
+                    own.since = first_other if own.last is None else own.last
                 own.others += others
 
     def report(self, command_type: str, encoder_type: str) -> SilenceReport:

@@ -164,7 +164,14 @@ def test_silence_many_is_each_in_turn(kinds: list[bool], first: list[bool]) -> N
     receive = [1000 + 7 * k for k in range(len(kinds))]
     for is_cmd, t in zip(kinds, receive, strict=True):
         (one.command if is_cmd else one.encoder)(t)
-    two.arrived_many(np.array(kinds, dtype=bool), np.array(receive, dtype=np.int64))
+    def seen(mine: bool) -> tuple[int, int, int] | None:
+        own = [k for k, is_cmd in enumerate(kinds) if is_cmd is mine]
+        after = [k for k in range(own[-1] + 1 if own else 0, len(kinds)) if kinds[k] is not mine]
+        if not own and not after:
+            return None
+        return (receive[own[-1]] if own else -1), len(after), (receive[after[0]] if after else -1)
+
+    two.arrived_many(seen(True), seen(False))
     for name in ("_command", "_encoder"):
         a, b = getattr(one, name), getattr(two, name)
         assert (a.last, a.since, a.others) == (b.last, b.since, b.others)
