@@ -746,6 +746,32 @@ class BagWriter:
         self._writer.write(entry[0], int(log_time_ns), raw)
         self.count += 1
 
+    def write_raw_many(self, records: Sequence[tuple[str, int, bytes]]) -> None:
+        """Write ``(topic, log time, CDR bytes)`` records in order on topics already added
+        (:meth:`add_topic`): :meth:`write_raw` for each, in one call."""
+        if not self._open:
+            raise BagError(f"{self.path} is closed")
+        try:
+            entries = [(self._connections[topic][0], t, raw) for topic, t, raw in records]
+        except KeyError as err:
+            raise BagError(f"topic {err.args[0]!r} was not added to {self.path}") from err
+        writer = self._writer
+        if self.compiled and entries:
+            # what rosbags' Writer.write does per message (the counts and the time span that
+            # go into metadata.yaml, then its storage's write), with the bookkeeping once
+            write = writer.storage.write
+            counts = writer.counts
+            for conn, t, raw in entries:
+                write(conn, t, raw)
+                counts[conn.id] += 1
+            times = [t for _, t, _ in entries]
+            writer.min_timestamp = min(writer.min_timestamp, min(times))
+            writer.max_timestamp = max(writer.max_timestamp, max(times))
+        else:
+            for conn, t, raw in entries:
+                writer.write(conn, t, raw)
+        self.count += len(entries)
+
     def close(self) -> None:
         """Finish the bag (idempotent)."""
         if self._open:

@@ -286,17 +286,22 @@ class _Feed:
         history.command_t.extend(stamps[cmd].tolist())
         history.command_raw.extend(values[cmd].tolist())
         history.command_sent.extend(sent[cmd].tolist())
-        write_raw = self.writer.write_raw
         patch = self.read_cmd.patch
-        comp_topic, cmd_type = OUTPUT_TOPICS["compensated_command"], self.command_type
+        comp_topic = OUTPUT_TOPICS["compensated_command"]
         accepted_list, sent_list = accepted.tolist(), sent.tolist()
+        records: list[tuple[str, int, bytes]] = []
+        add = records.append
         for k, item in enumerate(items):
-            write_raw(item.topic, item.log_time_ns, item.raw, item.msgtype)
+            add((item.topic, item.log_time_ns, item.raw))
             if accepted_list[k]:
-                write_raw(comp_topic, item.log_time_ns, patch(item.raw, sent_list[k]), cmd_type)
+                add((comp_topic, item.log_time_ns, patch(item.raw, sent_list[k])))
             due = outputs.get(k)
             if due:
+                self.writer.write_raw_many(records)
+                records = []
+                add = records.append
                 self.publish(due, item.log_time_ns)
+        self.writer.write_raw_many(records)
 
     def _one(
         self,

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from genbacklash_ros.bags import fast_mcap
-from genbacklash_ros.bags.bagio import BagReader, BagWriter
+from genbacklash_ros.bags.bagio import BagError, BagReader, BagWriter
 from genbacklash_ros.node.messages import (
     DiagnosticArray,
     DiagnosticStatus,
@@ -117,3 +117,30 @@ def test_readable_by_mcap_ros2(bags: tuple[Path, Path]) -> None:
         for m in reader_mod.read_ros2_messages(str(compiled / "bag.mcap"), topics=["/encoder"])
     ]
     assert positions == [float(k) for k in range(3000)]
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_write_raw_many_is_write_raw_in_turn(tmp_path: Path, compiled: bool) -> None:
+    with BagReader(_write(tmp_path / "src" / "bag", compiled=True).path) as reader:
+        topics = reader.topics
+        records = [(m.topic, m.log_time_ns, m.raw) for m in reader.raw_messages(list(topics))]
+    for name, many in (("one", False), ("many", True)):
+        with BagWriter(tmp_path / name / "bag", compiled=compiled if many else False) as w:
+            for topic, info in topics.items():
+                w.add_topic(topic, info.msgtype)
+            if many:
+                w.write_raw_many(records[:1000])
+                w.write_raw_many([])
+                w.write_raw_many(records[1000:])
+            else:
+                for topic, t, raw in records:
+                    w.write_raw(topic, t, raw, topics[topic].msgtype)
+        assert w.count == len(records)
+    one, many_ = (tmp_path / n / "bag" / "metadata.yaml" for n in ("one", "many"))
+    assert one.read_text() == many_.read_text()  # counts, time span, topics
+    with BagReader(tmp_path / "many" / "bag") as reader:
+        assert [(m.topic, m.log_time_ns, m.raw) for m in reader.raw_messages(list(topics))] == (
+            records
+        )
+    with BagWriter(tmp_path / "x", compiled=compiled) as w, pytest.raises(BagError, match="/nope"):
+        w.write_raw_many([("/nope", 1, b"")])

@@ -164,6 +164,7 @@ def test_silence_many_is_each_in_turn(kinds: list[bool], first: list[bool]) -> N
     receive = [1000 + 7 * k for k in range(len(kinds))]
     for is_cmd, t in zip(kinds, receive, strict=True):
         (one.command if is_cmd else one.encoder)(t)
+
     def seen(mine: bool) -> tuple[int, int, int] | None:
         own = [k for k, is_cmd in enumerate(kinds) if is_cmd is mine]
         after = [k for k in range(own[-1] + 1 if own else 0, len(kinds)) if kinds[k] is not mine]
