@@ -128,6 +128,24 @@ def process_start() -> float:
     return time.perf_counter() - started
 
 
+def floor_start() -> float:
+    """Starting Python and importing what the floor's process imports."""
+    started = time.perf_counter()
+    code = "import rosbags.rosbag2, rosbags.typesys"
+    subprocess.run([sys.executable, "-c", code], check=True)
+    return time.perf_counter() - started
+
+
+def scipy_signal_import() -> float:
+    """Importing ``scipy.signal`` in a fresh process that has numpy already."""
+    code = (
+        "import time, numpy; t = time.perf_counter(); import scipy.signal; "
+        "print(time.perf_counter() - t)"
+    )
+    done = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True)
+    return float(done.stdout)
+
+
 # --------------------------------------------------------------------------- IO candidates
 
 Raw = list[tuple[str, int, bytes]]
@@ -374,8 +392,10 @@ def profile_split(bag: Path, out: Path) -> tuple[float, list[tuple[str, float]]]
             - cum("compensate.py", "command"),
         ),
         (
-            "write the output (BagWriter.write_raw, RawValueReader.patch)",
-            cum("bagio.py", "write_raw") + cum("raw_values.py", "patch"),
+            "write the output (BagWriter.write_raw(_many), RawValueReader.patch)",
+            cum("bagio.py", "write_raw")
+            + cum("bagio.py", "write_raw_many")
+            + cum("raw_values.py", "patch"),
         ),
     ]
     known = sum(v for _, v in parts)
@@ -427,6 +447,8 @@ def main() -> None:
             add("floor_process", run_floor_process(bag, root / "floor", n_out))
             add("floor_inprocess", run_floor_inprocess(bag, root / "floor", n_out))
             add("start", process_start())
+            add("scipy_signal", scipy_signal_import())
+            add("floor_start", floor_start())
             for name, read in readers.items():
                 add(f"read:{name}", timed(lambda r=read: r(bag)))
             for name, write in writers.items():
@@ -550,8 +572,12 @@ path): {inverse["step"] * 1e6:.2f} us with the table inverse against
 ({inverse["inv_solve"] / inverse["inv"]:.1f}x). The table answer is within 1e-9 of the range
 of the root solve's (tests/core/test_inverse_fast.py; ~1e-14 seen).
 
-Where the time goes: process start {b["start"]:.2f} s of {b["cli"]:.2f} s (importing numpy and
-scipy: `scipy.signal` alone takes about 0.5 s; genbacklash_core imports it for its filters).
+Where the time goes: process start {b["start"]:.2f} s of {b["cli"]:.2f} s, of which
+`import scipy.signal` takes {b["scipy_signal"]:.2f} s (genbacklash_core imports it at the
+top of `linear`, `refine`, `windowed` and `recursive` for `lfilter`); the floor's process
+starts (Python, rosbags) in {b["floor_start"]:.2f} s. Without the starts, the replay takes
+{b["cli"] - b["start"]:.2f} s against the floor's {b["floor_process"] - b["floor_start"]:.2f} s
+({(b["floor_process"] - b["floor_start"]) / (b["cli"] - b["start"]):.2f}x).
 Of the replay itself ({profiled:.2f} s under cProfile, which inflates Python-heavy parts):
 
 {split_table}
