@@ -660,7 +660,7 @@ class BacklashPipeline:
         if view.cmd_before[end] > c0:
             end = self._commands_end(view, i, c0, end)
         if view.enc_before[end] > e0:
-            end = self._readings_end(view, e0, end)
+            end = self._readings_end(view, e0, c0, end)
         if end > i:
             self._take_stretch(view, i, end, out)
         return end
@@ -701,8 +701,9 @@ class BacklashPipeline:
             k += 1
         return view.cmd_pos[stop] if stop < c1 else end
 
-    def _readings_end(self, view: BlockView, e0: int, end: int) -> int:
-        """Where the stretch ends for its encoder readings (ordinals from ``e0``)."""
+    def _readings_end(self, view: BlockView, e0: int, c0: int, end: int) -> int:
+        """Where the stretch ends for its encoder readings (ordinals from ``e0``; the
+        stretch's commands from ordinal ``c0``)."""
         e1 = view.enc_before[end]
         first = view.enc_pos[e0]
         align, health = self._align, self._health
@@ -713,7 +714,7 @@ class BacklashPipeline:
         silence = health.silence_ns
         if t[e0] <= last or t[e0] - last > silence:
             return first
-        stop = min(e1, e0 + self._feed_at_count - align.pending - 1)  # that reading feeds
+        stop = min(e1, e0 + max(self._feed_at_count - align.pending - 1, 0))  # it feeds
         k = bisect.bisect_right(view.enc_disorder, e0)
         if k < len(view.enc_disorder) and view.enc_disorder[k] < stop:
             stop = view.enc_disorder[k]
@@ -729,12 +730,13 @@ class BacklashPipeline:
             base = last if start is None else start
             stop = bisect.bisect_left(t, base + LOSS_WINDOW_NS, low, stop)
         if stop > e0:
-            stop = self._stuck_end(view, e0, stop)
+            stop = self._stuck_end(view, e0, c0, stop)
         return view.enc_pos[stop] if stop < e1 else end
 
-    def _stuck_end(self, view: BlockView, e0: int, stop: int) -> int:
+    def _stuck_end(self, view: BlockView, e0: int, c0: int, stop: int) -> int:
         """Where the readings ``e0 .. stop - 1`` stop being quiet for the stuck-encoder
-        check: the first one :meth:`StreamHealth.check_reading` would find stuck.
+        check: the first one :meth:`StreamHealth.check_reading` would find stuck (the
+        stretch's commands, from ordinal ``c0``, count from when they come).
 
         The still run the stretch starts in (or that its first reading starts) is judged
         here, once for each command it holds (:meth:`StreamHealth.stuck_reason`, the
@@ -762,9 +764,8 @@ class BacklashPipeline:
         # force STUCK_INPUT_NS before the reading, among those that came before it)
         est = self._use.current
         value = y[o]
-        known_t, known_u = align.cmd_t, align.cmd_u
-        n_known = len(known_t)
-        c0 = view.cmd_before[view.enc_pos[e0]]
+        known_t, known_u = align.cmd_t, align.cmd_u  # the commands before the stretch
+        n_known = len(known_t)  # and the stretch's own from ordinal c0, as they come
         c_end = view.cmd_before[view.enc_pos[run_end - 1]]
         total = n_known + c_end - c0
 

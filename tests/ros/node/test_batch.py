@@ -185,3 +185,50 @@ def test_period_add_many_is_add_in_turn(steps: list[int]) -> None:
         one.add(step)
     two.add_many(steps)
     assert one.value == two.value
+
+
+def _frozen_encoder_after_a_jump(seed: int, hold_ms: int = 150) -> tuple[list[Event], int]:
+    """2.5 s of the clean drivetrain (the estimate converges), then 150 ms of the last
+    command held with the encoder steady, then a command far away while the encoder stays
+    where it was: a stuck encoder, which only the command in force 20 ms before each
+    reading reveals (``hold_ms`` after the steady part begins). Returns the events and the
+    index of the jump."""
+    events = [e for e in scenario_of(CLEAN, seed).events if e.true_ns < 2_500_000_000]
+    last_cmd = next(e for e in reversed(events) if e.kind == "command")
+    last_enc = next(e for e in reversed(events) if e.kind == "encoder")
+    t0 = max(e.true_ns for e in events)
+    tail: list[Event] = []
+    for k in range(1, 301):  # 300 ms: commands every 5 ms, readings every 1 ms
+        t = t0 + k * 1_000_000
+        if k % 5 == 0:
+            value = last_cmd.value if k <= hold_ms else last_cmd.value + 1.5
+            tail.append(
+                Event(
+                    t,
+                    "command",
+                    t,
+                    last_cmd.receive_ns + t - last_cmd.true_ns,
+                    last_cmd.stamp_ns + t - last_cmd.true_ns,
+                    value,
+                )
+            )
+        stamp = last_enc.stamp_ns + t - last_enc.true_ns
+        tail.append(Event(t + 1, "encoder", t, stamp + 100_000, stamp, last_enc.value))
+    jump = len(events) + next(
+        k for k, e in enumerate(tail) if e.kind == "command" and e.value != last_cmd.value
+    )
+    return events + tail, jump
+
+
+@pytest.mark.parametrize("hold_ms", range(100, 165, 5))
+@pytest.mark.parametrize("offset", [-1, 0, 1])
+def test_a_stretch_starting_at_the_command_that_reveals_a_stuck_encoder(
+    hold_ms: int, offset: int
+) -> None:
+    """Wherever the feeds fall, a stretch that starts at (or just before) the jump holds it
+    for the readings 20 ms after it."""
+    events, jump = _frozen_encoder_after_a_jump(seed=8, hold_ms=hold_ms)
+    one, two = BacklashPipeline(PARAMS), BacklashPipeline(PARAMS)
+    a = per_message(one, events)
+    assert one.stats.dropped["encoder_stuck"] > 0  # the scenario does find the stuck encoder
+    assert_same(one, two, a, batched(two, events, [jump + offset]))
