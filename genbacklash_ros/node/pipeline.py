@@ -647,6 +647,9 @@ class BacklashPipeline:
         if due is None or now is None or now >= due:
             return i
         end = min(view.n, i + _STRETCH_MAX)
+        feeds = view.enc_before[i] + max(self._feed_at_count - self._align.pending - 1, 0)
+        if feeds < len(view.enc_pos):  # the reading that feeds ends it at the latest
+            end = min(end, view.enc_pos[feeds])
         k = bisect.bisect_left(view.nonfinite, i)
         if k < len(view.nonfinite):
             end = min(end, view.nonfinite[k])
