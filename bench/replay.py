@@ -274,6 +274,20 @@ def check_output(out: Path, n: int) -> None:
     assert count == n, (path, count, n)
 
 
+_CANDIDATE_MODULES = {
+    "mcap": "mcap",
+    "pybag-sdk": "pybag",
+    "foxglove-sdk": "foxglove",
+    "ours: rosbags Writer + foxglove-sdk storage": "foxglove",
+}
+
+
+def _installed(module: str) -> bool:
+    import importlib.util
+
+    return importlib.util.find_spec(module) is not None
+
+
 # --------------------------------------------------------------------------- the pipeline
 
 Event = tuple[bool, int, float, int]
@@ -441,6 +455,9 @@ def main() -> None:
             "foxglove-sdk": write_foxglove,
             "ours: rosbags Writer + foxglove-sdk storage": write_ours,
         }
+        missing = [name for name, module in _CANDIDATE_MODULES.items() if not _installed(module)]
+        readers = {k: v for k, v in readers.items() if k not in missing}
+        writers = {k: v for k, v in writers.items() if k not in missing}
         for k in range(ROUNDS):  # round-robin: load bursts hit all alike
             print(f"round {k + 1}/{ROUNDS}", file=sys.stderr, flush=True)
             add("cli", run_cli(bag, root / "cli"))
@@ -527,6 +544,12 @@ def main() -> None:
             for name in writers
         ],
     )
+    not_measured = (
+        f"Not installed here, so not measured: {', '.join(missing)} "
+        "(`pip install mcap pybag-sdk foxglove-sdk`).\n\n"
+        if missing
+        else ""
+    )
     split_table = md_table(
         ["stage (cProfile of one in-process replay)", "share of the replay"],
         [[label, f"{share:.0%}"] for label, share in split],
@@ -557,11 +580,11 @@ mcap-ros2-support):
 
 {io_table}
 
-pybag-sdk is pure Python (its raw record reader and writer are its internal record layer:
-its public API decodes and encodes messages); foxglove-sdk is compiled but only writes MCAP
-(no reader). The replay therefore reads with rosbags (fastest reader measured) and writes
-through rosbags' rosbag2 `Writer` (metadata.yaml, rosbag2 metadata record, the same records
-as rosbags writes) with foxglove-sdk's writer as its MCAP storage
+{not_measured}pybag-sdk is pure Python (its raw record reader and writer are its internal
+record layer: its public API decodes and encodes messages); foxglove-sdk is compiled but only
+writes MCAP (no reader). The replay therefore reads with rosbags (fastest reader measured)
+and writes through rosbags' rosbag2 `Writer` (metadata.yaml, rosbag2 metadata record, the
+same records as rosbags writes) with foxglove-sdk's writer as its MCAP storage
 (`genbacklash_ros/bags/fast_mcap.py`; rosbags' own writer is the fallback without it).
 
 Compensated command (`InverseBacklash.step`, the operation bag's drivetrain, a 20,000-sample
