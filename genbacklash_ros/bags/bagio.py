@@ -13,7 +13,9 @@ messages of every complete chunk, then raises :class:`BagError` saying where the
 so that a replay can keep (and properly close) what it wrote so far.
 
 :class:`BagWriter` writes a rosbag2 directory with one MCAP file
-(``rosbags.rosbag2.Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)``) from our
+(``rosbags.rosbag2.Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)``, its MCAP
+records written by foxglove-sdk's compiled writer where installed:
+:mod:`~genbacklash_ros.bags.fast_mcap`) from our
 messages (:func:`~genbacklash_ros.bags.rosbags_types.to_rosbags` + ``serialize_cdr``) or from raw
 CDR bytes. :func:`align` is the batch form of the pipeline's alignment (one sample per
 encoder message, the command held), used by ``genbacklash identify`` on bags.
@@ -487,11 +489,20 @@ class BagReader:
         if reader is None:
             raise BagError(f"{self.path} is not open")
         connections = [c for c in reader.connections if c.topic in wanted]
+        # one bag: its own reader's stream (already in log-time order), without the merge
+        # AnyReader puts over several bags
+        sources = reader.readers
+        stream = (sources[0] if len(sources) == 1 else reader).messages(connections=connections)
         count = 0
         try:
-            for conn, log_time, raw in reader.messages(connections=connections):
+            for conn, log_time, raw in stream:
                 count += 1
-                yield RawMessage(conn.topic, int(log_time), conn.msgtype, bytes(raw))
+                yield RawMessage(
+                    conn.topic,
+                    int(log_time),
+                    conn.msgtype,
+                    raw if type(raw) is bytes else bytes(raw),
+                )
         except GeneratorExit:
             raise
         except Exception as err:  # rosbags' reader errors
@@ -639,6 +650,15 @@ class BagWriter:
     ----------
     path : str or Path
         The bag directory to create; it must not exist.
+    compiled : bool
+        Write the MCAP file with foxglove-sdk's compiled writer
+        (:mod:`~genbacklash_ros.bags.fast_mcap`) when it is installed; False: with rosbags'
+        pure-Python writer. The files hold the same records either way.
+
+    Attributes
+    ----------
+    compiled : bool
+        Whether the compiled writer is in use.
 
     Notes
     -----
@@ -647,8 +667,10 @@ class BagWriter:
     exception leaves the block, so that what was written stays a valid bag.
     """
 
-    def __init__(self, path: str | Path) -> None:
+    def __init__(self, path: str | Path, *, compiled: bool = True) -> None:
         from rosbags.rosbag2 import StoragePlugin, Writer
+
+        from genbacklash_ros.bags import fast_mcap
 
         self.path = Path(path)
         if self.path.exists():
@@ -659,7 +681,10 @@ class BagWriter:
             raise BagError(f"cannot write {self.path}: {_one_line(err)}") from err
         self._store = jazzy_typestore()
         try:
-            self._writer: Any = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
+            # foxglove-sdk's compiled MCAP writer where it is installed, else rosbags' own
+            self.compiled = compiled and fast_mcap.AVAILABLE
+            kind = fast_mcap.FoxgloveWriter if self.compiled else Writer
+            self._writer: Any = kind(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
             self._writer.open()
         except Exception as err:
             raise BagError(f"cannot create {self.path}: {_one_line(err)}") from err
@@ -720,6 +745,32 @@ class BagWriter:
             entry = self._connections[topic]
         self._writer.write(entry[0], int(log_time_ns), raw)
         self.count += 1
+
+    def write_raw_many(self, records: Sequence[tuple[str, int, bytes]]) -> None:
+        """Write ``(topic, log time, CDR bytes)`` records in order on topics already added
+        (:meth:`add_topic`): :meth:`write_raw` for each, in one call."""
+        if not self._open:
+            raise BagError(f"{self.path} is closed")
+        try:
+            entries = [(self._connections[topic][0], t, raw) for topic, t, raw in records]
+        except KeyError as err:
+            raise BagError(f"topic {err.args[0]!r} was not added to {self.path}") from err
+        writer = self._writer
+        if self.compiled and entries:
+            # what rosbags' Writer.write does per message (the counts and the time span that
+            # go into metadata.yaml, then its storage's write), with the bookkeeping once
+            write = writer.storage.write
+            counts = writer.counts
+            for conn, t, raw in entries:
+                write(conn, t, raw)
+                counts[conn.id] += 1
+            times = [t for _, t, _ in entries]
+            writer.min_timestamp = min(writer.min_timestamp, min(times))
+            writer.max_timestamp = max(writer.max_timestamp, max(times))
+        else:
+            for conn, t, raw in entries:
+                writer.write(conn, t, raw)
+        self.count += len(entries)
 
     def close(self) -> None:
         """Finish the bag (idempotent)."""

@@ -42,6 +42,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import struct
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Literal, cast
 
@@ -151,6 +152,55 @@ class RawValueReader:
             else:
                 return self._read_fast(raw, layout)
         return self._read_slow(raw)
+
+    def read_many(self, raws: Sequence[bytes]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`read` of many messages at once, in numpy steps per learnt layout.
+
+        Returns ``(stamps, values, ok)``: int64 header stamps (0: none), float values and
+        whether each message was read so. A message not ``ok`` (another layout, not finite,
+        damaged) is for :meth:`read` to read or reject, one by one; for the others the
+        results are :meth:`read`'s. The first message of a length not seen yet is read by
+        :meth:`read` here to learn its layout.
+        """
+        n = len(raws)
+        stamps = np.zeros(n, dtype=np.int64)
+        values = np.full(n, math.nan)
+        ok = np.zeros(n, dtype=bool)
+        if n == 0:
+            return stamps, values, ok
+        lengths = np.fromiter(map(len, raws), dtype=np.int64, count=n)
+        for length in np.unique(lengths).tolist():
+            if length not in self._layouts and len(self._layouts) < _MAX_LAYOUTS:
+                first = int(np.argmax(lengths == length))
+                try:
+                    self.read(raws[first])  # learns the layout (its value is read again)
+                except MessageError:
+                    pass
+            layout = self._layouts.get(length)
+            if layout is None:
+                continue
+            index = np.flatnonzero(lengths == length)
+            joined = b"".join([raws[k] for k in index.tolist()])
+            rows = np.frombuffer(joined, dtype=np.uint8).reshape(index.size, length)
+            good = np.ones(index.size, dtype=bool)
+            for start, expected in layout.constant:
+                same = rows[:, start : start + len(expected)] == np.frombuffer(expected, np.uint8)
+                good &= same.all(axis=1)
+            at = layout.value_at
+            value = rows[:, at : at + 8].copy().view("<f8")[:, 0]
+            good &= np.isfinite(value)
+            for offset, count in layout.checked:
+                floats = rows[:, offset : offset + 8 * count].copy().view("<f8")
+                good &= np.isfinite(floats).all(axis=1)
+            if layout.stamp_at >= 0:
+                at = layout.stamp_at
+                sec = rows[:, at : at + 4].copy().view("<i4")[:, 0].astype(np.int64)
+                nanosec = rows[:, at + 4 : at + 8].copy().view("<u4")[:, 0].astype(np.int64)
+                stamps[index] = np.where(good, sec * NS_PER_S + nanosec, 0)
+            values[index[good]] = value[good]
+            ok[index[good]] = True
+            self.fast += int(np.count_nonzero(good))
+        return stamps, values, ok
 
     def _read_fast(self, raw: bytes, layout: _Layout) -> tuple[int, float]:
         (value,) = _unpack_d(raw, layout.value_at)

@@ -23,8 +23,10 @@ properly (it stays readable) and returns the reason in :attr:`ReplayResult.error
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 
@@ -35,6 +37,7 @@ from genbacklash_ros.bags.bagio import (
     BagError,
     BagReader,
     BagWriter,
+    RawMessage,
 )
 from genbacklash_ros.bags.raw_values import RawValueReader, UndecodableMessage
 from genbacklash_ros.node.messages import DiagnosticArray, Float64MultiArray, MessageError
@@ -51,6 +54,7 @@ OUTPUT_TOPICS: dict[str, str] = {
 """Pipeline output key -> topic in the output bag (the node's names, GUIDE §4)."""
 
 _PROGRESS_EVERY = 2048
+_BLOCK = 8192  # input messages handed to the pipeline at once (BacklashPipeline.on_batch)
 
 
 @dataclass
@@ -151,8 +155,8 @@ class _Progress:
 
             self._bar = tqdm(total=total, desc="replay", unit="msg", unit_scale=True, leave=False)
 
-    def step(self) -> None:
-        self._pending += 1
+    def step(self, count: int = 1) -> None:
+        self._pending += count
         if self._pending >= _PROGRESS_EVERY and self._bar is not None:
             self._bar.update(self._pending)
             self._pending = 0
@@ -185,6 +189,148 @@ class _CorruptMessages:
             f"{bag} is corrupt: {self.count} {which} not decodable and skipped "
             f"(first: {self.first})"
         )
+
+
+class _Feed:
+    """Blocks of input messages through the pipeline, and what it publishes into the output.
+
+    Each block's values are read at once (:meth:`RawValueReader.read_many`) and given to
+    :meth:`BacklashPipeline.on_batch`; a message whose bytes the fast reader does not take is
+    read (or rejected) by itself, in its place, through the per-message path
+    (:meth:`BacklashPipeline.on_command_value`, :meth:`~BacklashPipeline.on_encoder_value`),
+    as every message is when not ``batched``. The input messages are copied as raw records,
+    each followed by what it made the node publish.
+    """
+
+    def __init__(
+        self,
+        pipeline: BacklashPipeline,
+        read_cmd: RawValueReader,
+        read_enc: RawValueReader,
+        writer: BagWriter,
+        command_topic: str,
+        command_type: str,
+        history: ReplayHistory,
+        corrupt: _CorruptMessages,
+        publish: Callable[[list[Output], int], None],
+        use_header: bool,
+        batched: bool,
+    ) -> None:
+        self.pipeline = pipeline
+        self.read_cmd, self.read_enc = read_cmd, read_enc
+        self.writer = writer
+        self.command_topic, self.command_type = command_topic, command_type
+        self.history = history
+        self.corrupt = corrupt
+        self.publish = publish
+        self.use_header = use_header
+        self.batched = batched
+
+    def block(self, items: list[RawMessage]) -> None:
+        """Feed ``items`` (in log-time order) and write the output they make."""
+        n = len(items)
+        is_cmd = np.fromiter((m.topic == self.command_topic for m in items), dtype=bool, count=n)
+        heads = np.zeros(n, dtype=np.int64)
+        values = np.full(n, np.nan)
+        ok = np.zeros(n, dtype=bool)
+        try:
+            log = np.fromiter((m.log_time_ns for m in items), dtype=np.int64, count=n)
+        except OverflowError:  # a damaged record's time: this block goes message by message
+            log = np.zeros(n, dtype=np.int64)
+            batched = False
+        else:
+            batched = self.batched
+        if batched:
+            for reader, mine in ((self.read_cmd, is_cmd), (self.read_enc, ~is_cmd)):
+                where = np.flatnonzero(mine)
+                h, v, good = reader.read_many([items[k].raw for k in where.tolist()])
+                heads[where], values[where], ok[where] = h, v, good
+        pipe = self.pipeline
+        history = self.history
+        sent = np.full(n, np.nan)
+        accepted = np.zeros(n, dtype=bool)
+        stamps = np.zeros(n, dtype=np.int64)
+        outputs: dict[int, list[Output]] = {}
+        start = 0
+        for odd in [*np.flatnonzero(~ok).tolist(), n]:  # not batched: every message
+            if odd > start:  # the messages read at once: one batch
+                part = pipe.on_batch(
+                    is_cmd[start:odd], heads[start:odd], values[start:odd], log[start:odd]
+                )
+                accepted[start:odd], stamps[start:odd], sent[start:odd] = (
+                    part.accepted,
+                    part.stamps,
+                    part.sent,
+                )
+                for k, out in part.outputs:
+                    outputs.setdefault(start + k, []).append(out)
+            if odd == n:
+                break
+            outs = self._one(items[odd], bool(is_cmd[odd]), heads, values, ok, odd)
+            if outs is not None:
+                taken, more = outs
+                if taken is not None:
+                    stamps[odd], sent[odd] = taken
+                    accepted[odd] = True
+                if more:
+                    outputs[odd] = more
+            start = odd + 1
+        enc = np.flatnonzero(~is_cmd & ok)
+        use_header = self.use_header
+        history.encoder_t.extend(
+            head if use_header and head else items[k].log_time_ns
+            for k, head in zip(enc.tolist(), heads[enc].tolist(), strict=True)
+        )
+        history.encoder_y.extend(values[enc].tolist())
+        cmd = np.flatnonzero(accepted)
+        history.command_t.extend(stamps[cmd].tolist())
+        history.command_raw.extend(values[cmd].tolist())
+        history.command_sent.extend(sent[cmd].tolist())
+        patch = self.read_cmd.patch
+        comp_topic = OUTPUT_TOPICS["compensated_command"]
+        accepted_list, sent_list = accepted.tolist(), sent.tolist()
+        records: list[tuple[str, int, bytes]] = []
+        add = records.append
+        for k, item in enumerate(items):
+            add((item.topic, item.log_time_ns, item.raw))
+            if accepted_list[k]:
+                add((comp_topic, item.log_time_ns, patch(item.raw, sent_list[k])))
+            due = outputs.get(k)
+            if due:
+                self.writer.write_raw_many(records)
+                records = []
+                add = records.append
+                self.publish(due, item.log_time_ns)
+        self.writer.write_raw_many(records)
+
+    def _one(
+        self,
+        item: RawMessage,
+        is_cmd: bool,
+        heads: np.ndarray,
+        values: np.ndarray,
+        ok: np.ndarray,
+        k: int,
+    ) -> tuple[tuple[int, float] | None, list[Output]] | None:
+        """A message by itself through the per-message path (rejected when its bytes do
+        not decode); records its stamp and value in ``heads``, ``values`` and ``ok[k]``."""
+        pipe = self.pipeline
+        stream: Literal["command", "encoder"] = "command" if is_cmd else "encoder"
+        reader = self.read_cmd if is_cmd else self.read_enc
+        try:
+            header_ns, value = reader.read(item.raw)
+        except MessageError as err:
+            pipe.reject(stream, str(err))
+            self.corrupt.note(err, item.topic, item.log_time_ns)
+            return None
+        heads[k], values[k], ok[k] = header_ns, value, True
+        if is_cmd:
+            taken = pipe.on_command_value(header_ns, value, item.log_time_ns)
+            if taken is None:
+                return None
+            stamp, sent, outs = taken
+            return (stamp, sent), outs
+        return None, pipe.on_encoder_value(header_ns, value, item.log_time_ns)
 
 
 def _replay_params(
@@ -221,6 +367,7 @@ def replay(
     nb: int | None = None,
     method: str | None = None,
     progress: bool = False,
+    batched: bool = True,
 ) -> ReplayResult:
     """Replay ``bag`` through one :class:`BacklashPipeline` and write ``output``.
 
@@ -239,6 +386,10 @@ def replay(
         Overrides of the parameters of the same name (None: keep).
     progress : bool
         Show a tqdm progress bar on stderr.
+    batched : bool
+        Feed the pipeline blocks of messages (:meth:`BacklashPipeline.on_batch`, the fast
+        path); False: one message at a time (:meth:`~BacklashPipeline.on_command_value`,
+        :meth:`~BacklashPipeline.on_encoder_value`). The outputs are the same.
 
     Returns
     -------
@@ -296,48 +447,37 @@ def replay(
             read_cmd = RawValueReader(cmd_info.msgtype, "command", index=index, joint=joint_name)
             read_enc = RawValueReader(enc_info.msgtype, "encoder", joint=joint_name)
             corrupt = _CorruptMessages()
-            comp_topic = OUTPUT_TOPICS["compensated_command"]
-            cmd_type = cmd_info.msgtype
-            write_raw = writer.write_raw
-            enc_t, enc_y = history.encoder_t, history.encoder_y
+            feed = _Feed(
+                pipeline,
+                read_cmd,
+                read_enc,
+                writer,
+                command_topic,
+                cmd_info.msgtype,
+                history,
+                corrupt,
+                publish,
+                use_header,
+                batched,
+            )
+            block: list[RawMessage] = []
             try:
-                for topic, log_time, msgtype, raw in reader.raw_messages(
-                    [command_topic, encoder_topic]
-                ):
-                    count += 1
-                    bar.step()
-                    last_log = log_time
-                    write_raw(topic, log_time, raw, msgtype)
-                    if topic == command_topic:
-                        try:
-                            header_ns, value = read_cmd.read(raw)
-                        except MessageError as err:
-                            pipeline.reject("command", str(err))
-                            corrupt.note(err, topic, log_time)
-                            continue
-                        accepted = pipeline.on_command_value(header_ns, value, log_time)
-                        if accepted is None:
-                            continue
-                        stamp, sent, outs = accepted
-                        write_raw(comp_topic, log_time, read_cmd.patch(raw, sent), cmd_type)
-                        history.command_t.append(stamp)
-                        history.command_raw.append(value)
-                        history.command_sent.append(sent)
-                    else:
-                        try:
-                            header_ns, value = read_enc.read(raw)
-                        except MessageError as err:
-                            pipeline.reject("encoder", str(err))
-                            corrupt.note(err, topic, log_time)
-                            continue
-                        enc_t.append(header_ns if use_header and header_ns else log_time)
-                        enc_y.append(value)
-                        outs = pipeline.on_encoder_value(header_ns, value, log_time)
-                    if outs:
-                        publish(outs, log_time)
+                for item in reader.raw_messages([command_topic, encoder_topic]):
+                    block.append(item)
+                    if len(block) >= (_BLOCK if batched else 1):
+                        feed.block(block)
+                        count += len(block)
+                        last_log = item.log_time_ns
+                        bar.step(len(block))
+                        block = []
             except BagError as err:
                 error = str(err)
             finally:
+                if block:  # what was read before the damage (or the last block)
+                    feed.block(block)
+                    count += len(block)
+                    last_log = block[-1].log_time_ns
+                    bar.step(len(block))
                 bar.close()
             error = error or corrupt.summary(Path(bag))
             publish(pipeline.finish(), last_log)

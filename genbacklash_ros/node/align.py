@@ -126,6 +126,12 @@ class Aligner:
         """The time of a message (see the pipeline's notes)."""
         return header_ns if self._use_header and header_ns else int(receive_ns)
 
+    def times_of(self, header_ns: np.ndarray, receive_ns: np.ndarray) -> np.ndarray:
+        """:meth:`time_of` of many messages (int64 arrays; a header stamp of 0: none)."""
+        if not self._use_header:
+            return receive_ns
+        return np.where(header_ns != 0, header_ns, receive_ns)
+
     @property
     def pending(self) -> int:
         """Encoder readings not yet taken."""
@@ -154,6 +160,37 @@ class Aligner:
             self._enc_y.append(value)
             self._enc_mark.append(self._mark_next)
             self._mark_next = False
+
+    def add_commands(self, stamps: list[int], values: list[float]) -> None:
+        """Accepted commands in order, as :meth:`add_command` for each (the caller keeps the
+        history within ``MAX_COMMANDS``: :attr:`room`)."""
+        if stamps:
+            self.cmd_t.extend(stamps)
+            self.cmd_u.extend(values)
+            self.last_cmd_ns = stamps[-1]
+
+    @property
+    def room(self) -> int:
+        """Commands :meth:`add_commands` may add before the history needs trimming."""
+        return MAX_COMMANDS - len(self.cmd_t)
+
+    def add_readings(self, stamps: list[int], values: list[float], steps: list[int]) -> None:
+        """Accepted encoder readings in order, none stuck, each after the one before (the
+        first after :attr:`last_enc_ns`, ``steps`` the differences): as :meth:`add_reading`
+        for each."""
+        if not stamps:
+            return
+        if self.last_enc_ns is not None:
+            self._period.add_many(steps)
+        else:
+            self._period.add_many(steps[1:])
+        self.last_enc_ns = stamps[-1]
+        self.last_y = values[-1]
+        self._enc_t.extend(stamps)
+        self._enc_y.extend(values)
+        self._enc_mark.append(self._mark_next)
+        self._enc_mark.extend([False] * (len(stamps) - 1))
+        self._mark_next = False
 
     def reading_taken_out(self) -> None:
         """A reading was rejected (invalid, not finite): the next one breaks the chain."""

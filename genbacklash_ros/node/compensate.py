@@ -79,6 +79,11 @@ class CompensateStage:
         sent = comp.step(value, confidence)
         return sent if math.isfinite(sent) else self._limit(value)
 
+    def ready(self, est: Estimate) -> bool:
+        """True when :meth:`command` with ``est`` needs no new model (the batch form runs
+        only such commands; a new model is taken by the per-message path)."""
+        return not self._on or est is self._comp_estimate
+
     def adopt(self, est: Estimate, last_y: float | None) -> None:
         """A new estimate is in use: prepare the compensator for it now."""
         if self._on and est is not self._comp_estimate:

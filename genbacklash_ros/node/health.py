@@ -272,6 +272,7 @@ class StreamHealth:
         "_silence",
         "_still_since",
         "_stuck",
+        "_stuck_branches",
         "_stuck_why",
         "faults",
     )
@@ -299,6 +300,9 @@ class StreamHealth:
         self._still_since: int | None = None  # time of the first of equal readings
         self._stuck = False
         self._stuck_why = ""
+        # the branches at the last command judged: (model, command, L(u), R(u)); a dwell
+        # asks for the same command at every still reading
+        self._stuck_branches: tuple[GeneralBacklash, float, float, float] | None = None
         self._sat_since: int | None = None  # time of the first of saturated commands
         self._fed_t: int | None = None  # the last sample fed (spike prediction)
         self._fed_y: float | None = None
@@ -454,6 +458,74 @@ class StreamHealth:
             self._still_since, self._stuck = None, False
             return ReadingCheck(False, None, self._found())
         return self._watch_stuck(stamp, last, value, commands, inputs, estimate)
+
+    # ------------------------------------------------------------------ batch form
+
+    @property
+    def silence_ns(self) -> int:
+        """The encoder gap that counts as a silence now (ns)."""
+        return self._silence
+
+    @property
+    def last_encoder_receive(self) -> int | None:
+        """The receive time of the last accepted encoder reading (None: none yet)."""
+        return self._last_enc_rx
+
+    @property
+    def rate_window(self) -> tuple[int | None, int]:
+        """Where the current rate window started (None: at the next reading) and how many
+        gaps it holds: a reading closes it ``LOSS_WINDOW_NS`` after its start once it holds
+        ``LOSS_WINDOW_READINGS`` gaps."""
+        return self._gaps_from, len(self._gaps)
+
+    @property
+    def still_since(self) -> int | None:
+        """The time of the reading before the current run of equal readings (None: the
+        last reading changed)."""
+        return self._still_since
+
+    def commands_quiet(self) -> bool:
+        """Commands checked now find nothing by themselves but a late command or a
+        saturated one: no fault is active and no run of commands from the past is going."""
+        return not self.faults and not self._cmd_back
+
+    def readings_quiet(self) -> bool:
+        """Readings checked now are judged by their gap, rate window and stillness only: the
+        encoder is not stuck and no run of readings from the past is going."""
+        return not self._stuck and not self._enc_back
+
+    def stuck_reason(self, value: float, held: float | None, est: Estimate) -> str:
+        """Why an unchanged reading ``value`` is stuck ("" when the model allows it), ``held``
+        being the command in force ``STUCK_INPUT_NS`` before the reading: the test
+        :meth:`check_reading` makes of a reading ``STUCK_NS`` into a still run."""
+        return self._stuck_reason(value, held, est)
+
+    def accept_commands(self) -> None:
+        """Commands that :meth:`check_command` would pass without finding anything (none
+        saturated, none late), accepted."""
+        if self._cmd_back:
+            self._cmd_back.clear()
+        self._sat_since = None
+
+    def accept_readings(
+        self, last: int, gaps: list[int], receive_ns: int, still_since: int | None
+    ) -> None:
+        """Readings that :meth:`check_reading` would pass without finding anything (no gap
+        beyond the silence, no rate window closed, none stuck), accepted after the stream's
+        last time ``last``: their ``gaps`` to the reading before each, the last one's
+        receive time and the start of the still run it ends in (None: it changed)."""
+        if not gaps:
+            return
+        if self._enc_back:
+            self._enc_back.clear()
+        if self._gaps_from is None:
+            self._gaps_from = last
+        self._gaps.extend(gaps)
+        self._enc_rejects = 0
+        self._last_enc_rx = receive_ns
+        self._still_since = still_since
+        if still_since is None:
+            self._stuck = False
 
     def jumped_back(self, stream: str, stamp: int, last: int) -> int | None:
         """Whether a message of ``stream`` (``"command"`` or ``"encoder"``) at ``stamp``, not
@@ -699,8 +771,13 @@ class StreamHealth:
         if held is None:
             return ""
         u = held
-        with np.errstate(all="ignore"):
-            left, right = float(model.left([u])[0]), float(model.right([u])[0])
+        memo = self._stuck_branches
+        if memo is not None and memo[0] is model and memo[1] == u:
+            left, right = memo[2], memo[3]
+        else:
+            with np.errstate(all="ignore"):
+                left, right = float(model.left([u])[0]), float(model.right([u])[0])
+            self._stuck_branches = (model, u, left, right)
         move = max(min(left, right) - value, value - max(left, right))
         if not (math.isfinite(move) and move > max(STUCK_SIGMAS * scale, 1e-3 * abs(value))):
             return ""

@@ -123,6 +123,7 @@ Float64(data=0.5)
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
@@ -130,8 +131,11 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Literal, TypeAlias
 
+import numpy as np
+
 from genbacklash_core import Estimate, GenBacklashError, OnlineIdentifier
 from genbacklash_ros.node.align import Aligner
+from genbacklash_ros.node.batch import BlockView
 from genbacklash_ros.node.checkpoint import Checkpoint, CheckpointError, save_checkpoint, warm_start
 from genbacklash_ros.node.compensate import CompensateStage
 
@@ -151,9 +155,9 @@ from genbacklash_ros.node.health import SILENCE_UNKNOWN_NS as SILENCE_UNKNOWN_NS
 from genbacklash_ros.node.health import SPIKE_MAX_SHARE as SPIKE_MAX_SHARE
 from genbacklash_ros.node.health import SPIKE_SIGMAS as SPIKE_SIGMAS
 from genbacklash_ros.node.health import STILL_HOLD_NS as STILL_HOLD_NS
+from genbacklash_ros.node.health import STUCK_INPUT_NS, Drop, HealthEvent, StreamHealth
 from genbacklash_ros.node.health import STUCK_NS as STUCK_NS
 from genbacklash_ros.node.health import STUCK_SIGMAS as STUCK_SIGMAS
-from genbacklash_ros.node.health import Drop, HealthEvent, StreamHealth
 from genbacklash_ros.node.identify import (
     EstimateInUse,
     Identified,
@@ -188,6 +192,7 @@ __all__ = [
     "DIAGNOSTICS_PERIOD_NS",
     "FAULT_HOLD_NS",
     "BacklashPipeline",
+    "BatchOutputs",
     "CheckpointWriter",
     "Output",
     "PipelineStats",
@@ -252,6 +257,68 @@ class PipelineStats:
     checkpoint_errors: int
     dropped: MappingProxyType[str, int]
     last_problem: str
+
+
+@dataclass(frozen=True, slots=True)
+class BatchOutputs:
+    """What :meth:`BacklashPipeline.on_batch` made of a batch of messages.
+
+    Attributes
+    ----------
+    accepted : numpy.ndarray of bool
+        Per message: a command the pipeline accepted (it has a compensated command).
+    stamps : numpy.ndarray of int64
+        Per message: an accepted command's time (0 for the others).
+    sent : numpy.ndarray of float
+        Per message: an accepted command's compensated value (NaN for the others).
+    outputs : list of (int, Output)
+        The periodic outputs (estimates, diagnostics), each with the index of the message
+        that made it due, in order; compensated commands are in ``sent`` instead.
+    """
+
+    accepted: np.ndarray
+    stamps: np.ndarray
+    sent: np.ndarray
+    outputs: list[tuple[int, Output]]
+
+
+class _BatchResult:
+    """What :meth:`BacklashPipeline.on_batch` fills in as it goes."""
+
+    __slots__ = ("accepted", "outputs", "sent", "stamps")
+
+    def __init__(self, n: int) -> None:
+        self.accepted = np.zeros(n, dtype=bool)
+        self.stamps = np.zeros(n, dtype=np.int64)
+        self.sent = np.full(n, math.nan)
+        self.outputs: list[tuple[int, Output]] = []
+
+
+def _seen(
+    view: BlockView, i: int, end: int, c0: int, c1: int, e0: int, e1: int, commands: bool
+) -> tuple[int, int, int] | None:
+    """What :meth:`SilentStreams.arrived_many` needs of one stream over ``i .. end - 1``."""
+    own_pos, own_count = (view.cmd_pos, c1 - c0) if commands else (view.enc_pos, e1 - e0)
+    other_pos, other_rx, o0, o1 = (
+        (view.enc_pos, view.enc_rx, e0, e1) if commands else (view.cmd_pos, view.cmd_rx, c0, c1)
+    )
+    own_rx = view.cmd_rx if commands else view.enc_rx
+    if own_count:
+        last_own = (c1 if commands else e1) - 1
+        after = bisect.bisect_right(other_pos, own_pos[last_own], o0, o1)
+        first = other_rx[after] if after < o1 else -1
+        return own_rx[last_own], o1 - after, first
+    if o1 > o0:
+        return -1, o1 - o0, other_rx[o0]
+    return None
+
+
+_STRETCH_MAX = 8192  # messages looked at for one stretch at most
+
+
+def _no_fault() -> bool:
+    """No fault is active (the batch form runs commands only then)."""
+    return False
 
 
 def _order_text(stream: str, stamp: int, last: int) -> str:
@@ -500,6 +567,276 @@ class BacklashPipeline:
         outputs: list[Output] = []
         self._advance(stamp, outputs, heavy=False)
         return stamp, sent, outputs
+
+    def on_batch(
+        self,
+        is_command: np.ndarray,
+        header_ns: np.ndarray,
+        values: np.ndarray,
+        receive_ns: np.ndarray,
+    ) -> BatchOutputs:
+        """Many messages already read, in the order they came: the batch form of
+        :meth:`on_command_value` and :meth:`on_encoder_value`, with the same results.
+
+        Parameters
+        ----------
+        is_command : numpy.ndarray of bool
+            Per message: a command (else an encoder reading).
+        header_ns : numpy.ndarray of int64
+            Header stamps (0: none).
+        values : numpy.ndarray of float
+            The values read.
+        receive_ns : numpy.ndarray of int64
+            Receive times.
+
+        Returns
+        -------
+        BatchOutputs
+
+        Notes
+        -----
+        Stretches of messages that make nothing happen but bookkeeping -- in order, on time,
+        finite, no fault, no feed, no periodic output due, no stuck reading -- are found by
+        bisection in what :class:`~genbacklash_ros.node.batch.BlockView` worked out once for
+        the block, and taken in one step by the stages' batch methods
+        (:meth:`Aligner.add_readings`, :meth:`StreamHealth.accept_readings`, ...); each
+        message that does make something happen goes through the per-message path. The
+        compensated commands and the estimates are those of the per-message path to the
+        last bit (tests/ros/node/test_batch.py). With a thread worker the identifier's
+        results are taken at the start of each stretch.
+        """
+        kinds = np.asarray(is_command, dtype=bool)
+        view = BlockView(
+            kinds,
+            np.asarray(header_ns, dtype=np.int64),
+            np.asarray(values, dtype=np.float64),
+            np.asarray(receive_ns, dtype=np.int64),
+            self._params.stamp_source == "header",
+        )
+        n = view.n
+        out = _BatchResult(n)
+        i = 0
+        while i < n:
+            i = self._quiet(view, i, out)
+            if i >= n:
+                break
+            # this message makes something happen: the per-message path
+            value, received = float(view.values[i]), int(receive_ns[i])
+            head = int(header_ns[i])
+            if kinds[i]:
+                taken = self.on_command_value(head, value, received)
+                if taken is not None:
+                    out.stamps[i], sent, outs = taken
+                    out.sent[i] = sent
+                    out.accepted[i] = True
+                    out.outputs.extend((i, item) for item in outs)
+            else:
+                out.outputs.extend(
+                    (i, item) for item in self.on_encoder_value(head, value, received)
+                )
+            i += 1
+        return BatchOutputs(out.accepted, out.stamps, out.sent, out.outputs)
+
+    def _quiet(self, view: BlockView, i: int, out: _BatchResult) -> int:
+        """Take the messages from ``i`` on that make nothing happen but bookkeeping in one
+        step (see :meth:`on_batch`); where they end."""
+        self._take_results()
+        clock = self._clock
+        due = clock.next_due
+        now = clock.now
+        if due is None or now is None or now >= due:
+            return i
+        end = min(view.n, i + _STRETCH_MAX)
+        feeds = view.enc_before[i] + max(self._feed_at_count - self._align.pending - 1, 0)
+        if feeds < len(view.enc_pos):  # the reading that feeds ends it at the latest
+            end = min(end, view.enc_pos[feeds])
+        k = bisect.bisect_left(view.nonfinite, i)
+        if k < len(view.nonfinite):
+            end = min(end, view.nonfinite[k])
+        if end > i:
+            late = np.flatnonzero(view.times[i:end] >= due)  # a periodic output is due
+            if late.size:
+                end = i + int(late[0])
+        if end == i:
+            return i
+        c0, e0 = view.cmd_before[i], view.enc_before[i]
+        if view.cmd_before[end] > c0:
+            end = self._commands_end(view, i, c0, end)
+        if view.enc_before[end] > e0:
+            end = self._readings_end(view, e0, c0, end)
+        if end > i:
+            self._take_stretch(view, i, end, out)
+        return end
+
+    def _commands_end(self, view: BlockView, i: int, c0: int, end: int) -> int:
+        """Where the stretch from ``i`` ends for its commands (ordinals from ``c0``)."""
+        c1 = view.cmd_before[end]
+        first = view.cmd_pos[c0]
+        health = self._health
+        if self._in_loop or not self._comp.ready(self._use.current) or not health.commands_quiet():
+            return first
+        last = self._align.last_cmd_ns
+        if last is not None and view.cmd_t[c0] <= last:
+            return first
+        stop = min(c1, c0 + max(self._align.room, 0))
+        options = self._comp.options
+        for found, after in (
+            (view.cmd_disorder, c0 + 1),  # the first command was checked against the state
+            (view.saturated(options.u_min, options.u_max), c0),
+        ):
+            k = bisect.bisect_left(found, after)
+            if k < len(found) and found[k] < stop:
+                stop = found[k]
+        # late commands: more than the silence limit after the last reading
+        silence = health.silence_ns
+        known = health.last_encoder_receive
+        e0 = view.enc_before[i]
+        o = c0
+        while o < stop and view.cmd_prev_enc[o] < e0:  # no reading of this stretch before it
+            if known is not None and view.cmd_rx[o] - known > silence:
+                stop = o
+            o += 1
+        k = bisect.bisect_left(view.cmd_late, o)
+        while k < len(view.cmd_late) and view.cmd_late[k] < stop:
+            if view.cmd_gap[view.cmd_late[k]] > silence:
+                stop = view.cmd_late[k]
+                break
+            k += 1
+        return view.cmd_pos[stop] if stop < c1 else end
+
+    def _readings_end(self, view: BlockView, e0: int, c0: int, end: int) -> int:
+        """Where the stretch ends for its encoder readings (ordinals from ``e0``; the
+        stretch's commands from ordinal ``c0``)."""
+        e1 = view.enc_before[end]
+        first = view.enc_pos[e0]
+        align, health = self._align, self._health
+        last, previous = align.last_enc_ns, align.last_y
+        if last is None or previous is None or not health.readings_quiet():
+            return first
+        t = view.enc_t
+        silence = health.silence_ns
+        if t[e0] <= last or t[e0] - last > silence:
+            return first
+        stop = min(e1, e0 + max(self._feed_at_count - align.pending - 1, 0))  # it feeds
+        k = bisect.bisect_right(view.enc_disorder, e0)
+        if k < len(view.enc_disorder) and view.enc_disorder[k] < stop:
+            stop = view.enc_disorder[k]
+        k = bisect.bisect_right(view.enc_long, e0)
+        while k < len(view.enc_long) and view.enc_long[k] < stop:
+            if view.enc_step[view.enc_long[k] - 1] > silence:
+                stop = view.enc_long[k]
+                break
+            k += 1
+        start, count = health.rate_window
+        low = e0 + max(LOSS_WINDOW_READINGS - count - 1, 1 if start is None else 0)
+        if low < stop:  # the readings up to stop are in order: bisect their times
+            base = last if start is None else start
+            stop = bisect.bisect_left(t, base + LOSS_WINDOW_NS, low, stop)
+        if stop > e0:
+            stop = self._stuck_end(view, e0, c0, stop)
+        return view.enc_pos[stop] if stop < e1 else end
+
+    def _stuck_end(self, view: BlockView, e0: int, c0: int, stop: int) -> int:
+        """Where the readings ``e0 .. stop - 1`` stop being quiet for the stuck-encoder
+        check: the first one :meth:`StreamHealth.check_reading` would find stuck (the
+        stretch's commands, from ordinal ``c0``, count from when they come).
+
+        The still run the stretch starts in (or that its first reading starts) is judged
+        here, once for each command it holds (:meth:`StreamHealth.stuck_reason`, the
+        per-message test itself); a later run that lasts ``STUCK_NS`` within the stretch
+        ends it (its reading goes the per-message way, and the next stretch starts in it).
+        """
+        t, y = view.enc_t, view.enc_y
+        align, health = self._align, self._health
+        k = bisect.bisect_right(view.enc_changed, e0)
+        run_end = min(view.enc_changed[k] if k < len(view.enc_changed) else stop, stop)
+        k = bisect.bisect_left(view.enc_still, run_end)
+        if k < len(view.enc_still) and view.enc_still[k] < stop:
+            stop = view.enc_still[k]  # a run that began in the stretch lasts STUCK_NS
+        run_end = min(run_end, stop)
+        if y[e0] == align.last_y:  # the run goes on from before the stretch
+            since, begin = health.still_since, e0
+            since = align.last_enc_ns if since is None else since
+        else:  # the run starts at e0
+            since, begin = t[e0], e0 + 1
+        assert since is not None
+        o = bisect.bisect_left(t, since + STUCK_NS, begin, run_end)
+        if o >= run_end:
+            return stop
+        # candidates o .. run_end - 1: judged at each command they hold (the command in
+        # force STUCK_INPUT_NS before the reading, among those that came before it)
+        est = self._use.current
+        value = y[o]
+        known_t, known_u = align.cmd_t, align.cmd_u  # the commands before the stretch
+        n_known = len(known_t)  # and the stretch's own from ordinal c0, as they come
+        c_end = view.cmd_before[view.enc_pos[run_end - 1]]
+        total = n_known + c_end - c0
+
+        def time_of(j: int) -> int:
+            return known_t[j] if j < n_known else view.cmd_t[c0 + j - n_known]
+
+        while o < run_end:
+            at = t[o] - STUCK_INPUT_NS
+            count = bisect.bisect_right(known_t, at)
+            if count == n_known:
+                count += bisect.bisect_right(view.cmd_t, at, c0, c_end) - c0
+            came = n_known + view.cmd_before[view.enc_pos[o]] - c0
+            j = min(count, came) - 1
+            held = None if j < 0 else known_u[j] if j < n_known else view.cmd_u[c0 + j - n_known]
+            if health.stuck_reason(value, held, est):
+                return o
+            if count > came:  # held back by a command not come yet: the next reading
+                o += 1
+            elif j + 1 < total:  # the next command holds from its time + STUCK_INPUT_NS
+                o = bisect.bisect_left(t, time_of(j + 1) + STUCK_INPUT_NS, o + 1, run_end)
+            else:
+                break
+        return stop
+
+    def _take_stretch(self, view: BlockView, i: int, end: int, out: _BatchResult) -> None:
+        """Accept the messages ``i .. end - 1`` (all quiet) in one step."""
+        c0, c1 = view.cmd_before[i], view.cmd_before[end]
+        e0, e1 = view.enc_before[i], view.enc_before[end]
+        align, health, led = self._align, self._health, self._ledger
+        self._silence.arrived_many(
+            _seen(view, i, end, c0, c1, e0, e1, True), _seen(view, i, end, c0, c1, e0, e1, False)
+        )
+        if c1 > c0:
+            est = self._use.current
+            comp = self._comp
+            last_y = align.last_y
+            values = view.cmd_u[c0:c1]
+            sent = [comp.command(v, est, passing=_no_fault, last_y=last_y) for v in values]
+            health.accept_commands()
+            stamps = view.cmd_t[c0:c1]
+            align.add_commands(stamps, values)
+            led.commands += c1 - c0
+            led.compensated += c1 - c0
+            where = view.cmd_pos[c0:c1]
+            out.accepted[where] = True
+            out.stamps[where] = stamps
+            out.sent[where] = sent
+        if e1 > e0:
+            last = align.last_enc_ns
+            assert last is not None
+            t, y = view.enc_t, view.enc_y
+            gaps = [t[e0] - last, *view.enc_step[e0 : e1 - 1]]
+            final = e1 - 1
+            if (y[final] != y[final - 1]) if final > e0 else (y[e0] != align.last_y):
+                still = None
+            else:
+                k = bisect.bisect_right(view.enc_changed, final) - 1
+                if k >= 0 and view.enc_changed[k] > e0:
+                    still = t[view.enc_changed[k]]
+                elif y[e0] != align.last_y:
+                    still = t[e0]
+                else:
+                    still = health.still_since
+                    still = last if still is None else still
+            health.accept_readings(last, gaps, view.enc_rx[final], still)
+            align.add_readings(t[e0:e1], y[e0:e1], gaps)
+            led.encoders += e1 - e0
+        self._clock.tick(int(view.times[i:end].max()))
 
     def on_encoder(self, msg: object, receive_ns: int) -> list[Output]:
         """An encoder message received at ``receive_ns``: any periodic outputs now due."""

@@ -114,6 +114,13 @@ class Schedule:
             self.now = now = stamp
         return now >= self._next_due
 
+    @property
+    def next_due(self) -> int | None:
+        """The data time at which the next periodic step is due (None before the clock
+        starts): a batch of messages all before it makes no step due (:meth:`tick` is then
+        False for each)."""
+        return None if self.now is None else self._next_due
+
     def due(self, now: int) -> Due:
         """What is due at ``now``."""
         return Due(

@@ -166,6 +166,13 @@ class EncoderPeriod:
             self._steps.append(step_ns)
             self._cached = None
 
+    def add_many(self, steps_ns: list[int]) -> None:
+        """Differences in order, as :meth:`add` for each."""
+        positive = [step for step in steps_ns if step > 0]
+        if positive:
+            self._steps.extend(positive)
+            self._cached = None
+
     def reset(self) -> None:
         """Forget the differences (a restart)."""
         self._steps.clear()

@@ -111,6 +111,26 @@ class SilentStreams:
         self._encoder.arrived(receive_ns)
         self._command.other_arrived(receive_ns)
 
+    def arrived_many(
+        self, command: tuple[int, int, int] | None, encoder: tuple[int, int, int] | None
+    ) -> None:
+        """Messages of both streams whose values were read, in one step: the same as
+        :meth:`command` and :meth:`encoder` for each in turn. Per stream, ``(receive time of
+        its last message, messages of the other stream after it, receive time of the first
+        of those)``; for a stream without messages, ``(-1, messages of the other stream,
+        receive time of the first)`` -- None when the stream had none and neither had the
+        other after it."""
+        for own, seen in ((self._command, command), (self._encoder, encoder)):
+            if seen is None:
+                continue
+            last, others, first_other = seen
+            if last >= 0:
+                own.arrived(last)
+            if others:
+                if own.since is None:
+                    own.since = first_other if own.last is None else own.last
+                own.others += others
+
     def report(self, command_type: str, encoder_type: str) -> SilenceReport:
         """The silent streams now (``command_type``, ``encoder_type``: the parameters'
         values, named in the advice)."""

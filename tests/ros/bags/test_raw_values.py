@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -164,3 +165,48 @@ def test_bytes_that_do_not_decode_are_a_message_error() -> None:
         RawValueReader(Float64MultiArray.ros_type, "encoder")
     with pytest.raises(MessageError, match="not finite"):
         RawValueReader(Float64.ros_type, "command").patch(cdr(Float64(1.0)), math.inf)
+
+
+def _many_matches_one_by_one(reader_args: tuple[str, str, int, str], raws: list[bytes]) -> None:
+    """``read_many`` reads what ``read`` reads, and leaves the rest (not ok) to it."""
+    msgtype, role, index, joint = reader_args
+    many = RawValueReader(msgtype, role, index=index, joint=joint)  # type: ignore[arg-type]
+    one = RawValueReader(msgtype, role, index=index, joint=joint)  # type: ignore[arg-type]
+    stamps, values, ok = many.read_many(raws)
+    assert stamps.dtype == np.int64 and ok.shape == values.shape == (len(raws),)
+    for k, raw in enumerate(raws):
+        want = attempt(one, raw)
+        if ok[k]:
+            assert (int(stamps[k]), float(values[k])) == want
+        else:  # read() decides: the same value (another layout) or the error
+            assert _same(attempt(many, raw), want)
+
+
+@settings(max_examples=80, deadline=None, derandomize=True)
+@given(st.lists(joint_states(), min_size=1, max_size=20), st.sampled_from(["", "a", "ab"]))
+def test_read_many_joint_states(msgs: list[JointState], joint: str) -> None:
+    raws = [cdr(m) for m in msgs] * 2  # again: by the layouts learnt the first time
+    for role in ("encoder", "command"):
+        _many_matches_one_by_one((JointState.ros_type, role, 0, joint), raws)
+
+
+@settings(max_examples=80, deadline=None, derandomize=True)
+@given(st.lists(multi_arrays(), min_size=1, max_size=20), st.integers(0, 3))
+def test_read_many_multi_arrays(msgs: list[Float64MultiArray], index: int) -> None:
+    raws = [cdr(m) for m in msgs] * 2
+    _many_matches_one_by_one((Float64MultiArray.ros_type, "command", index, ""), raws)
+
+
+def test_read_many_steady_topic_and_damage() -> None:
+    msgs = [JointState(Header(Time(k, 5), "b"), ("d", "w"), (0.1 * k, -0.2 * k)) for k in range(40)]
+    raws = [cdr(m) for m in msgs]
+    raws[7] = raws[7][:20]  # damaged: another length, left to read()
+    raws[9] = cdr(JointState(Header(Time(9), "b"), ("d", "w"), (math.nan, 1.0)))  # not finite
+    raws[11] = raws[11][:30] + b"\xff" + raws[11][31:]  # a constant byte differs
+    reader = RawValueReader(JointState.ros_type, "encoder", joint="d")
+    stamps, values, ok = reader.read_many(raws)
+    assert np.flatnonzero(~ok).tolist() == [7, 9, 11]
+    assert values[ok].tolist() == [0.1 * k for k in range(40) if k not in (7, 9, 11)]
+    assert stamps[ok].tolist() == [k * 10**9 + 5 for k in range(40) if k not in (7, 9, 11)]
+    empty = reader.read_many([])
+    assert [a.size for a in empty] == [0, 0, 0]

@@ -1,0 +1,157 @@
+"""The table inverse of a branch (``_Branch.invert_fast``, ``invert_many``, the public
+``branch_inverse``) against the root solve it replaces (``_Branch.invert``): the same command
+to within 1e-9 of the command range, on monotone and turning branches, in and out of reach;
+and the compensator built on it against the same compensator on the root solve."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
+
+from genbacklash_core import (
+    CompensatorOptions,
+    GenBacklashError,
+    GeneralBacklash,
+    branch_inverse,
+    compensate,
+    paper_example,
+)
+from genbacklash_core import inverse as inverse_module
+from genbacklash_core.inverse import _Branch, _plan
+
+from .test_inverse import MODELS, _walk, monotone_models
+
+EXACT = 1e-9  # of the command range
+
+
+@st.composite
+def any_models(draw: st.DrawFn) -> tuple[GeneralBacklash, float, float]:
+    """Monotone models (test_inverse's) and branches that turn inside the range (degree 2
+    and 3 with any middle coefficient): the inverse holds on the monotone piece."""
+    if draw(st.booleans()):
+        return draw(monotone_models())
+    sign = draw(st.sampled_from([1.0, -1.0]))
+
+    def branch() -> tuple[float, ...]:
+        m1 = draw(st.floats(0.3, 2.0))
+        rest = draw(st.lists(st.floats(-0.6, 0.6), min_size=1, max_size=2))
+        return (sign * m1, *(sign * c for c in rest))
+
+    c_left, c_right = draw(st.floats(0.0, 1.0)), draw(st.floats(0.0, 1.0))
+    low = -c_left - draw(st.floats(0.2, 4.0))
+    high = c_right + draw(st.floats(0.2, 4.0))
+    try:
+        model = GeneralBacklash(branch(), c_left, branch(), c_right)
+        _plan(model, low, high)
+    except GenBacklashError:
+        assume(False)
+    return model, low, high
+
+
+@settings(max_examples=300, deadline=None, derandomize=True, database=None)
+@given(any_models(), st.lists(st.floats(-6.0, 6.0), min_size=1, max_size=40), st.floats(-3, 3))
+def test_property_table_inverse_is_the_root_solve(
+    case: tuple[GeneralBacklash, float, float], targets: list[float], guess: float
+) -> None:
+    model, low, high = case
+    plan = _plan(model, low, high)
+    span = high - low
+    for branch in (plan.left, plan.right):
+        solved = np.array([branch.invert(y, guess) for y in targets])
+        fast = np.array([branch.invert_fast(y, guess) for y in targets])
+        many = branch.invert_many(np.array(targets))
+        assert np.all(np.abs(fast - solved) <= EXACT * span), (fast - solved, targets)
+        assert np.all(np.abs(many - solved) <= EXACT * span), (many - solved, targets)
+        assert np.all((branch.a <= fast) & (fast <= branch.b))
+
+
+@pytest.mark.parametrize("name", list(MODELS))
+def test_unbounded_pieces_and_targets_beyond_the_table(name: str) -> None:
+    """Without output limits the pieces may be unbounded: the table covers part of them and
+    the root solve the rest (far targets), with the same answers."""
+    model = MODELS[name]
+    plan = _plan(model, -math.inf, math.inf)
+    targets = np.concatenate((np.linspace(-3.0, 3.0, 301), [-1e6, -200.0, 150.0, 1e9]))
+    for branch in (plan.up, plan.down):
+        solved = np.array([branch.invert(y, 0.0) for y in targets.tolist()])
+        fast = np.array([branch.invert_fast(y, 0.0) for y in targets.tolist()])
+        scale = np.maximum(1.0, np.abs(solved))
+        assert np.all(np.abs(fast - solved) <= EXACT * scale)
+        assert np.all(np.abs(branch.invert_many(targets) - solved) <= EXACT * scale)
+
+
+def test_a_table_is_built_once_and_only_for_curved_branches() -> None:
+    model = paper_example(1).model
+    plan = _plan(model, -2.0, 2.0)
+    assert plan.up.table is None
+    plan.up.invert_fast(0.5, 0.0)
+    table = plan.up.table
+    assert table is not None and len(table.g_list) > 100
+    assert np.all(np.diff(table.g) > 0)  # increasing, as bisection needs
+    plan.up.invert_fast(0.6, 0.0)
+    assert plan.up.table is table
+    straight = _plan(GeneralBacklash.ideal(1.0, 0.3, 0.5), -2.0, 2.0)
+    assert straight.up.invert_fast(0.25, 0.0) == straight.up.invert(0.25, 0.0) == 0.75
+    assert straight.up.table is None  # the closed form needs none
+
+
+def test_the_polish_rejects_a_wrong_guess(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A table guess off by more than the tolerance goes to the root solve: the tolerance
+    bites (a guess off by 1e-6 would otherwise be returned, 1e-6 of the range wrong)."""
+    model = paper_example(1).model
+    branch = _plan(model, -2.0, 2.0).up
+    want = branch.invert(0.4, 0.0)
+    branch.invert_fast(0.4, 0.0)  # builds the table
+    table = branch.table
+    assert table is not None
+    monkeypatch.setattr(type(table), "guess", lambda self, target: want + 1e-3)
+    calls: list[float] = []
+    original = _Branch.invert
+
+    def counting(self: _Branch, y: float, guess: float) -> float:
+        calls.append(guess)
+        return original(self, y, guess)
+
+    monkeypatch.setattr(_Branch, "invert", counting)
+    assert abs(branch.invert_fast(0.4, 0.0) - want) <= 1e-15
+    assert calls == [want + 1e-3]  # the solve, from the table's guess
+
+
+@settings(max_examples=100, deadline=None, derandomize=True, database=None)
+@given(monotone_models(), st.integers(0, 2**32 - 1), st.integers(1, 300))
+def test_property_compensator_on_the_table_is_the_compensator_on_the_solve(
+    case: tuple[GeneralBacklash, float, float], seed: int, n: int
+) -> None:
+    model, low, high = case
+    assume(model.branches_separated(low, high))
+    options = CompensatorOptions(u_min=low, u_max=high, smoothing=seed % 3)
+    x_d = _walk(seed, n, low, high)
+    fast = compensate(model, x_d, options)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(_Branch, "invert_fast", _Branch.invert)
+        inverse_module._plan.cache_clear()  # plans (and tables) built afresh
+        solved = compensate(model, x_d, options)
+    inverse_module._plan.cache_clear()
+    assert np.all(np.abs(fast - solved) <= EXACT * (high - low))
+
+
+def test_branch_inverse_public_form() -> None:
+    model = paper_example(1).model
+    options = CompensatorOptions(u_min=-2.0, u_max=2.0)
+    x = np.linspace(-1.0, 1.0, 12).reshape(3, 4)
+    plan = _plan(model, -2.0, 2.0)
+    for push, branch in ((1, plan.up), (-1, plan.down)):
+        u = branch_inverse(model, x, push, options)
+        assert u.shape == x.shape
+        want = np.array([branch.invert(v, 0.0) for v in x.ravel().tolist()]).reshape(x.shape)
+        assert np.all(np.abs(u - want) <= EXACT * 4.0)
+    lifted = branch_inverse(model, [0.3], +1, options)
+    assert float(model.right(lifted)[0]) == pytest.approx(0.3, abs=1e-12)  # eq. (12)
+    with pytest.raises(GenBacklashError, match="push must be"):
+        branch_inverse(model, [0.3], 0)
+    with pytest.raises(GenBacklashError, match="finite"):
+        branch_inverse(model, [math.nan], 1)
