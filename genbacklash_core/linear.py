@@ -10,7 +10,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import signal
 
 from ._typing import ArrayLike, FloatArray
 from .data import as_float_array
@@ -130,6 +129,8 @@ def simulate_linear(block: LinearBlock, x: ArrayLike) -> FloatArray:
         raise NonFiniteInputError("the input of the linear block holds NaN or infinite samples")
     if xx.size == 0:
         return np.zeros(0)
+    from scipy import signal  # here, not at the top: 0.5 s of import a backlash never needs
+
     y = np.asarray(signal.lfilter(block.numerator, block.denominator, xx), dtype=np.float64)
     if not np.all(np.isfinite(y)):
         raise GenBacklashError(

@@ -69,7 +69,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import signal
 
 from ._typing import ArrayLike, BoolArray, FloatArray, IntArray
 from .data import NonFinitePolicy, scale_limits
@@ -489,6 +488,8 @@ def _ewma(values: FloatArray, alpha: float, start: float) -> float:
         return start + alpha * (float(values[0]) - start)
     decay = 1.0 - alpha
     if n > 4096:  # the weights below would underflow long before; filter instead
+        from scipy import signal  # here, not at the top: 0.5 s of import a backlash never needs
+
         out, _ = signal.lfilter([alpha], [1.0, -decay], values, zi=[decay * start])
         return float(out[-1])
     weights = alpha * decay ** np.arange(n - 1, -1, -1, dtype=np.float64)

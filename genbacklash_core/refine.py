@@ -23,7 +23,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import signal
 
 from ._typing import BoolArray, FloatArray
 from .backlash import GeneralBacklash
@@ -101,6 +100,8 @@ def simulate_parameters(
     x = play_operator(lo, hi, x0)  # eqs. (20), (36)
     if not structure.cascade:
         return x, x
+    from scipy import signal  # here, not at the top: 0.5 s of import a backlash never needs
+
     a, b = structure.linear_part(p)
     y = signal.lfilter(np.concatenate([[0.0], a]), np.concatenate([[1.0], b]), x)  # eq. (30)
     return x, np.asarray(y, dtype=np.float64)
@@ -225,6 +226,8 @@ def _jacobian(
     jx = _backlash_sensitivity(structure, p, u, x, x0, anchors)
     if not structure.cascade:
         return jx
+    from scipy import signal  # here, not at the top: 0.5 s of import a backlash never needs
+
     a, b = structure.linear_part(p)
     num = np.concatenate([[0.0], a])
     den = np.concatenate([[1.0], b])

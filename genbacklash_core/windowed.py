@@ -25,7 +25,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import signal
 
 from ._typing import ArrayLike, BoolArray, FloatArray
 from .data import NonFinitePolicy, scale_limits
@@ -896,6 +895,8 @@ def _refine_window(
         den = np.concatenate([[1.0], b])
         past_y = y[start - nb : start][::-1] if nb else np.zeros(0)
         past_x = rows.x[start - na : start][::-1]
+        from scipy import signal  # here, not at the top: 0.5 s of import a backlash never needs
+
         zi = signal.lfiltic(num, den, past_y, past_x)
         free = signal.lfilter(num, den, np.zeros(u.size - start), zi=zi)[0]
         u_fit, y_fit, x0 = u[start:], y[start:] - free, float(rows.x[start - 1])

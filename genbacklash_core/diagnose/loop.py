@@ -49,7 +49,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy import stats
 
 from genbacklash_core._typing import ArrayLike, BoolArray, FloatArray
 from genbacklash_core.backlash import GeneralBacklash
@@ -164,6 +163,8 @@ def gap_drop_test(y: FloatArray, before: FloatArray, after: FloatArray) -> tuple
     >>> p < 0.01
     True
     """
+    from scipy import stats  # here: a slow import most runs never need
+
     d = (y - before) ** 2 - (y - after) ** 2
     lrv = long_run_variance(d)
     if lrv <= 0.0:

@@ -18,7 +18,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
 
 from genbacklash_core._typing import FloatArray
 from genbacklash_core.errors import GenBacklashError
@@ -42,7 +41,7 @@ __all__ = [
     "model_error_model",
 ]
 
-_Z95 = float(stats.norm.ppf(0.975))
+_Z95 = 1.959963984540054  # scipy.stats.norm.ppf(0.975) (a test checks it)
 
 
 @dataclass(frozen=True, eq=False)
@@ -65,6 +64,8 @@ class CorrelationTest:
 
 
 def _correlation_test(name: str, x: FloatArray, e: FloatArray, lags: FloatArray) -> CorrelationTest:
+    from scipy import stats  # here: a slow import most runs never need
+
     n = e.size
     values = correlation(x, e, lags)
     biggest = float(np.max(np.abs(values))) if values.size else 0.0
@@ -240,6 +241,8 @@ class ResidualAnalysis:
 
 
 def _two_sided_t(value: float) -> TestResult:
+    from scipy import stats  # here: a slow import most runs never need
+
     return TestResult(value, math.inf, min(1.0, 2.0 * float(stats.norm.sf(abs(value)))))
 
 
@@ -274,6 +277,8 @@ def analyse_residuals(
     >>> analyse_residuals(u, e).white()
     False
     """
+    from scipy import stats  # here: a slow import most runs never need
+
     uu = np.asarray(u, dtype=np.float64)
     ee = np.asarray(e, dtype=np.float64)
     n = ee.size

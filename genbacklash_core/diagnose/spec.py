@@ -26,7 +26,6 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-from scipy import signal
 
 from genbacklash_core._typing import BoolArray, FloatArray
 from genbacklash_core.backlash import evaluate_branch
@@ -281,6 +280,8 @@ class ModelSpec:
 
     def backlash_input(self, theta: FloatArray, u: FloatArray) -> FloatArray:
         """``v``: the input delayed by the dead time and lagged by the input lag (if any)."""
+        from scipy import signal  # here: a slow import most runs never need
+
         ud = shift_input(u, self.delay)
         i_lag, _ = self._extra_index()
         if i_lag is None:
@@ -294,6 +295,8 @@ class ModelSpec:
 
     def _input_sensitivity(self, theta: FloatArray, u: FloatArray, v: FloatArray) -> FloatArray:
         """``dv/da``: ``dv(t) = a dv(t-1) + v(t-1) - u(t-d)``, 0 at the start."""
+        from scipy import signal  # here: a slow import most runs never need
+
         i_lag, _ = self._extra_index()
         a = 0.0 if i_lag is None else float(theta[i_lag])
         ud = shift_input(u, self.delay)
@@ -342,6 +345,8 @@ class ModelSpec:
         backlash state restarts at ``y - o`` where ``anchors`` is True (see the module
         notes; ``y`` the measured output).
         """
+        from scipy import signal  # here: a slow import most runs never need
+
         p, offset, rate, low, high = self._parts(theta)
         structure = self.structure
         ud = self.backlash_input(theta, u)
@@ -490,6 +495,8 @@ class ModelSpec:
     ) -> FloatArray:
         """``dy/dtheta`` of the free-run simulation ``out`` (the start state held fixed;
         ``anchors`` as in :meth:`simulate`, whose pinned states are held fixed too)."""
+        from scipy import signal  # here: a slow import most runs never need
+
         structure = self.structure
         p, _offset, _, low, high = self._parts(theta)
         x0 = (

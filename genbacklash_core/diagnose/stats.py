@@ -11,7 +11,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import signal, stats
 
 from genbacklash_core._typing import FloatArray
 from genbacklash_core.errors import GenBacklashError
@@ -92,6 +91,8 @@ def ljung_box(x: FloatArray, max_lag: int, fitted: int = 0) -> TestResult:
     >>> ljung_box(rng.normal(size=2000), 20).p_value > 0.01
     True
     """
+    from scipy import stats  # here: a slow import most runs never need
+
     n = x.size
     if not 1 <= max_lag < n:
         raise GenBacklashError(f"need 1 <= max_lag < N, got {max_lag} for N = {n}")
@@ -138,6 +139,8 @@ def prewhitening_filter(x: FloatArray, order: int = 10) -> FloatArray:
 
 def whiten(a: FloatArray, x: FloatArray) -> FloatArray:
     """Apply the prewhitening polynomial ``a`` to ``x``."""
+    from scipy import signal  # here: a slow import most runs never need
+
     return np.asarray(signal.lfilter(a, [1.0], x - np.mean(x)), dtype=np.float64)
 
 
@@ -191,6 +194,8 @@ def nested_f_test(e: FloatArray, x: FloatArray | None, z: FloatArray) -> NestedT
     >>> out.test.p_value < 1e-6, round(float(out.coefficients[0]), 2)
     (True, 0.01)
     """
+    from scipy import stats  # here: a slow import most runs never need
+
     n = e.size
     zz = np.asarray(z, dtype=np.float64).reshape(n, -1)
     if x is None or x.size == 0:

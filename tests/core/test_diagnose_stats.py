@@ -177,3 +177,12 @@ def test_settings_validate() -> None:
     with pytest.raises(GenBacklashError, match="bic_margin"):
         DiagnoseSettings(bic_margin=-1.0)
     assert DiagnoseSettings().as_dict()["validation"] == 0.3
+
+
+def test_the_95_percent_quantile_is_scipys() -> None:
+    """``_Z95`` is written out (scipy.stats is imported only when a test runs)."""
+    from scipy import stats
+
+    from genbacklash_core.diagnose import residuals
+
+    assert residuals._Z95 == float(stats.norm.ppf(0.975))

@@ -172,3 +172,15 @@ def test_closed_stdout_ends_quietly(tmp_path: Path, unbuffered: bool) -> None:
     stderr = proc.stderr.read().decode()
     assert proc.wait(timeout=120) == EXIT_BROKEN_PIPE
     assert stderr == ""
+
+
+def test_the_command_line_starts_without_scipy_signal_or_stats() -> None:
+    """``genbacklash replay`` of a backlash never filters or tests: importing the command
+    line must not import scipy.signal or scipy.stats (0.5 s of a 3 s replay of a 5-minute bag
+    was their import)."""
+    code = (
+        "import sys, genbacklash_ros.cli.main; "
+        "print(sorted(m for m in ('scipy.signal', 'scipy.stats') if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
