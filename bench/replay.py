@@ -587,8 +587,9 @@ of the root solve's (tests/core/test_inverse_fast.py; ~1e-14 seen).
 Where the time goes: process start {b["start"]:.2f} s of {b["cli"]:.2f} s (numpy, rosbags
 and our modules; scipy.signal and scipy.stats, 0.5 s together, are imported only by the
 commands that filter or test: tests/ros/cli/test_cli.py keeps them out of the CLI's import);
-the floor's process starts (Python, rosbags) in {b["floor_start"]:.2f} s. Without the starts, the replay takes
-{b["cli"] - b["start"]:.2f} s against the floor's {b["floor_process"] - b["floor_start"]:.2f} s
+the floor's process starts (Python, rosbags) in {b["floor_start"]:.2f} s. Without the
+starts, the replay takes {b["cli"] - b["start"]:.2f} s against the floor's
+{b["floor_process"] - b["floor_start"]:.2f} s
 ({(b["floor_process"] - b["floor_start"]) / (b["cli"] - b["start"]):.2f}x).
 Of the replay itself ({profiled:.2f} s under cProfile, which inflates Python-heavy parts):
 
