@@ -55,8 +55,6 @@ from genbacklash_ros.node.messages import (
     JointState,
     Message,
     MessageError,
-    read_command,
-    read_encoder,
 )
 from genbacklash_ros.node.sample_rule import keep_breaks, link_breaks, record_period
 
@@ -898,39 +896,65 @@ def read_aligned(
     breaks the chain of consecutive samples at the next encoder reading in log order, as in
     the pipeline (``breaks``, see :func:`align`).
     """
+    from genbacklash_ros.bags.raw_values import RawValueReader  # (it imports rosbags' types)
+
     with BagReader(path) as reader:
-        cmd_kind = COMMAND_MSGTYPES[reader.topic(command_topic, COMMAND_MSGTYPES).msgtype]
-        enc_kind = ENCODER_MSGTYPES[reader.topic(encoder_topic, ENCODER_MSGTYPES).msgtype]
-        ct: list[int] = []
-        cu: list[float] = []
-        et: list[int] = []
-        ey: list[float] = []
-        em: list[bool] = []  # the reading follows one the adapters rejected (log order)
-        rejected = False
-        for item in reader.messages([command_topic, encoder_topic]):
-            if item.topic == command_topic:
-                try:
-                    stamp, value = read_command(
-                        item.message, cmd_kind, index=command_index, joint=joint
-                    )
-                except MessageError:
-                    pass
-                else:
-                    ct.append(stamp or item.log_time_ns)
-                    cu.append(value)
-            if item.topic == encoder_topic:
-                try:
-                    stamp, value = read_encoder(item.message, enc_kind, joint=joint)
-                except MessageError:
-                    rejected = True  # a reading taken out: the next one breaks the chain
+        cmd_type = reader.topic(command_topic, COMMAND_MSGTYPES).msgtype
+        enc_type = reader.topic(encoder_topic, ENCODER_MSGTYPES).msgtype
+        # values straight from the CDR bytes, in numpy steps per block; a message the fast
+        # path cannot vouch for is read (or rejected) by the adapters, one by one
+        readers = {
+            command_topic: RawValueReader(cmd_type, "command", index=command_index, joint=joint),
+            encoder_topic: RawValueReader(enc_type, "encoder", joint=joint),
+        }
+        parts: dict[str, list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = {
+            command_topic: [],
+            encoder_topic: [],
+        }
+        block: list[RawMessage] = []
+
+        def take(block: list[RawMessage]) -> None:
+            for topic, read in readers.items():
+                mine = [m for m in block if m.topic == topic]
+                if not mine:
                     continue
-                et.append(stamp or item.log_time_ns)
-                ey.append(value)
-                em.append(rejected)
-                rejected = False
+                head, value, ok = read.read_many([m.raw for m in mine])
+                for k in np.flatnonzero(~ok).tolist():
+                    try:
+                        head[k], value[k] = read.read(mine[k].raw)
+                    except MessageError:
+                        continue
+                    ok[k] = True
+                log = np.fromiter((m.log_time_ns for m in mine), dtype=np.int64, count=len(mine))
+                parts[topic].append((np.where(head != 0, head, log), value, ok))
+
+        for item in reader.raw_messages([command_topic, encoder_topic]):
+            block.append(item)
+            if len(block) >= 8192:
+                take(block)
+                block = []
+        take(block)
+
+    def joined(topic: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        got = parts[topic]
+        if not got:
+            return np.zeros(0, np.int64), np.zeros(0), np.zeros(0, bool)
+        return (
+            np.concatenate([g[0] for g in got]),
+            np.concatenate([g[1] for g in got]),
+            np.concatenate([g[2] for g in got]),
+        )
+
+    c_all, cu_all, c_ok = joined(command_topic)
+    e_all, ey_all, e_ok = joined(encoder_topic)
+    ct, cu = c_all[c_ok].tolist(), cu_all[c_ok].tolist()
+    et, ey = e_all[e_ok], ey_all[e_ok]
+    # a reading taken out (rejected) breaks the chain at the next one kept (log order)
+    rejected_before = np.cumsum(~e_ok)[e_ok]
+    em = np.diff(rejected_before, prepend=0) > 0
     if not ct:
         raise BagError(f"no readable command on {command_topic!r} in {path}")
-    if not et:
+    if not et.size:
         raise BagError(f"no readable encoder reading on {encoder_topic!r} in {path}")
     order_c = np.argsort(np.asarray(ct, dtype=np.int64), kind="stable")
     order_e = np.argsort(np.asarray(et, dtype=np.int64), kind="stable")
