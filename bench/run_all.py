@@ -28,6 +28,7 @@ BENCHMARKS = (
     "ros_latency",
     "ros_latency_load",
     "ros_latency_operation",
+    "ros_latency_operation_load",
     "soak",
     "faults",
     "restart",
@@ -38,6 +39,10 @@ BENCHMARKS = (
 RUNS = {
     "ros_latency_load": ("ros_latency", ["--load", "--rate", "500", "--warmup", "4"]),
     "ros_latency_operation": ("ros_latency", ["--scenario", "operation", "--seeds", "0", "1", "2"]),
+    "ros_latency_operation_load": (
+        "ros_latency",
+        ["--scenario", "operation", "--load", "--seeds", "0", "1", "2"],
+    ),
 }
 
 
