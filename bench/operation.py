@@ -201,7 +201,7 @@ def main() -> None:
     )
     wear_rows = []
     for method in METHODS:
-        for seed in tqdm(range(2), desc=f"wear, {method}", file=sys.stderr):
+        for seed in tqdm(seeds, desc=f"wear, {method}", file=sys.stderr):
             lag, final = wear_lag(method, seed, minutes)
             wear_rows.append((method, seed, f"{lag:.1f}", f"{final:.4f}"))
     wear_table = md_table(
