@@ -86,7 +86,7 @@ from .estimate import (
 from .identify import _backlash_columns, _switching
 from .memory import BranchCoverage, coverage_of, excitation_advice, pair_series
 from .play import play_operator
-from .samples import as_breaks
+from .samples import as_breaks, run_lengths
 from .simulate import play_bounds
 from .structure import Structure
 from .windowed import (
@@ -467,14 +467,6 @@ class _Solution:
     unit_covariance: FloatArray  # (Phi^T Phi + R_0 + prior)^-1
     sigma2: float  # residual variance of the memory's rows (NaN when too few)
     rows: int  # rows used
-
-
-def _runs(breaks: BoolArray, carried: int) -> IntArray:
-    """Per sample, how many consecutive samples end there (``carried`` before the first)."""
-    index = np.arange(breaks.size)
-    last = np.where(breaks, index, -1)
-    np.maximum.accumulate(last, out=last)
-    return np.asarray(np.where(last >= 0, index - last + 1, carried + index + 1), dtype=np.intp)
 
 
 def _ewma(values: FloatArray, alpha: float, start: float) -> float:
@@ -960,7 +952,7 @@ class RecursiveIdentifier:
         self._input_low, self._input_high = float(low[-1]), float(high[-1])
         deadband = s.input_deadband * (high - low)  # per sample: the span seen so far
         run_before = self._run
-        run = _runs(b, run_before)
+        run = run_lengths(b, run_before)
         self._run = int(min(run[-1], 1 << 40))
         if self._structure.cascade:
             informative = self._piece_cascade(u, y, run, run_before, deadband, first)
@@ -1286,7 +1278,7 @@ class RecursiveIdentifier:
             _Lags.unknown(structure),
             u,
             y,
-            _runs(b, 0),
+            run_lengths(b, 0),
             0,
             np.full(u.size, deadband),
             settling_samples(structure, p),

@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._typing import ArrayLike, BoolArray, FloatArray
+from ._typing import ArrayLike, BoolArray, FloatArray, IntArray
 from .errors import GenBacklashError
 
 __all__ = [
@@ -51,6 +51,7 @@ __all__ = [
     "monotone_paths",
     "nominal_period",
     "restart_points",
+    "run_lengths",
     "sample_breaks",
     "segment_lengths",
 ]
@@ -163,6 +164,19 @@ def restart_points(breaks: BoolArray | None) -> BoolArray | None:
     anchors = np.array(breaks, dtype=bool)
     anchors[0] = False
     return anchors
+
+
+def run_lengths(breaks: BoolArray, carried: int) -> IntArray:
+    """Per sample, how many consecutive samples end there: a break starts a new run, and
+    the run before the first sample held ``carried`` (streams fed in pieces).
+
+    >>> run_lengths(np.array([False, False, True, False]), 5).tolist()
+    [6, 7, 1, 2]
+    """
+    index = np.arange(breaks.size)
+    last = np.where(breaks, index, -1)
+    np.maximum.accumulate(last, out=last)
+    return np.asarray(np.where(last >= 0, index - last + 1, carried + index + 1), dtype=np.intp)
 
 
 def segment_lengths(breaks: BoolArray) -> FloatArray:

@@ -48,7 +48,7 @@ from .identify import (
 from .memory import BranchCoverage, RowMemory, excitation_advice
 from .play import play_operator
 from .refine import refine_parameters
-from .samples import as_breaks, breaks_to_rows
+from .samples import as_breaks, breaks_to_rows, run_lengths
 from .simulate import play_bounds
 from .structure import Structure
 
@@ -1012,9 +1012,9 @@ class WindowedIdentifier:
         self._reason = "warming up"
         self._samples = 0
         self._kept = 0  # samples stored in the window (cascade: settled dwells left out)
-        self._still = 0  # samples the input has held its value, up to the latest (cascade)
+        self._still = 0  # samples at the latest input, its move included (cascade)
         self._held_u = math.nan  # that value
-        self._settling: tuple[FloatArray, int] | None = None  # (p, its dwell horizon)
+        self._dwell: int | None = None  # dwell samples the cascade stores (see _set_p)
         self._last_fit_at = 0
         self._last_fit_rows = 0
         self._next_fit = self.min_samples
@@ -1044,36 +1044,29 @@ class WindowedIdentifier:
         stored (cascade)."""
         return self._kept if self._memory is None else self._rows
 
-    def _dwell_horizon(self) -> int | None:
-        """Samples of a dwell the cascade's window stores: twice the linear block's settling
-        horizon at the current estimate (to 1e-4 of a step); ``None`` before an estimate."""
-        p = self._p
-        if p is None:
-            return None
-        if self._settling is None or not np.array_equal(self._settling[0], p):
-            self._settling = (p.copy(), 2 * settling_samples(self._structure, p))
-        return self._settling[1]
+    def _set_p(self, p: FloatArray) -> None:
+        """Take ``p`` as the equation-error estimate; for the cascade also the samples of a
+        dwell its window stores: twice the linear block's settling horizon at ``p`` (to
+        1e-4 of a step)."""
+        self._p = p
+        if self._memory is None:
+            self._dwell = 2 * settling_samples(self._structure, p)
 
     def _unsettled(self, uu: FloatArray) -> BoolArray:
         """Which samples the cascade's window stores: all but those of a dwell (the input
-        held at one value) past :meth:`_dwell_horizon`. After that the linear block has
+        held at one value) past ``_dwell`` samples (:meth:`_set_p`). After that the linear block has
         settled (eqs. 30-31 at a fixed point): the samples repeat one steady state, and
         leaving them out keeps the window's series that of the same dynamics (a reading
         lost among them changes nothing either: the state did not move)."""
-        n = uu.size
-        same = np.empty(n, dtype=bool)
-        same[0] = uu[0] == self._held_u
-        np.equal(uu[1:], uu[:-1], out=same[1:])
-        index = np.arange(n)
-        change = np.where(same, -1, index)
-        np.maximum.accumulate(change, out=change)
-        run = np.where(change >= 0, index - change, self._still + index + 1)  # 0: it moved
+        moved = np.empty(uu.size, dtype=bool)
+        moved[0] = uu[0] != self._held_u
+        np.not_equal(uu[1:], uu[:-1], out=moved[1:])
+        run = run_lengths(moved, self._still)  # samples at this input, the move included
         self._still = int(min(run[-1], 1 << 40))
         self._held_u = float(uu[-1])
-        horizon = self._dwell_horizon()
-        if horizon is None:
-            return np.ones(n, dtype=bool)
-        return np.asarray(run <= horizon)
+        if self._dwell is None:  # no estimate yet: every sample
+            return np.ones(uu.size, dtype=bool)
+        return np.asarray(run <= self._dwell + 1)  # the move and `_dwell` held samples
 
     def seed(self, estimate: Estimate) -> Estimate:
         """Continue from a saved ``estimate`` (e.g. a checkpoint's) instead of a cold start.
@@ -1128,7 +1121,7 @@ class WindowedIdentifier:
         self._sign_known_now = True
         self._seed = prior
         self._seed_samples = min(s.window, estimate.samples) if estimate.samples else s.window
-        self._p = prior.p.copy()
+        self._set_p(prior.p.copy())
         self._reported = prior.p.copy()
         self._covariance = np.array(estimate.covariance, dtype=np.float64)
         self._residual = estimate.residual
@@ -1569,7 +1562,7 @@ class WindowedIdentifier:
             conditioning = self._recent_conditioning(fit.rows)
         self._conditioning_ref = np.maximum(self._conditioning_ref, conditioning)
         self._span_ref = max(self._span_ref, float(np.ptp(u)))
-        self._p = fit.p
+        self._set_p(fit.p)
         reported = fit.p
         if s.refine and self._seed is None:
             previous = self._reported

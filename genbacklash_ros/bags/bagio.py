@@ -45,6 +45,7 @@ import numpy as np
 
 from genbacklash_core import GenBacklashError
 from genbacklash_core.samples import lift_bridged, missing_readings, monotone_paths
+from genbacklash_ros.bags.raw_values import RawValueReader
 from genbacklash_ros.bags.rosbags_types import from_rosbags, jazzy_typestore, to_rosbags
 from genbacklash_ros.node.messages import (
     CommandType,
@@ -54,7 +55,6 @@ from genbacklash_ros.node.messages import (
     Float64MultiArray,
     JointState,
     Message,
-    MessageError,
 )
 from genbacklash_ros.node.sample_rule import keep_breaks, link_breaks, record_period
 
@@ -864,7 +864,7 @@ def _bridged(
     return lift_bridged(breaks, missing_readings(et, period), monotone)
 
 
-def _increasing(times: list[int], values: list[float]) -> tuple[np.ndarray, np.ndarray]:
+def _increasing(times: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Drop samples whose time is not after the previous accepted one (as the pipeline)."""
     t = np.asarray(times, dtype=np.int64)
     keep = _increasing_mask(t)
@@ -896,8 +896,6 @@ def read_aligned(
     breaks the chain of consecutive samples at the next encoder reading in log order, as in
     the pipeline (``breaks``, see :func:`align`).
     """
-    from genbacklash_ros.bags.raw_values import RawValueReader  # (it imports rosbags' types)
-
     with BagReader(path) as reader:
         cmd_type = reader.topic(command_topic, COMMAND_MSGTYPES).msgtype
         enc_type = reader.topic(encoder_topic, ENCODER_MSGTYPES).msgtype
@@ -911,23 +909,15 @@ def read_aligned(
             command_topic: [],
             encoder_topic: [],
         }
-        block: list[RawMessage] = []
 
         def take(block: list[RawMessage]) -> None:
             for topic, read in readers.items():
                 mine = [m for m in block if m.topic == topic]
-                if not mine:
-                    continue
-                head, value, ok = read.read_many([m.raw for m in mine])
-                for k in np.flatnonzero(~ok).tolist():
-                    try:
-                        head[k], value[k] = read.read(mine[k].raw)
-                    except MessageError:
-                        continue
-                    ok[k] = True
+                head, value, ok = read.read_all([m.raw for m in mine])
                 log = np.fromiter((m.log_time_ns for m in mine), dtype=np.int64, count=len(mine))
                 parts[topic].append((np.where(head != 0, head, log), value, ok))
 
+        block: list[RawMessage] = []
         for item in reader.raw_messages([command_topic, encoder_topic]):
             block.append(item)
             if len(block) >= 8192:
@@ -935,33 +925,19 @@ def read_aligned(
                 block = []
         take(block)
 
-    def joined(topic: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        got = parts[topic]
-        if not got:
-            return np.zeros(0, np.int64), np.zeros(0), np.zeros(0, bool)
-        return (
-            np.concatenate([g[0] for g in got]),
-            np.concatenate([g[1] for g in got]),
-            np.concatenate([g[2] for g in got]),
-        )
-
-    c_all, cu_all, c_ok = joined(command_topic)
-    e_all, ey_all, e_ok = joined(encoder_topic)
-    ct, cu = c_all[c_ok].tolist(), cu_all[c_ok].tolist()
-    et, ey = e_all[e_ok], ey_all[e_ok]
+    c_t, c_u, c_ok = (np.concatenate(a) for a in zip(*parts[command_topic], strict=True))
+    e_t, e_y, e_ok = (np.concatenate(a) for a in zip(*parts[encoder_topic], strict=True))
     # a reading taken out (rejected) breaks the chain at the next one kept (log order)
-    rejected_before = np.cumsum(~e_ok)[e_ok]
-    em = np.diff(rejected_before, prepend=0) > 0
-    if not ct:
+    e_m = np.diff(np.cumsum(~e_ok)[e_ok], prepend=0) > 0
+    c_t, c_u, e_t, e_y = c_t[c_ok], c_u[c_ok], e_t[e_ok], e_y[e_ok]
+    if not c_t.size:
         raise BagError(f"no readable command on {command_topic!r} in {path}")
-    if not et.size:
+    if not e_t.size:
         raise BagError(f"no readable encoder reading on {encoder_topic!r} in {path}")
-    order_c = np.argsort(np.asarray(ct, dtype=np.int64), kind="stable")
-    order_e = np.argsort(np.asarray(et, dtype=np.int64), kind="stable")
-    c_t, c_u = _increasing([ct[i] for i in order_c], [cu[i] for i in order_c])
-    e_t = np.asarray(et, dtype=np.int64)[order_e]
-    e_y = np.asarray(ey, dtype=np.float64)[order_e]
-    e_m = np.asarray(em, dtype=bool)[order_e]
+    order_c = np.argsort(c_t, kind="stable")
+    order_e = np.argsort(e_t, kind="stable")
+    c_t, c_u = _increasing(c_t[order_c], c_u[order_c])
+    e_t, e_y, e_m = e_t[order_e], e_y[order_e], e_m[order_e]
     unique = _increasing_mask(e_t)
     if not unique.all():  # a duplicate's mark passes to the next reading kept
         seen = np.cumsum(e_m)[unique]

@@ -202,6 +202,18 @@ class RawValueReader:
             self.fast += int(np.count_nonzero(good))
         return stamps, values, ok
 
+    def read_all(self, raws: Sequence[bytes]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`read_many`, and :meth:`read` for each message it leaves: ``(stamps, values,
+        ok)`` with ``ok`` False only where the adapters reject the message."""
+        stamps, values, ok = self.read_many(raws)
+        for k in np.flatnonzero(~ok).tolist():
+            try:
+                stamps[k], values[k] = self.read(raws[k])
+            except MessageError:
+                continue
+            ok[k] = True
+        return stamps, values, ok
+
     def _read_fast(self, raw: bytes, layout: _Layout) -> tuple[int, float]:
         (value,) = _unpack_d(raw, layout.value_at)
         for offset, count in layout.checked:

@@ -544,13 +544,8 @@ class BacklashPipeline:
             return None
         stamp = align.time_of(header_ns, receive_ns)
         last = align.last_cmd_ns
-        if last is not None and stamp <= last:
-            back = health.jumped_back("command", stamp, last)
-            if back is None:
-                key = "command_duplicate" if stamp == last else "command_out_of_order"
-                self._drop(key, _order_text("command", stamp, last))
-                return None
-            self._reanchor("command", stamp, last, back)
+        if last is not None and stamp <= last and not self._behind("command", stamp, last):
+            return None
         self._events(health.check_command(stamp, value, int(receive_ns), self._comp.options))
         sent = self._comp.command(
             value,
@@ -861,12 +856,8 @@ class BacklashPipeline:
         stamp = align.time_of(header_ns, receive_ns)
         last = align.last_enc_ns
         if last is not None and stamp <= last:
-            back = health.jumped_back("encoder", stamp, last)
-            if back is None:
-                key = "encoder_duplicate" if stamp == last else "encoder_out_of_order"
-                self._drop(key, _order_text("encoder", stamp, last))
+            if not self._behind("encoder", stamp, last):
                 return []
-            self._reanchor("encoder", stamp, last, back)
             last = None  # re-anchored: this reading starts the new time line
         check = health.check_reading(
             stamp,
@@ -1092,6 +1083,18 @@ class BacklashPipeline:
             return
         led.checkpoints += 1
         led.last_checkpoint_ns = now
+
+    def _behind(self, stream: str, stamp: int, last: int) -> bool:
+        """A ``stream`` message stamped at or before the stream's last time ``last``: after a
+        clock jump back, alignment restarts at ``stamp`` (True: take the message); otherwise
+        it is dropped as a duplicate or out of order (False)."""
+        back = self._health.jumped_back(stream, stamp, last)
+        if back is None:
+            key = f"{stream}_duplicate" if stamp == last else f"{stream}_out_of_order"
+            self._drop(key, _order_text(stream, stamp, last))
+            return False
+        self._reanchor(stream, stamp, last, back)
+        return True
 
     def _reanchor(self, stream: str, stamp: int, last: int, back: int) -> None:
         """Restart alignment and the data clock at ``stamp`` after a clock jump back (by
