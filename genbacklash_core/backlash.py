@@ -209,6 +209,22 @@ class GeneralBacklash:
             [ml[0], ml[0] * self.c_left, *ml[1:], mr[0], mr[0] * self.c_right, *mr[1:]]
         )  # eq. (23)
 
+    def branches_at(self, u: float) -> tuple[float, float]:
+        """``(L(u), R(u))`` at one finite input, in Python floats (eqs. 11-12, 16-17): what
+        :meth:`left` and :meth:`right` give for ``[u]``, without arrays for a single value.
+
+        >>> GeneralBacklash.ideal(1.0, 0.1, 0.2).branches_at(1.0)
+        (1.1, 0.8)
+        """
+        values = []
+        for m, shifted in ((self.m_left, u + self.c_left), (self.m_right, u - self.c_right)):
+            acc = shifted * m[-1]  # Horner's rule, as evaluate_branch
+            for coefficient in m[-2::-1]:
+                acc += coefficient
+                acc *= shifted
+            values.append(acc)
+        return values[0], values[1]
+
     def left(self, u: ArrayLike) -> FloatArray:
         """Left branch ``L(u)`` (eq. 11); ``+-inf`` where it exceeds the float range.
 

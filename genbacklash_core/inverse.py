@@ -44,6 +44,7 @@ import itertools
 import math
 import numbers
 import sys
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -772,6 +773,10 @@ def branch_inverse(
 # --------------------------------------------------------------------------- the step
 
 
+_Memory = tuple[float, float, float, int, float, int]
+"""A :class:`CompensatorState` as a plain tuple, in its field order (the loops' form)."""
+
+
 def _step(
     plan: _Plan,
     state: CompensatorState,
@@ -779,12 +784,24 @@ def _step(
     options: CompensatorOptions,
     confidence: float,
 ) -> tuple[float, CompensatorState]:
-    x, u_prev, v_prev = state.x, state.u, state.u_inverse
+    memory = (state.x, state.u, state.u_inverse, state.direction, state.offset, state.ramp)
+    u, after = _advance(plan, memory, x_d, options, confidence)
+    return u, CompensatorState(*after)
+
+
+def _advance(
+    plan: _Plan,
+    memory: _Memory,
+    x_d: float,
+    options: CompensatorOptions,
+    confidence: float,
+) -> tuple[float, _Memory]:
+    """One step of the compensator on the state as a tuple (:func:`_step` without building
+    a :class:`CompensatorState`; the loops keep the tuple between samples)."""
+    x, u_prev, v_prev, direction, offset, ramp = memory
     if not math.isfinite(x_d):  # no usable target: hold the previous command
         u = min(max(u_prev, options.u_min), options.u_max)
-        return u, CompensatorState(
-            plan.clamp(x, u), u, v_prev, state.direction, state.offset, state.ramp
-        )
+        return u, (plan.clamp(x, u), u, v_prev, direction, offset, ramp)
     up, down = plan.up, plan.down
     # Which case of eq. (8): push up (lower branch), push down (upper branch) or hold.
     scale = max(abs(x), abs(x_d), plan.left.magnitude(v_prev), plan.right.magnitude(v_prev))
@@ -806,7 +823,6 @@ def _step(
             v = v_prev
 
     # Gap-crossing smoothing: a new push direction starts a linear ramp of the jump.
-    direction, offset, ramp = state.direction, state.offset, state.ramp
     if push != 0:
         if push != direction and options.smoothing > 0:
             offset = v - (v_prev - offset)  # the whole jump from the last smoothed command
@@ -844,7 +860,7 @@ def _step(
     elif u > options.u_max:
         u = options.u_max
     # Advance the modelled output with the command actually sent (eq. 20).
-    return u, CompensatorState(plan.clamp(x, u), u, v, direction, offset, ramp)
+    return u, (plan.clamp(x, u), u, v, direction, offset, ramp)
 
 
 def _as_float(name: str, value: object) -> float:
@@ -963,8 +979,16 @@ def compensate(
         raise GenBacklashError(f"state must be a CompensatorState, got {current!r}")
     targets, trusts = _series(x_d, confidence)
     out = np.empty(len(targets))
+    memory = (
+        current.x,
+        current.u,
+        current.u_inverse,
+        current.direction,
+        current.offset,
+        current.ramp,
+    )
     for t, (target, trust) in enumerate(zip(targets, trusts, strict=True)):
-        out[t], current = _step(plan, current, target, opts, trust)
+        out[t], memory = _advance(plan, memory, target, opts, trust)
     return out
 
 
@@ -1055,9 +1079,29 @@ class InverseBacklash:
     def run(self, x_d: ArrayLike, confidence: ArrayLike = 1.0) -> FloatArray:
         """Commands for a block of samples, continuing from (and advancing) the state."""
         targets, trusts = _series(x_d, confidence)
-        out = np.empty(len(targets))
+        return np.array(self._run(targets, trusts), dtype=np.float64)
+
+    def steps(self, x_d: Sequence[float], confidence: float = 1.0) -> list[float]:
+        """:meth:`step` for each of ``x_d`` in turn, at one ``confidence``: the commands.
+
+        The form for a caller with Python floats at hand (the node's batch path); the same
+        commands and state as the calls one by one.
+
+        >>> comp = InverseBacklash(GeneralBacklash.ideal(1.0, 0.5, 0.5))
+        >>> comp.steps([0.5, 1.0, 1.0])
+        [1.0, 1.5, 1.5]
+        """
+        targets = [_as_float("x_d", x) for x in x_d]
+        trust = _as_float("confidence", confidence)
+        return self._run(targets, [trust] * len(targets))
+
+    def _run(self, targets: list[float], trusts: list[float]) -> list[float]:
         state = self._state
-        for t, (target, trust) in enumerate(zip(targets, trusts, strict=True)):
-            out[t], state = _step(self._plan, state, target, self._options, trust)
-        self._state = state
+        memory = (state.x, state.u, state.u_inverse, state.direction, state.offset, state.ramp)
+        plan, options = self._plan, self._options
+        out = []
+        for target, trust in zip(targets, trusts, strict=True):
+            u, memory = _advance(plan, memory, target, options, trust)
+            out.append(u)
+        self._state = CompensatorState(*memory)
         return out

@@ -89,6 +89,11 @@ class FoxgloveMcap:
         )
         self._channels[connection.id] = channel.base
 
+    def channel_log(self, connection: Any) -> Any:
+        """The compiled channel's own ``log(data: bytes, log_time: int, sink_id: None)`` for
+        ``connection`` (what :meth:`write` calls), for writers of many messages."""
+        return self._channels[connection.id].log
+
     def write(self, connection: Any, timestamp: int, data: bytes | memoryview) -> None:
         """Write one message's bytes at log time ``timestamp`` (ns)."""
         self._channels[connection.id].log(bytes(data), timestamp, None)

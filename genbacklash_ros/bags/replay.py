@@ -22,8 +22,11 @@ properly (it stays readable) and returns the reason in :attr:`ReplayResult.error
 
 from __future__ import annotations
 
+import gc
+import itertools
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
@@ -55,6 +58,29 @@ OUTPUT_TOPICS: dict[str, str] = {
 
 _PROGRESS_EVERY = 2048
 _BLOCK = 8192  # input messages handed to the pipeline at once (BacklashPipeline.on_batch)
+_GC_YOUNG = 50_000  # allocations between young-generation collections during a replay
+
+
+@contextmanager
+def _few_collections() -> Iterator[None]:
+    """Collect reference cycles less often while a replay runs.
+
+    A replay allocates a few tuples and byte strings per message and keeps almost none, so
+    the collector's default (a young collection every 700 allocations, a full one when the
+    survivors pile up) spends its time scanning what lives anyway: the imported modules and
+    the replay's history. Here what exists already is frozen out of the collections
+    (:func:`gc.freeze`) and the young generation is collected every ``_GC_YOUNG``
+    allocations; cycles are still collected. Both are undone on the way out. Measured on
+    the 5-minute operation bag: about 0.2 s of 2.1 s (BENCHMARKS.md "Replay throughput").
+    """
+    thresholds = gc.get_threshold()
+    gc.freeze()
+    gc.set_threshold(_GC_YOUNG, *thresholds[1:])
+    try:
+        yield
+    finally:
+        gc.set_threshold(*thresholds)
+        gc.unfreeze()
 
 
 @dataclass
@@ -229,21 +255,23 @@ class _Feed:
     def block(self, items: list[RawMessage]) -> None:
         """Feed ``items`` (in log-time order) and write the output they make."""
         n = len(items)
-        is_cmd = np.fromiter((m.topic == self.command_topic for m in items), dtype=bool, count=n)
+        topics, times, _types, raws = zip(*items, strict=True)  # the fields, each in order
+        is_cmd = np.array(topics, dtype=object) == self.command_topic
         heads = np.zeros(n, dtype=np.int64)
         values = np.full(n, np.nan)
         ok = np.zeros(n, dtype=bool)
+        fits = True
         try:
-            log = np.fromiter((m.log_time_ns for m in items), dtype=np.int64, count=n)
+            log = np.fromiter(times, dtype=np.int64, count=n)
         except OverflowError:  # a damaged record's time: this block goes message by message
             log = np.zeros(n, dtype=np.int64)
-            batched = False
+            fits = batched = False
         else:
             batched = self.batched
         if batched:
             for reader, mine in ((self.read_cmd, is_cmd), (self.read_enc, ~is_cmd)):
                 where = np.flatnonzero(mine)
-                h, v, good = reader.read_many([items[k].raw for k in where.tolist()])
+                h, v, good = reader.read_many([raws[k] for k in where.tolist()])
                 heads[where], values[where], ok[where] = h, v, good
         pipe = self.pipeline
         history = self.history
@@ -276,32 +304,50 @@ class _Feed:
                     outputs[odd] = more
             start = odd + 1
         enc = np.flatnonzero(~is_cmd & ok)
-        use_header = self.use_header
-        history.encoder_t.extend(
-            head if use_header and head else items[k].log_time_ns
-            for k, head in zip(enc.tolist(), heads[enc].tolist(), strict=True)
-        )
+        if fits:  # the log times as int64
+            stamped = heads[enc] if self.use_header else np.zeros(enc.size, dtype=np.int64)
+            history.encoder_t.extend(np.where(stamped != 0, stamped, log[enc]).tolist())
+        else:
+            history.encoder_t.extend(
+                head if self.use_header and head else times[k]
+                for k, head in zip(enc.tolist(), heads[enc].tolist(), strict=True)
+            )
         history.encoder_y.extend(values[enc].tolist())
         cmd = np.flatnonzero(accepted)
         history.command_t.extend(stamps[cmd].tolist())
         history.command_raw.extend(values[cmd].tolist())
         history.command_sent.extend(sent[cmd].tolist())
+        # the input copied as read, each accepted command followed by its compensated
+        # command and each message by what it made the node publish: whole runs of input
+        # records go into the list at once, between the messages that add something
         patch = self.read_cmd.patch
         comp_topic = OUTPUT_TOPICS["compensated_command"]
-        accepted_list, sent_list = accepted.tolist(), sent.tolist()
-        records: list[tuple[str, int, bytes]] = []
-        add = records.append
-        for k, item in enumerate(items):
-            add((item.topic, item.log_time_ns, item.raw))
+        comp_type = self.command_type
+        sent_list = sent.tolist()
+        writer = self.writer
+        events = cmd.tolist()
+        if outputs:
+            events = sorted({*events, *outputs})
+        accepted_list = accepted.tolist()
+        records: list[RawMessage] = []
+        done = 0
+        for k in events:
+            records += items[done : k + 1]
+            done = k + 1
+            item = items[k]
             if accepted_list[k]:
-                add((comp_topic, item.log_time_ns, patch(item.raw, sent_list[k])))
+                records.append(
+                    RawMessage(
+                        comp_topic, item.log_time_ns, comp_type, patch(item.raw, sent_list[k])
+                    )
+                )
             due = outputs.get(k)
             if due:
-                self.writer.write_raw_many(records)
+                writer.write_messages(records)
                 records = []
-                add = records.append
                 self.publish(due, item.log_time_ns)
-        self.writer.write_raw_many(records)
+        records += items[done:]
+        writer.write_messages(records)
 
     def _one(
         self,
@@ -405,7 +451,7 @@ def replay(
     if command_topic == encoder_topic:
         raise BagError(f"the command and encoder topics must differ, both are {command_topic!r}")
     started = time.perf_counter()
-    with BagReader(bag) as reader:
+    with _few_collections(), BagReader(bag) as reader:
         cmd_info = reader.topic(command_topic, COMMAND_MSGTYPES)
         enc_info = reader.topic(encoder_topic, ENCODER_MSGTYPES)
         custom_data = reader.custom_data
@@ -461,15 +507,19 @@ def replay(
                 batched,
             )
             block: list[RawMessage] = []
+            stream = reader.raw_messages([command_topic, encoder_topic])
+            size = _BLOCK if batched else 1
             try:
-                for item in reader.raw_messages([command_topic, encoder_topic]):
-                    block.append(item)
-                    if len(block) >= (_BLOCK if batched else 1):
-                        feed.block(block)
-                        count += len(block)
-                        last_log = item.log_time_ns
-                        bar.step(len(block))
-                        block = []
+                while True:
+                    # extend keeps what it took when the reader raises part-way
+                    block.extend(itertools.islice(stream, size))
+                    if not block:
+                        break
+                    feed.block(block)
+                    count += len(block)
+                    last_log = block[-1].log_time_ns
+                    bar.step(len(block))
+                    block = []
             except BagError as err:
                 error = str(err)
             finally:

@@ -7,6 +7,7 @@ ran but did not converge (the result, with its reason, is still printed).
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import os
 import sys
@@ -27,10 +28,6 @@ from genbacklash_core import (
 )
 from genbacklash_core.data import NonFinitePolicy
 from genbacklash_ros.bags.csvio import Series, write_series_csv
-from genbacklash_ros.cli import diagnose as diagnose_cli
-from genbacklash_ros.cli import excite as excite_cli
-from genbacklash_ros.cli import fleet as fleet_cli
-from genbacklash_ros.cli import node as node_cli  # imports no middleware
 from genbacklash_ros.cli import replay as replay_cli
 
 __all__ = ["main"]
@@ -39,6 +36,18 @@ EXIT_OK = 0
 EXIT_BAD_INPUT = 2
 EXIT_NOT_CONVERGED = 3
 EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE, what a shell reports for a writer killed by it
+
+# commands defined in modules of their own: the module and the function that adds its
+# parser(s); main() imports only the one a command line names (the node's module imports no
+# middleware, the diagnosis its effects: each costs start-up time the others need not pay)
+_COMMAND_MODULES: dict[str, tuple[str, str]] = {
+    "diagnose": ("genbacklash_ros.cli.diagnose", "add_parser"),
+    "replay": ("genbacklash_ros.cli.replay", "add_parser"),
+    "node": ("genbacklash_ros.cli.node", "add_parser"),
+    "excite": ("genbacklash_ros.cli.excite", "add_parser"),
+    "fleet": ("genbacklash_ros.cli.fleet", "add_parsers"),
+    "fleet-report": ("genbacklash_ros.cli.fleet", "add_parsers"),
+}
 
 
 class _Progress:
@@ -230,8 +239,10 @@ _BATCH_USES = (
 )
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser (exposed for tests and documentation)."""
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The argument parser (exposed for tests and documentation); with ``command`` one of
+    the commands defined in modules of their own, only its parser besides the built-in
+    ones (what :func:`main` parses a command line of it with)."""
     parser = argparse.ArgumentParser(
         prog="genbacklash",
         description=(
@@ -369,18 +380,19 @@ def build_parser() -> argparse.ArgumentParser:
         "--out", default="demo_output", metavar="DIR", help="output directory (default demo_output)"
     )
     demo.set_defaults(func=_cmd_demo)
-    diagnose_cli.add_parser(sub)
-    replay_cli.add_parser(sub)
-    node_cli.add_parser(sub)
-    excite_cli.add_parser(sub)
-    fleet_cli.add_parsers(sub)
+    wanted = (
+        [_COMMAND_MODULES[command]] if command in _COMMAND_MODULES else _COMMAND_MODULES.values()
+    )
+    for module, function in dict.fromkeys(wanted):
+        getattr(importlib.import_module(module), function)(sub)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``genbacklash`` console script."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    words = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(words[0] if words else None)
+    args = parser.parse_args(words)
     try:
         code: int = args.func(args)
         sys.stdout.flush()  # a buffered stdout (no PYTHONUNBUFFERED) fails here, not at exit

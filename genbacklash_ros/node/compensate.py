@@ -27,6 +27,11 @@ from genbacklash_core import CompensatorOptions, Estimate, GenBacklashError, Inv
 __all__ = ["CompensateStage"]
 
 
+def _no_fault() -> bool:
+    """No fault is active (the batch form runs commands only then)."""
+    return False
+
+
 class CompensateStage:
     """The node's compensator and its limits (see the module notes).
 
@@ -63,6 +68,24 @@ class CompensateStage:
         (``passing()``: a fault is active; asked only when a model compensates)."""
         sent = self._command(value, est, passing, last_y)
         self.last_sent = sent
+        return sent
+
+    def commands(self, values: list[float], est: Estimate, *, last_y: float | None) -> list[float]:
+        """:meth:`command` for each of ``values`` in turn with no fault active (the batch
+        form): the same commands, in one call to the compensator."""
+        comp = self._comp
+        if not values:
+            return []
+        if not self._on or comp is None or est is not self._comp_estimate:
+            sent = [self.command(v, est, passing=_no_fault, last_y=last_y) for v in values]
+            return sent
+        sent = comp.steps(values, est.confidence)
+        for k, command in enumerate(sent):
+            if not math.isfinite(command):  # as _command: within the limits instead
+                if k:
+                    self.last_sent = sent[k - 1]
+                sent[k] = self._limit(values[k])
+        self.last_sent = sent[-1]
         return sent
 
     def _command(

@@ -50,8 +50,12 @@ to be reset, so compensation resumes at once with the current estimate.
   prediction standing in for it in the next prediction. The scale is a running average
   (weight 0.2 per batch) of the batches' upper quartile of the absolute prediction errors /
   1.15 (a normal sigma, robust to a quarter of outliers; at least 1e-3 of the readings'
-  magnitude). When more than ``SPIKE_MAX_SHARE`` (20 %) of a batch would be rejected the
-  model, not the encoder, is taken to be off and the batch is fed whole.
+  magnitude). The limit is at least ``SPIKE_COUNTS`` (2) encoder counts, the count being
+  the smallest change between consecutive readings seen: a quantised reading is up to one
+  count from what it measures, so an error of one count and a little is no spike, however
+  small the scale of the errors while the load rests. When more than ``SPIKE_MAX_SHARE``
+  (20 %) of a batch would be rejected the model, not the encoder, is taken to be off and
+  the batch is fed whole.
 * **Encoder stuck** -- with a trusted estimate of a general backlash (as for spikes), the
   reading has not changed for ``STUCK_NS`` (50 ms) although the model says the command in
   force ``STUCK_INPUT_NS`` (20 ms) before the reading has moved the load by more than
@@ -116,6 +120,7 @@ __all__ = [
     "SILENCE_MIN_NS",
     "SILENCE_PERIODS",
     "SILENCE_UNKNOWN_NS",
+    "SPIKE_COUNTS",
     "SPIKE_MAX_SHARE",
     "SPIKE_SIGMAS",
     "STILL_HOLD_NS",
@@ -143,6 +148,7 @@ REANCHOR_COUNT = 3  # consecutive far-back messages of a stream that mean a cloc
 REANCHOR_BACK_NS = 100_000_000  # ... each this far before the stream's last time
 SPIKE_SIGMAS = 8.0  # a reading this many residual scales from its prediction is a spike
 SPIKE_MAX_SHARE = 0.2  # more of a batch than this: the model is off, not the encoder
+SPIKE_COUNTS = 2.0  # ... and at least this many encoder counts (a quantised reading's error)
 RESYNC_NS = 500_000_000  # after a gap, samples wait this long at most for a consistent one
 STUCK_NS = 50_000_000  # an unchanged reading this long, while the model says it moves ...
 STUCK_SIGMAS = 5.0  # ... by more than this many residual scales, is a stuck encoder
@@ -266,6 +272,7 @@ class StreamHealth:
         "_gaps",
         "_gaps_from",
         "_last_enc_rx",
+        "_quantum",
         "_resync_since",
         "_sat_since",
         "_scale",
@@ -307,6 +314,7 @@ class StreamHealth:
         self._fed_t: int | None = None  # the last sample fed (spike prediction)
         self._fed_y: float | None = None
         self._scale: float | None = None  # robust scale of the one-step prediction errors
+        self._quantum = math.inf  # the smallest change between consecutive readings fed
         self._resync_since: int | None = None  # time of the first sample after a gap
         self._converged = False  # the estimate has converged since the identifier started
 
@@ -585,6 +593,7 @@ class StreamHealth:
         model = est.model
         if not isinstance(model, GeneralBacklash):
             return Screening(None, [])
+        self._track_quantum(ys)
         with np.errstate(all="ignore"):
             left, right = model.left(us), model.right(us)
             low, high = np.minimum(left, right), np.maximum(left, right)
@@ -594,7 +603,9 @@ class StreamHealth:
             fresh[0] = True
         scale = self._scale
         trusted = self._trusted(est)
-        limit = SPIKE_SIGMAS * scale if trusted and scale is not None else math.inf
+        limit = math.inf
+        if trusted and scale is not None:
+            limit = max(SPIKE_SIGMAS * scale, SPIKE_COUNTS * self._quantum)
         resync = self._resync_since
         if resync is None and y_prev is not None and not fresh.any():
             # the usual case at once: each reading predicted from the one before it
@@ -775,13 +786,22 @@ class StreamHealth:
         if memo is not None and memo[0] is model and memo[1] == u:
             left, right = memo[2], memo[3]
         else:
-            with np.errstate(all="ignore"):
-                left, right = float(model.left([u])[0]), float(model.right([u])[0])
+            left, right = model.branches_at(u)
             self._stuck_branches = (model, u, left, right)
         move = max(min(left, right) - value, value - max(left, right))
         if not (math.isfinite(move) and move > max(STUCK_SIGMAS * scale, 1e-3 * abs(value))):
             return ""
         return f" although the model moves the load by {move:.3g} at the command {u:.6g}"
+
+    def _track_quantum(self, ys: np.ndarray) -> None:
+        """Lower the encoder count to the smallest change between consecutive readings of
+        ``ys`` (an encoder without quantisation soon makes it negligible)."""
+        if ys.size > 1:
+            with np.errstate(all="ignore"):
+                steps = np.abs(np.diff(ys))
+            steps = steps[steps > 0.0]  # NaN and equal readings out
+            if steps.size:
+                self._quantum = min(self._quantum, float(steps.min()))
 
     def _track_scale(self, errors: np.ndarray, ys: np.ndarray) -> None:
         """Blend a batch's absolute prediction errors into the residual scale (their upper

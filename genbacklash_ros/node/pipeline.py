@@ -206,7 +206,7 @@ WorkerFactory: TypeAlias = Callable[[OnlineIdentifier], IdentifierWorker]
 """Makes the identify stage's worker for an identifier (``SyncWorker``, ``ThreadWorker``)."""
 
 COMMAND_WAIT_NS = 100_000_000  # encoder time after which a sample's command counts as held
-BATCH_SAMPLES = 64  # encoder messages per identifier feed
+BATCH_SAMPLES = 128  # encoder messages per identifier feed (at most)
 BATCH_NS = 100_000_000  # data time between identifier feeds at most
 
 _COMMAND_CLASSES: dict[str, type] = {
@@ -314,11 +314,7 @@ def _seen(
 
 
 _STRETCH_MAX = 8192  # messages looked at for one stretch at most
-
-
-def _no_fault() -> bool:
-    """No fault is active (the batch form runs commands only then)."""
-    return False
+_NOT_JUDGED = object()
 
 
 def _order_text(stream: str, stamp: int, last: int) -> str:
@@ -770,6 +766,7 @@ class BacklashPipeline:
         def time_of(j: int) -> int:
             return known_t[j] if j < n_known else view.cmd_t[c0 + j - n_known]
 
+        judged: object = _NOT_JUDGED  # the command judged last (a dwell repeats one)
         while o < run_end:
             at = t[o] - STUCK_INPUT_NS
             count = bisect.bisect_right(known_t, at)
@@ -778,8 +775,10 @@ class BacklashPipeline:
             came = n_known + view.cmd_before[view.enc_pos[o]] - c0
             j = min(count, came) - 1
             held = None if j < 0 else known_u[j] if j < n_known else view.cmd_u[c0 + j - n_known]
-            if health.stuck_reason(value, held, est):
-                return o
+            if held != judged:  # else the same reading, estimate and command: the same answer
+                if health.stuck_reason(value, held, est):
+                    return o
+                judged = held
             if count > came:  # held back by a command not come yet: the next reading
                 o += 1
             elif j + 1 < total:  # the next command holds from its time + STUCK_INPUT_NS
@@ -801,7 +800,7 @@ class BacklashPipeline:
             comp = self._comp
             last_y = align.last_y
             values = view.cmd_u[c0:c1]
-            sent = [comp.command(v, est, passing=_no_fault, last_y=last_y) for v in values]
+            sent = comp.commands(values, est, last_y=last_y)  # no fault active in a stretch
             health.accept_commands()
             stamps = view.cmd_t[c0:c1]
             align.add_commands(stamps, values)

@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from genbacklash_core import GenBacklashError, GeneralBacklash, paper_example
 from genbacklash_core.structure import Structure
@@ -294,3 +296,24 @@ def test_degree1_matches_eq1_random_input(
     result = bl.simulate(u)
     np.testing.assert_allclose(result, expected, rtol=0, atol=1e-12)
     assert np.ptp(result) > 0.5  # the data did move the output
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    m_left=st.lists(st.floats(-5, 5), min_size=1, max_size=4),
+    m_right=st.lists(st.floats(-5, 5), min_size=1, max_size=4),
+    c_left=st.floats(0.0, 2.0),
+    c_right=st.floats(0.0, 2.0),
+    u=st.floats(-1e3, 1e3),
+)
+def test_branches_at_one_input_are_left_and_right_of_it(
+    m_left: list[float], m_right: list[float], c_left: float, c_right: float, u: float
+) -> None:
+    """The scalar form the stuck-encoder check uses is the array form, to the bit."""
+    n = min(len(m_left), len(m_right))
+    try:
+        model = GeneralBacklash(tuple(m_left[:n]), c_left, tuple(m_right[:n]), c_right)
+    except GenBacklashError:  # e.g. a zero leading slope
+        return
+    left, right = model.branches_at(u)
+    assert (left, right) == (float(model.left([u])[0]), float(model.right([u])[0]))

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from genbacklash_core.samples import MAX_BRIDGED
+from genbacklash_ros.bags import bagio
 from genbacklash_ros.bags.bagio import BagError, BagReader, BagWriter, align, read_aligned
 from genbacklash_ros.bags.rosbags_types import jazzy_typestore
 from genbacklash_ros.node.messages import (
@@ -255,3 +256,64 @@ def test_align_bridges_lost_readings_only_along_monotone_commands() -> None:
     assert reversing.breaks.tolist() == [True, False, False, False, True]  # 0 -> 1 -> 0 at 40
     marked = align(cmd_t, cmd_u, enc_t, enc_y, bridge=True, marks=enc_t == 50)
     assert marked.breaks[at[50]]  # a reading taken out before it: never bridged
+
+
+REPO_BAGS = Path(__file__).resolve().parents[3] / "bags"
+
+
+@pytest.mark.parametrize("name", ["drivetrain", "operation", "example1", "example3"])
+def test_chunks_in_order_read_as_rosbags_merges_them(
+    name: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The bundled bags (recorder-like: chunks one after the other in time) are read chunk
+    after chunk, and that is the stream rosbags' merging reader gives, for the directory
+    and for the bare .mcap file."""
+    bag = REPO_BAGS / name
+    (mcap,) = bag.glob("*.mcap")
+    for source in (bag, mcap):
+        with BagReader(source) as reader:
+            topics = list(reader.topics)
+            assert bagio._chunks_in_order(reader._reader, set(topics)) is not None
+            chunked = list(reader.raw_messages(topics))
+        with monkeypatch.context() as patch:
+            patch.setattr(bagio, "_chunks_in_order", lambda *args: None)
+            with BagReader(source) as reader:
+                assert list(reader.raw_messages(topics)) == chunked
+        with BagReader(source) as reader:
+            assert len(chunked) == sum(t.count for t in reader.topics.values())
+
+
+def test_chunks_out_of_order_go_through_rosbags_merge(tmp_path: Path) -> None:
+    """A file whose chunks overlap in time (written out of order) is read through rosbags'
+    merge, in log-time order."""
+    store = jazzy_typestore()
+    raw = bytes(
+        store.serialize_cdr(store.types["std_msgs/msg/Float64"](data=1.5), "std_msgs/msg/Float64")
+    )
+    times = [T0 + k for k in range(20_000, 40_000)] + [T0 + k for k in range(20_000)]
+    with BagWriter(tmp_path / "bag") as writer:  # ~1.7 MB: chunks of 1 MiB overlap in time
+        writer.add_topic("/x", "std_msgs/msg/Float64")
+        writer.write_raw_many([("/x", t, raw) for t in times])
+    with BagReader(tmp_path / "bag") as reader:
+        assert bagio._chunks_in_order(reader._reader, {"/x"}) is None
+        got = [m.log_time_ns for m in reader.raw_messages(["/x"])]
+    assert got == sorted(times)
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_write_messages_copies_what_was_read(tmp_path: Path, compiled: bool) -> None:
+    with BagReader(REPO_BAGS / "drivetrain") as reader:
+        topics = reader.topics
+        read = list(reader.raw_messages(list(topics)))
+    with BagWriter(tmp_path / "copy", compiled=compiled) as writer:
+        for topic, info in topics.items():
+            writer.add_topic(topic, info.msgtype)
+        writer.write_messages(read[:100])
+        writer.write_messages([])
+        writer.write_messages(read[100:])
+    assert writer.count == len(read)
+    with BagReader(tmp_path / "copy") as reader:
+        assert list(reader.raw_messages(list(topics))) == read
+        assert {t: i.count for t, i in reader.topics.items()} == {
+            t: i.count for t, i in topics.items()
+        }

@@ -184,3 +184,25 @@ def test_the_command_line_starts_without_scipy_signal_or_stats() -> None:
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
+
+
+def test_a_command_imports_only_its_own_module() -> None:
+    """main() builds the parser of the command named (the others' modules stay unimported:
+    start-up time of `genbacklash replay`), while `genbacklash --help` still lists them all."""
+    code = (
+        "import sys\n"
+        "from genbacklash_ros.cli.main import main\n"
+        "try:\n"
+        "    main(['replay', '--help'])\n"
+        "except SystemExit:\n"
+        "    pass\n"
+        "names = ('genbacklash_ros.cli.diagnose', 'genbacklash_ros.cli.fleet',\n"
+        "         'genbacklash_ros.cli.excite', 'genbacklash_core.diagnose')\n"
+        "print(sorted(m for m in names if m in sys.modules), file=sys.stderr)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert "usage: genbacklash replay" in out.stdout
+    assert out.stderr.strip() == "[]"
+    listed = build_parser().format_help()
+    for command in ("identify", "diagnose", "replay", "node", "excite", "fleet", "fleet-report"):
+        assert command in listed

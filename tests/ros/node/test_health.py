@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from genbacklash_core import CompensatorOptions, Estimate
+from genbacklash_core import CompensatorOptions, Estimate, EstimatorState, GeneralBacklash
 from genbacklash_core.structure import Structure
 from genbacklash_ros.node.health import (
     FAULT_HOLD_NS,
@@ -134,3 +134,37 @@ def test_reset_forgets_every_fault() -> None:
     health.fault("encoder_stuck", DiagnosticStatus.ERROR, "stuck", 0)
     health.reset()
     assert not health.faults and not health.report(0).parts
+
+
+def test_an_encoder_dithering_by_one_count_is_no_spike() -> None:
+    """A quantised encoder at rest toggles between two counts. The errors' scale falls to
+    its floor while the load rests, below one count; a one-count change is still no spike
+    (the limit is at least SPIKE_COUNTS counts), while a jump of 20 counts is one."""
+    count = 2 * np.pi / 4096
+    model = GeneralBacklash((1.0,), 0.05, (1.0,), 0.05)
+    est = Estimate(
+        Structure(1),
+        np.array(model.parameters()),
+        np.eye(4) * 1e-10,
+        residual=1e-4,
+        excitation=0.5,
+        state=EstimatorState.CONVERGED,
+        confidence=0.99,
+        samples=10_000,
+    )
+    health = StreamHealth()
+    rest = 65 * count  # inside the dead band of u = rest
+    u = np.full(100, rest)
+    times = np.arange(100) * MS
+    still = np.full(100, rest)
+    for k in range(10):  # the load rests: the scale falls to its floor
+        assert health.screen(times + k * 100 * MS, u, still, est).keep is None
+    dither = rest + count * (np.arange(100) % 7 == 3)
+    screening = health.screen(times + 1000 * MS, u, dither, est)
+    assert screening.keep is None and screening.events == []
+    spike = dither.copy()
+    spike[50] += 20 * count
+    screening = health.screen(times + 1100 * MS, u, spike, est)
+    assert screening.keep is not None
+    assert np.flatnonzero(~screening.keep).tolist() == [50]
+    assert [e.key for e in screening.events] == ["encoder_spike"]
