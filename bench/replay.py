@@ -122,9 +122,11 @@ def run_floor_inprocess(bag: Path, out: Path, n_out: int) -> float:
 
 
 def process_start() -> float:
-    """Starting Python and importing the command line (what `genbacklash` pays first)."""
+    """Starting Python and importing the command line with the replay's parser (what
+    `genbacklash replay` pays first)."""
+    code = "from genbacklash_ros.cli.main import build_parser; build_parser('replay')"
     started = time.perf_counter()
-    subprocess.run([sys.executable, "-c", "import genbacklash_ros.cli.main"], check=True)
+    subprocess.run([sys.executable, "-c", code], check=True)
     return time.perf_counter() - started
 
 
@@ -139,6 +141,10 @@ def floor_start() -> float:
 # --------------------------------------------------------------------------- IO candidates
 
 Raw = list[tuple[str, int, bytes]]
+OURS = (
+    "ours: BagReader (rosbags' chunk reader, chunks in order) / "
+    "BagWriter (rosbags Writer + foxglove-sdk storage)"
+)
 
 
 def read_rosbags(bag: Path) -> Raw:
@@ -147,6 +153,11 @@ def read_rosbags(bag: Path) -> Raw:
     with Reader(bag) as reader:
         conns = [c for c in reader.connections if c.topic in TOPICS]
         return [(c.topic, t, raw) for c, t, raw in reader.messages(connections=conns)]
+
+
+def read_ours(bag: Path) -> Raw:
+    with BagReader(bag) as reader:
+        return [(m.topic, m.log_time_ns, m.raw) for m in reader.raw_messages(TOPICS)]
 
 
 def read_mcap(bag: Path) -> Raw:
@@ -250,9 +261,7 @@ def write_ours(msgs: Raw, types: dict[str, str], out: Path) -> None:
         assert writer.compiled
         for topic, msgtype in types.items():
             writer.add_topic(topic, msgtype)
-        write = writer.write_raw
-        for topic, t, raw in msgs:
-            write(topic, t, raw, types[topic])
+        writer.write_raw_many(msgs)  # what the replay calls (write_messages is the same)
 
 
 def check_output(out: Path, n: int) -> None:
@@ -268,7 +277,7 @@ _CANDIDATE_MODULES = {
     "mcap": "mcap",
     "pybag-sdk": "pybag",
     "foxglove-sdk": "foxglove",
-    "ours: rosbags Writer + foxglove-sdk storage": "foxglove",
+    OURS: "foxglove",
 }
 
 
@@ -386,20 +395,21 @@ def profile_split(bag: Path, out: Path) -> tuple[float, list[tuple[str, float]]]
         ("values from the CDR bytes (RawValueReader)", cum("raw_values.py", "read_many")),
         ("pipeline: identifier feeds (align.take, screen, identify)", cum("pipeline.py", "_feed")),
         (
-            "pipeline: compensated commands (CompensateStage.command)",
-            cum("compensate.py", "command"),
+            "pipeline: compensated commands (CompensateStage.commands / command)",
+            cum("compensate.py", "commands") + cum("compensate.py", "command"),
         ),
         (
             "pipeline: the rest of on_batch (stretches, per-message events)",
             cum("pipeline.py", "on_batch")
             - cum("pipeline.py", "_feed")
+            - cum("compensate.py", "commands")
             - cum("compensate.py", "command"),
         ),
         (
-            "write the output (BagWriter.write_raw(_many), RawValueReader.patch)",
-            cum("bagio.py", "write_raw")
-            + cum("bagio.py", "write_raw_many")
-            + cum("raw_values.py", "patch"),
+            "write the output (BagWriter.write_messages, RawValueReader.patch, BagWriter.encode)",
+            cum("bagio.py", "_write_records")
+            + cum("raw_values.py", "patch")
+            + cum("bagio.py", "encode"),
         ),
     ]
     known = sum(v for _, v in parts)
@@ -437,13 +447,18 @@ def main() -> None:
         def add(key: str, value: float) -> None:
             rows.setdefault(key, []).append(value)
 
-        readers = {"rosbags": read_rosbags, "mcap": read_mcap, "pybag-sdk": read_pybag}
+        readers = {
+            "rosbags": read_rosbags,
+            "mcap": read_mcap,
+            "pybag-sdk": read_pybag,
+            OURS: read_ours,
+        }
         writers = {
             "rosbags": write_rosbags,
             "mcap": write_mcap,
             "pybag-sdk": write_pybag,
             "foxglove-sdk": write_foxglove,
-            "ours: rosbags Writer + foxglove-sdk storage": write_ours,
+            OURS: write_ours,
         }
         missing = [name for name, module in _CANDIDATE_MODULES.items() if not _installed(module)]
         readers = {k: v for k, v in readers.items() if k not in missing}
@@ -528,7 +543,11 @@ def main() -> None:
                 name,
                 f"{n_msgs / b[f'read:{name}']:,.0f}" if f"read:{name}" in b else "no reader",
                 f"{n_msgs / b[f'write:{name}']:,.0f}",
-                "yes (Rust)" if "foxglove" in name else "no (Python)",
+                "write: yes (Rust); read: no (Python)"
+                if name == OURS
+                else "yes (Rust)"
+                if "foxglove" in name
+                else "no (Python)",
             ]
             for name in writers
         ],
@@ -585,8 +604,8 @@ path): {inverse["step"] * 1e6:.2f} us with the table inverse against
 of the root solve's (tests/core/test_inverse_fast.py; ~1e-14 seen).
 
 Where the time goes: process start {b["start"]:.2f} s of {b["cli"]:.2f} s (numpy, rosbags
-and our modules; scipy.signal and scipy.stats, 0.5 s together, are imported only by the
-commands that filter or test: tests/ros/cli/test_cli.py keeps them out of the CLI's import);
+and the modules the replay uses: the other commands' modules, and scipy.signal and
+scipy.stats, are imported only by the commands that use them, tests/ros/cli/test_cli.py);
 the floor's process starts (Python, rosbags) in {b["floor_start"]:.2f} s. Without the
 starts, the replay takes {b["cli"] - b["start"]:.2f} s against the floor's
 {b["floor_process"] - b["floor_start"]:.2f} s

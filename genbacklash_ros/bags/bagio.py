@@ -42,7 +42,7 @@ from dataclasses import dataclass
 from operator import itemgetter
 from pathlib import Path
 from types import TracebackType
-from typing import Any, Literal, NamedTuple, cast
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 
@@ -153,7 +153,34 @@ def _one_line(err: BaseException) -> str:
 # --------------------------------------------------------------------------- in order
 
 
-def _chunks_in_order(reader: Any, wanted: set[str]) -> Iterator[tuple[Any, int, bytes]] | None:
+class _ChunksInOrder:
+    """Iterate the messages of ``channels`` chunk after chunk (see :func:`_chunks_in_order`);
+    :attr:`count` is how many were yielded before the chunk being read (exact when rosbags
+    raises: a chunk is decoded whole before its first message comes)."""
+
+    def __init__(self, chunks: list[Any], channels: dict[int, Any], bio: Any, msgsrc: Any) -> None:
+        self._chunks, self._channels, self._bio, self._msgsrc = chunks, channels, bio, msgsrc
+        self.count = 0
+
+    def __iter__(self) -> Iterator[RawMessage]:
+        channels = self._channels
+        topics = {cid: c.topic for cid, c in channels.items()}
+        types = {cid: c.msgtype for cid, c in channels.items()}
+        for chunk in self._chunks:
+            if not any(chunk.channel_count.get(cid, 0) for cid in channels):
+                continue
+            start, stop = chunk.message_start_time, chunk.message_end_time + 1
+            source = self._msgsrc(chunk, channels, start, stop, self._bio)
+            next(source)  # its first item marks the chunk's start time (for a merge)
+            batch = [
+                RawMessage(topics[conn.id], log_time, types[conn.id], raw)
+                for log_time, _offset, conn, raw in source
+            ]
+            yield from batch
+            self.count += len(batch)
+
+
+def _chunks_in_order(reader: Any, wanted: set[str]) -> _ChunksInOrder | None:
     """The messages of ``wanted`` topics chunk after chunk, with rosbags' own chunk reader
     (``storage_mcap.msgsrc``: decompress, check, sort by log time), when the bag is one
     MCAP file whose chunks follow each other in time, as a recorder writes them; None
@@ -184,24 +211,9 @@ def _chunks_in_order(reader: Any, wanted: set[str]) -> Iterator[tuple[Any, int, 
         in_order = all(
             a.message_end_time <= b.message_start_time for a, b in itertools.pairwise(chunks)
         )
-        if not in_order:
-            return None
-        starts = [c.message_start_time for c in chunks]
-        ends = [c.message_end_time + 1 for c in chunks]
-        counts = [c.channel_count for c in chunks]
     except (ImportError, AttributeError, TypeError):
         return None
-
-    def messages() -> Iterator[tuple[Any, int, bytes]]:
-        for chunk, start, stop, count in zip(chunks, starts, ends, counts, strict=True):
-            if not any(count.get(cid, 0) for cid in channels):
-                continue
-            source = msgsrc(chunk, channels, start, stop, bio)
-            next(source)  # its first item marks the chunk's start time (for a merge)
-            for log_time, _offset, connection, raw in source:
-                yield connection, log_time, cast(bytes, raw)  # set on all but the first
-
-    return messages()
+    return _ChunksInOrder(chunks, channels, bio, msgsrc) if in_order else None
 
 
 # --------------------------------------------------------------------------- salvage
@@ -545,13 +557,18 @@ class BagReader:
             raise BagError(f"{self.path} is not open")
         chunks = _chunks_in_order(reader, wanted)
         if chunks is not None:
-            stream: Iterator[tuple[Any, int, bytes]] = chunks
-        else:
-            connections = [c for c in reader.connections if c.topic in wanted]
-            # one bag: its own reader's stream (already in log-time order), without the
-            # merge AnyReader puts over several bags
-            sources = reader.readers
-            stream = (sources[0] if len(sources) == 1 else reader).messages(connections=connections)
+            try:
+                yield from chunks
+            except GeneratorExit:
+                raise
+            except Exception as err:  # rosbags' reader errors
+                yield from self._after_damage(err, wanted, chunks.count)
+            return
+        connections = [c for c in reader.connections if c.topic in wanted]
+        # one bag: its own reader's stream (already in log-time order), without the merge
+        # AnyReader puts over several bags
+        sources = reader.readers
+        stream = (sources[0] if len(sources) == 1 else reader).messages(connections=connections)
         count = 0
         try:
             for conn, log_time, raw in stream:
@@ -565,15 +582,20 @@ class BagReader:
         except GeneratorExit:
             raise
         except Exception as err:  # rosbags' reader errors
-            reason = f"{self.path} is corrupt after {count} messages: {_one_line(err)}"
-            files = [f for f in _mcap_files(self.path) if f.is_file() and _starts_with_magic(f)]
-            if not files:
-                raise BagError(reason) from err
-            # rosbags reads through the summary's indexes, so damage anywhere (a chunk,
-            # an index) can stop it early: scan the records from the start instead and keep
-            # every intact chunk before the damage (the CRCs tell).
-            self._salvage, self._salvage_reason = files, reason
-            yield from self._salvaged_messages(wanted, skip=count)
+            yield from self._after_damage(err, wanted, count)
+
+    def _after_damage(self, err: Exception, wanted: set[str], count: int) -> Iterator[RawMessage]:
+        """rosbags stopped with ``err`` after ``count`` messages: :class:`BagError`, or the
+        messages after those that a record-by-record scan recovers (then the error)."""
+        reason = f"{self.path} is corrupt after {count} messages: {_one_line(err)}"
+        files = [f for f in _mcap_files(self.path) if f.is_file() and _starts_with_magic(f)]
+        if not files:
+            raise BagError(reason) from err
+        # rosbags reads through the summary's indexes, so damage anywhere (a chunk, an
+        # index) can stop it early: scan the records from the start instead and keep every
+        # intact chunk before the damage (the CRCs tell).
+        self._salvage, self._salvage_reason = files, reason
+        yield from self._salvaged_messages(wanted, skip=count)
 
     def _salvaged_messages(self, wanted: set[str], skip: int = 0) -> Iterator[RawMessage]:
         """The messages a record-by-record scan finds, after the first ``skip`` of them
@@ -791,9 +813,12 @@ class BagWriter:
 
     def write(self, topic: str, log_time_ns: int, message: Message) -> None:
         """Write one of our messages on ``topic`` at ``log_time_ns``."""
+        self.write_raw(topic, log_time_ns, self.encode(message), message.ros_type)
+
+    def encode(self, message: Message) -> bytes:
+        """The CDR bytes :meth:`write` writes for ``message`` (rosbags' serialiser)."""
         store = self._store
-        raw = store.serialize_cdr(to_rosbags(message, store), message.ros_type)
-        self.write_raw(topic, log_time_ns, raw, message.ros_type)
+        return bytes(store.serialize_cdr(to_rosbags(message, store), message.ros_type))
 
     def write_raw(
         self, topic: str, log_time_ns: int, raw: bytes | memoryview, msgtype: str

@@ -238,7 +238,7 @@ class _Feed:
         command_type: str,
         history: ReplayHistory,
         corrupt: _CorruptMessages,
-        publish: Callable[[list[Output], int], None],
+        publish: Callable[[list[Output], int], list[RawMessage]],
         use_header: bool,
         batched: bool,
     ) -> None:
@@ -343,9 +343,7 @@ class _Feed:
                 )
             due = outputs.get(k)
             if due:
-                writer.write_messages(records)
-                records = []
-                self.publish(due, item.log_time_ns)
+                records += self.publish(due, item.log_time_ns)
         records += items[done:]
         writer.write_messages(records)
 
@@ -480,12 +478,19 @@ def replay(
             writer.add_topic(OUTPUT_TOPICS["compensated_command"], cmd_info.msgtype)
             writer.add_topic(OUTPUT_TOPICS["diagnostics"], DiagnosticArray.ros_type)
 
-            def publish(outputs: list[Output], log_time: int) -> None:
+            def publish(outputs: list[Output], log_time: int) -> list[RawMessage]:
+                """The records of what the node published at ``log_time``."""
+                records = []
                 for out in outputs:
-                    writer.write(OUTPUT_TOPICS[out.topic], log_time, out.message)
+                    message = out.message
+                    raw = writer.encode(message)
+                    records.append(
+                        RawMessage(OUTPUT_TOPICS[out.topic], log_time, message.ros_type, raw)
+                    )
                     if out.topic == "estimate" and out.estimate is not None:
                         history.estimate_t.append(out.stamp_ns)
                         history.estimates.append(out.estimate)
+                return records
 
             # Values come straight from the CDR bytes (RawValueReader: a layout learnt from
             # rosbags, the adapters' rules) and the compensated command is the command's
@@ -530,7 +535,7 @@ def replay(
                     bar.step(len(block))
                 bar.close()
             error = error or corrupt.summary(Path(bag))
-            publish(pipeline.finish(), last_log)
+            writer.write_messages(publish(pipeline.finish(), last_log))
             messages_out = writer.count
     return ReplayResult(
         Path(output),
