@@ -517,7 +517,7 @@ def main() -> None:
                 "",
             ],
             [
-                "process start: `python -c 'import genbacklash_ros.cli.main'`",
+                "process start: Python, importing the command line and building the replay's parser",
                 f"{b['start']:.2f}",
                 "",
                 "",
