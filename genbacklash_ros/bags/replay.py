@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import gc
 import itertools
+import threading
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -61,6 +62,10 @@ _BLOCK = 8192  # input messages handed to the pipeline at once (BacklashPipeline
 _GC_YOUNG = 50_000  # allocations between young-generation collections during a replay
 
 
+_gc_lock = threading.Lock()
+_gc_users: list[tuple[int, int, int]] = []  # the thresholds to restore, one per replay running
+
+
 @contextmanager
 def _few_collections() -> Iterator[None]:
     """Collect reference cycles less often while a replay runs.
@@ -70,17 +75,24 @@ def _few_collections() -> Iterator[None]:
     survivors pile up) spends its time scanning what lives anyway: the imported modules and
     the replay's history. Here what exists already is frozen out of the collections
     (:func:`gc.freeze`) and the young generation is collected every ``_GC_YOUNG``
-    allocations; cycles are still collected. Both are undone on the way out. Measured on
-    the 5-minute operation bag: about 0.2 s of 2.1 s (BENCHMARKS.md "Replay throughput").
+    allocations; cycles are still collected. Both are undone when the last replay running
+    in the process (fleet threads run several) ends. Measured on the 5-minute operation
+    bag: about 0.2 s of 2.1 s (BENCHMARKS.md "Replay throughput").
     """
-    thresholds = gc.get_threshold()
-    gc.freeze()
-    gc.set_threshold(_GC_YOUNG, *thresholds[1:])
+    with _gc_lock:
+        if not _gc_users:
+            gc.freeze()
+        _gc_users.append(gc.get_threshold())
+        gc.set_threshold(_GC_YOUNG, *_gc_users[0][1:])
     try:
         yield
     finally:
-        gc.set_threshold(*thresholds)
-        gc.unfreeze()
+        with _gc_lock:
+            first = _gc_users[0]
+            _gc_users.pop()
+            if not _gc_users:
+                gc.set_threshold(*first)
+                gc.unfreeze()
 
 
 @dataclass
