@@ -517,7 +517,7 @@ def main() -> None:
                 "",
             ],
             [
-                "process start: Python, importing the command line and building the replay's parser",
+                "process start: Python, the command line's imports, the replay's parser",
                 f"{b['start']:.2f}",
                 "",
                 "",
