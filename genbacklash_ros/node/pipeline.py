@@ -206,7 +206,7 @@ WorkerFactory: TypeAlias = Callable[[OnlineIdentifier], IdentifierWorker]
 """Makes the identify stage's worker for an identifier (``SyncWorker``, ``ThreadWorker``)."""
 
 COMMAND_WAIT_NS = 100_000_000  # encoder time after which a sample's command counts as held
-BATCH_SAMPLES = 128  # encoder messages per identifier feed (at most)
+BATCH_SAMPLES = 64  # encoder messages per identifier feed (at most)
 BATCH_NS = 100_000_000  # data time between identifier feeds at most
 
 _COMMAND_CLASSES: dict[str, type] = {
