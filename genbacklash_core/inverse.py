@@ -777,6 +777,10 @@ _Memory = tuple[float, float, float, int, float, int]
 """A :class:`CompensatorState` as a plain tuple, in its field order (the loops' form)."""
 
 
+def _memory_of(state: CompensatorState) -> _Memory:
+    return (state.x, state.u, state.u_inverse, state.direction, state.offset, state.ramp)
+
+
 def _step(
     plan: _Plan,
     state: CompensatorState,
@@ -784,8 +788,7 @@ def _step(
     options: CompensatorOptions,
     confidence: float,
 ) -> tuple[float, CompensatorState]:
-    memory = (state.x, state.u, state.u_inverse, state.direction, state.offset, state.ramp)
-    u, after = _advance(plan, memory, x_d, options, confidence)
+    u, after = _advance(plan, _memory_of(state), x_d, options, confidence)
     return u, CompensatorState(*after)
 
 
@@ -979,14 +982,7 @@ def compensate(
         raise GenBacklashError(f"state must be a CompensatorState, got {current!r}")
     targets, trusts = _series(x_d, confidence)
     out = np.empty(len(targets))
-    memory = (
-        current.x,
-        current.u,
-        current.u_inverse,
-        current.direction,
-        current.offset,
-        current.ramp,
-    )
+    memory = _memory_of(current)
     for t, (target, trust) in enumerate(zip(targets, trusts, strict=True)):
         out[t], memory = _advance(plan, memory, target, opts, trust)
     return out
@@ -1096,8 +1092,7 @@ class InverseBacklash:
         return self._run(targets, [trust] * len(targets))
 
     def _run(self, targets: list[float], trusts: list[float]) -> list[float]:
-        state = self._state
-        memory = (state.x, state.u, state.u_inverse, state.direction, state.offset, state.ramp)
+        memory = _memory_of(self._state)
         plan, options = self._plan, self._options
         out = []
         for target, trust in zip(targets, trusts, strict=True):

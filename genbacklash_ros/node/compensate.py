@@ -77,8 +77,7 @@ class CompensateStage:
         if not values:
             return []
         if not self._on or comp is None or est is not self._comp_estimate:
-            sent = [self.command(v, est, passing=_no_fault, last_y=last_y) for v in values]
-            return sent
+            return [self.command(v, est, passing=_no_fault, last_y=last_y) for v in values]
         sent = comp.steps(values, est.confidence)
         for k, command in enumerate(sent):
             if not math.isfinite(command):  # as _command: within the limits instead

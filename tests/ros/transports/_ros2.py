@@ -127,3 +127,16 @@ def workspace_env(ws: Path, domain: int) -> dict[str, str]:
     env["ROS_DOMAIN_ID"] = str(domain)
     env["PYTHONUNBUFFERED"] = "1"
     return env
+
+
+def params_file(path: Path, **values: object) -> Path:
+    """Write ``path``: config/params.yaml (every default, keyed as shipped) with ``values``
+    changed; returns ``path``."""
+    lines = []
+    for line in (ROOT / "config" / "params.yaml").read_text().splitlines():
+        name = line.strip().split(":", 1)[0]
+        if line.startswith("    ") and name in values:
+            line = f"    {name}: {values[name]}"
+        lines.append(line)
+    path.write_text("\n".join(lines) + "\n")
+    return path

@@ -18,7 +18,7 @@ import pytest
 
 from genbacklash_ros.cli.node import choose_transport, ros2_main
 
-from ._ros2 import ROOT, domain_id, rclpy_missing
+from ._ros2 import domain_id, params_file, rclpy_missing
 
 needs_rclpy = pytest.mark.skipif(bool(rclpy_missing()), reason=rclpy_missing() or "-")
 
@@ -135,19 +135,6 @@ def test_message_conversion_round_trip() -> None:
         assert rclpy_node.from_ros(rclpy_node.to_ros(msg)) == msg
 
 
-def _params_file(tmp_path: Path, **values: object) -> Path:
-    """config/params.yaml (every default, keyed as shipped) with ``values`` changed."""
-    lines = []
-    for line in (ROOT / "config" / "params.yaml").read_text().splitlines():
-        name = line.strip().split(":", 1)[0]
-        if line.startswith("    ") and name in values:
-            line = f"    {name}: {values[name]}"
-        lines.append(line)
-    path = tmp_path / "params.yaml"
-    path.write_text("\n".join(lines) + "\n")
-    return path
-
-
 @needs_rclpy
 def test_the_shipped_params_file_applies_under_a_namespace(
     tmp_path: Path, ros_init: Callable[..., None]
@@ -156,7 +143,9 @@ def test_the_shipped_params_file_applies_under_a_namespace(
     node ran on its defaults without a word."""
     from genbacklash_ros.transports import rclpy_node
 
-    ros_init("--params-file", str(_params_file(tmp_path, degree=2)), "-r", "__ns:=/arm")
+    ros_init(
+        "--params-file", str(params_file(tmp_path / "params.yaml", degree=2)), "-r", "__ns:=/arm"
+    )
     node = rclpy_node.BacklashIdentifierNode()
     try:
         assert node.get_fully_qualified_name() == "/arm/backlash_identifier"
@@ -176,7 +165,7 @@ def test_a_whole_number_is_taken_for_a_double(
 
     from genbacklash_ros.transports import rclpy_node
 
-    ros_init("--params-file", str(_params_file(tmp_path, publish_rate=10, u_max=3)))
+    ros_init("--params-file", str(params_file(tmp_path / "params.yaml", publish_rate=10, u_max=3)))
     node = rclpy_node.BacklashIdentifierNode()
     try:
         for name, value in (("publish_rate", 10.0), ("u_max", 3.0)):
@@ -217,7 +206,7 @@ def test_a_bad_params_file_is_one_line_the_same_for_both_transports(
 ) -> None:
     from genbacklash_ros.cli.main import main as genbacklash
 
-    path = _params_file(tmp_path, **values)
+    path = params_file(tmp_path / "params.yaml", **values)
     status, err = _run_main(["--ros-args", "--params-file", str(path)], capfd)
     assert status == 2
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err

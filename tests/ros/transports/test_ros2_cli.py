@@ -28,7 +28,7 @@ import yaml
 
 from genbacklash_core import paper_example
 
-from ._ros2 import ROOT, built_workspace, domain_id, ros2_cli_missing, workspace_env
+from ._ros2 import built_workspace, domain_id, params_file, ros2_cli_missing, workspace_env
 
 pytestmark = pytest.mark.skipif(bool(ros2_cli_missing()), reason=ros2_cli_missing() or "-")
 
@@ -68,18 +68,6 @@ def _ros2(env: dict[str, str], *args: str, timeout: float = 60.0) -> str:
     return done.stdout + done.stderr
 
 
-def _params_file(path: Path, **values: object) -> Path:
-    """config/params.yaml (keyed as shipped) with ``values`` changed."""
-    lines = []
-    for line in (ROOT / "config" / "params.yaml").read_text().splitlines():
-        name = line.strip().split(":", 1)[0]
-        if line.startswith("    ") and name in values:
-            line = f"    {name}: {values[name]}"
-        lines.append(line)
-    path.write_text("\n".join(lines) + "\n")
-    return path
-
-
 def _launch(env: dict[str, str], tmp: Path, name: str, *arguments: str) -> Launched:
     log = tmp / f"{name}.log"
     with log.open("wb") as out:
@@ -112,7 +100,7 @@ def launched(env: dict[str, str], tmp_path_factory: pytest.TempPathFactory) -> I
     """`ros2 launch genbacklash_ros backlash_identifier.launch.py` with the shipped params
     file, but a checkpoint file in a temporary directory."""
     tmp = tmp_path_factory.mktemp("launch")
-    params = _params_file(tmp / "params.yaml", checkpoint_file=f'"{tmp / "default.json"}"')
+    params = params_file(tmp / "params.yaml", checkpoint_file=f'"{tmp / "default.json"}"')
     running = _launch(env, tmp, "default", f"params_file:={params}")
     try:
         _wait_for_node(running, "/backlash_identifier")
@@ -239,7 +227,7 @@ def test_namespaced_launch_with_a_params_file(
     for a double too), the topics are in the namespace, a publisher of the wrong type on the
     command topic is named in the diagnostics, and one Ctrl-C ends it cleanly."""
     assert launched.process.poll() is not None, "the default launch still runs"
-    params = _params_file(tmp_path / "arm.yaml", degree=2, publish_rate=10, joint='"knee"')
+    params = params_file(tmp_path / "arm.yaml", degree=2, publish_rate=10, joint='"knee"')
     running = _launch(env, tmp_path, "arm", "namespace:=arm", f"params_file:={params}")
     try:
         _wait_for_node(running, "/arm/backlash_identifier")
