@@ -90,9 +90,14 @@ def _wait_for_node(launched: Launched, fqn: str, timeout_s: float = 30.0) -> Non
 
 
 @pytest.fixture(scope="module")
-def env(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
+def env(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, str]]:
     ws = built_workspace(tmp_path_factory.mktemp("colcon"))
-    return workspace_env(ws, domain_id())
+    environment = workspace_env(ws, domain_id())
+    yield environment
+    # `ros2 node list` and `ros2 param` start a ros2 daemon on the test's domain: stop it, or
+    # the daemons of past runs pile up on a shared machine, each holding UDP ports that a
+    # later run's DDS participant may need ("failed to bind ... address in use")
+    _ros2(environment, "daemon", "stop")
 
 
 @pytest.fixture(scope="module")
