@@ -90,6 +90,14 @@ class Interop:
     log: str
 
 
+@pytest.fixture(scope="module", autouse=True)
+def _stop_the_ros2_daemon() -> Iterator[None]:
+    """`ros2 topic echo` and `ros2 topic pub` start a ros2 daemon on this module's domain:
+    stop it at the end (left running, past runs' daemons hold UDP ports on a shared machine)."""
+    yield
+    _ros2("daemon", "stop")
+
+
 @pytest.fixture(scope="module")
 def interop(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Interop]:
     tmp = tmp_path_factory.mktemp("dds_interop")
