@@ -20,8 +20,10 @@ read+write floor measured in the same run. One run measures, round-robin, best o
 
 from __future__ import annotations
 
+import compileall
 import cProfile
 import json
+import os
 import pstats
 import shutil
 import subprocess
@@ -128,6 +130,30 @@ def process_start() -> float:
     started = time.perf_counter()
     subprocess.run([sys.executable, "-c", code], check=True)
     return time.perf_counter() - started
+
+
+PACKAGES = [
+    Path(__file__).resolve().parents[1] / name for name in ("genbacklash_core", "genbacklash_ros")
+]
+
+
+def start_from_source() -> float:
+    """Process start with no bytecode for genbacklash's modules (each compiled from source at
+    every start: an editable checkout where Python writes no bytecode), best of 3; after it
+    the modules are compiled, as pip compiles an installed package's, and stay so."""
+    for package in PACKAGES:
+        for cache in package.rglob("__pycache__"):
+            shutil.rmtree(cache)
+    env = {**os.environ, "PYTHONDONTWRITEBYTECODE": "1"}
+    code = "from genbacklash_ros.cli.main import build_parser; build_parser('replay')"
+    times = []
+    for _ in range(3):
+        started = time.perf_counter()
+        subprocess.run([sys.executable, "-c", code], check=True, env=env)
+        times.append(time.perf_counter() - started)
+    for package in PACKAGES:
+        compileall.compile_dir(package, quiet=1)
+    return min(times)
 
 
 def floor_start() -> float:
@@ -440,6 +466,7 @@ def main() -> None:
         )
         assert first.error == "", first.error
         n_out = first.messages_out
+        source_start = start_from_source()
         msgs = read_rosbags(bag)
         data = read_values(bag)
         rows: dict[str, list[float]] = {}
@@ -602,6 +629,11 @@ path): {inverse["step"] * 1e6:.2f} us with the table inverse against
 {inverse["inv"] * 1e6:.2f} us against {inverse["inv_solve"] * 1e6:.2f} us
 ({inverse["inv_solve"] / inverse["inv"]:.1f}x). The table answer is within 1e-9 of the range
 of the root solve's (tests/core/test_inverse_fast.py; ~1e-14 seen).
+
+genbacklash's modules run from bytecode, compiled before the rounds as pip compiles an
+installed package's; this machine sets PYTHONDONTWRITEBYTECODE=1, so an editable checkout
+would otherwise compile every module at every start: {source_start:.2f} s to start then,
+against {b["start"]:.2f} s.
 
 Where the time goes: process start {b["start"]:.2f} s of {b["cli"]:.2f} s (numpy, rosbags
 and the modules the replay uses: the other commands' modules, and scipy.signal and

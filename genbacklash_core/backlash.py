@@ -225,6 +225,24 @@ class GeneralBacklash:
             values.append(acc)
         return values[0], values[1]
 
+    def branches(self, u: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """``(L(u), R(u))`` of a float64 array in one step, exactly as :meth:`left` and
+        :meth:`right` give them, without their input checks: for a caller whose inputs are
+        finite already (NaN or inf in ``u`` give NaN or inf, not an error).
+
+        >>> GeneralBacklash.ideal(1.0, 0.1, 0.2).branches(np.array([1.0, 2.0]))
+        (array([1.1, 2.1]), array([0.8, 1.8]))
+        """
+        out = []
+        with np.errstate(over="ignore", invalid="ignore"):
+            for m, shifted in ((self.m_left, u + self.c_left), (self.m_right, u - self.c_right)):
+                acc = shifted * m[-1]  # Horner's rule, as evaluate_branch (eqs. 11-12, 16-17)
+                for coefficient in m[-2::-1]:
+                    acc += coefficient
+                    acc *= shifted
+                out.append(acc)
+        return out[0], out[1]
+
     def left(self, u: ArrayLike) -> FloatArray:
         """Left branch ``L(u)`` (eq. 11); ``+-inf`` where it exceeds the float range.
 

@@ -1027,6 +1027,8 @@ class InverseBacklash:
         self._plan = _plan_for(model, self._options)
         self._model = model
         self._state = CompensatorState.initial(model, x0, u0, self._options)
+        # a settled step of the last run: (its state, target, confidence, command)
+        self._repeat: tuple[CompensatorState, float, float, float] | None = None
 
     @property
     def model(self) -> GeneralBacklash | Cascade:
@@ -1056,6 +1058,7 @@ class InverseBacklash:
         """
         self._plan = _plan_for(model, self._options)
         self._model = model
+        self._repeat = None  # a step of the old plan
 
     def reset(self, x0: float = 0.0, u0: float | None = None) -> None:
         """Restart at rest: load at ``x0``, command ``u0`` (as :meth:`CompensatorState.initial`)."""
@@ -1092,11 +1095,24 @@ class InverseBacklash:
         return self._run(targets, [trust] * len(targets))
 
     def _run(self, targets: list[float], trusts: list[float]) -> list[float]:
-        memory = _memory_of(self._state)
+        state = self._state
+        memory = _memory_of(state)
         plan, options = self._plan, self._options
         out = []
+        # A step is a function of (state, target, confidence): a held command on a state the
+        # step left unchanged gives the same command and state again (a dwell's repeats).
+        # ``settled``: (target, confidence, command) of such a step, from the last run too
+        # while its state is still the current one and the plan the same.
+        repeat = self._repeat
+        settled = repeat[1:] if repeat is not None and repeat[0] is state else None
         for target, trust in zip(targets, trusts, strict=True):
-            u, memory = _advance(plan, memory, target, options, trust)
+            if settled is not None and target == settled[0] and trust == settled[1]:
+                out.append(settled[2])
+                continue
+            u, after = _advance(plan, memory, target, options, trust)
+            settled = (target, trust, u) if after == memory else None
+            memory = after
             out.append(u)
-        self._state = CompensatorState(*memory)
+        self._state = state = CompensatorState(*memory)
+        self._repeat = None if settled is None else (state, *settled)
         return out

@@ -594,13 +594,12 @@ class StreamHealth:
         if not isinstance(model, GeneralBacklash):
             return Screening(None, [])
         self._track_quantum(ys)
-        with np.errstate(all="ignore"):
-            left, right = model.left(us), model.right(us)
-            low, high = np.minimum(left, right), np.maximum(left, right)
+        left, right = model.branches(us)
+        low, high = np.minimum(left, right), np.maximum(left, right)
         # a gap before a sample (or no sample before it): not predicted from the one before
-        fresh = np.diff(times, prepend=times[0] if t_prev is None else t_prev) > self._silence
-        if t_prev is None or y_prev is None:
-            fresh[0] = True
+        fresh = np.empty(times.size, dtype=bool)
+        np.greater(times[1:] - times[:-1], self._silence, out=fresh[1:])
+        fresh[0] = t_prev is None or y_prev is None or int(times[0]) - t_prev > self._silence
         scale = self._scale
         trusted = self._trusted(est)
         limit = math.inf
@@ -798,7 +797,7 @@ class StreamHealth:
         ``ys`` (an encoder without quantisation soon makes it negligible)."""
         if ys.size > 1:
             with np.errstate(all="ignore"):
-                steps = np.abs(np.diff(ys))
+                steps = np.abs(ys[1:] - ys[:-1])
             steps = steps[steps > 0.0]  # NaN and equal readings out
             if steps.size:
                 self._quantum = min(self._quantum, float(steps.min()))

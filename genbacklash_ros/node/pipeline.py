@@ -590,11 +590,13 @@ class BacklashPipeline:
         finite, no fault, no feed, no periodic output due, no stuck reading -- are found by
         bisection in what :class:`~genbacklash_ros.node.batch.BlockView` worked out once for
         the block, and taken in one step by the stages' batch methods
-        (:meth:`Aligner.add_readings`, :meth:`StreamHealth.accept_readings`, ...); each
-        message that does make something happen goes through the per-message path. The
-        compensated commands and the estimates are those of the per-message path to the
-        last bit (tests/ros/node/test_batch.py). With a thread worker the identifier's
-        results are taken at the start of each stretch.
+        (:meth:`Aligner.add_readings`, :meth:`StreamHealth.accept_readings`, ...). A stretch
+        also takes the reading that feeds the identifier (it ends there) and the commands at
+        which only an estimate comes due, making those steps where the per-message path
+        makes them; each other message that makes something happen goes through the
+        per-message path. The compensated commands and the estimates are those of the
+        per-message path to the last bit (tests/ros/node/test_batch.py). With a thread
+        worker the identifier's results are taken at the start of each stretch.
         """
         kinds = np.asarray(is_command, dtype=bool)
         view = BlockView(
@@ -608,9 +610,10 @@ class BacklashPipeline:
         out = _BatchResult(n)
         i = 0
         while i < n:
-            i = self._quiet(view, i, out)
-            if i >= n:
-                break
+            end = self._quiet(view, i, out)
+            if end > i:  # a stretch taken: the next may start right after it (after a feed)
+                i = end
+                continue
             # this message makes something happen: the per-message path
             value, received = float(view.values[i]), int(receive_ns[i])
             head = int(header_ns[i])
@@ -638,16 +641,17 @@ class BacklashPipeline:
         if due is None or now is None or now >= due:
             return i
         end = min(view.n, i + _STRETCH_MAX)
-        feeds = view.enc_before[i] + max(self._feed_at_count - self._align.pending - 1, 0)
+        feeds = view.enc_before[i] + self._to_feed() - 1
         if feeds < len(view.enc_pos):  # the reading that feeds ends it at the latest
-            end = min(end, view.enc_pos[feeds])
+            end = min(end, view.enc_pos[feeds] + 1)
         k = bisect.bisect_left(view.nonfinite, i)
         if k < len(view.nonfinite):
             end = min(end, view.nonfinite[k])
+        marks: list[int] = []  # commands at which an estimate (or nothing) comes due
         if end > i:
-            late = np.flatnonzero(view.times[i:end] >= due)  # a periodic output is due
+            late = np.flatnonzero(view.times[i:end] >= due)  # a periodic step is due
             if late.size:
-                end = i + int(late[0])
+                end = self._periodic_end(view, i + int(late[0]), end, marks)
         if end == i:
             return i
         c0, e0 = view.cmd_before[i], view.enc_before[i]
@@ -656,8 +660,46 @@ class BacklashPipeline:
         if view.enc_before[end] > e0:
             end = self._readings_end(view, e0, c0, end)
         if end > i:
-            self._take_stretch(view, i, end, out)
+            self._take_stretch(view, i, end, out, marks)
         return end
+
+    def _to_feed(self) -> int:
+        """Encoder readings to accept until the identifier is fed (the last of them feeds)."""
+        return max(self._feed_at_count - self._align.pending, 1)
+
+    def _periodic_end(self, view: BlockView, p: int, end: int, marks: list[int]) -> int:
+        """Where a stretch whose message ``p`` is the first with a periodic step due ends
+        (at most ``end``); appends to ``marks`` the messages inside it where steps are due.
+
+        A command's message steps only the estimate (:meth:`_advance` with ``heavy``
+        False): while no diagnostics report is due either, the stretch goes on through it
+        and :meth:`_take_stretch` makes the step there; an encoder reading (which may feed)
+        or a report (it counts what came before) ends the stretch. What comes due next is
+        worked out on a copy of the schedule, with the steps the stretch would make.
+        """
+        clock = self._clock.copy()
+        times, cmd_before = view.times, view.cmd_before
+        while True:
+            if cmd_before[p + 1] == cmd_before[p]:  # an encoder reading
+                return p
+            clock.tick(int(times[p]))
+            now = clock.now
+            assert now is not None
+            due = clock.due(now)
+            if due.diagnostics:
+                return p
+            marks.append(p)
+            if due.estimate:
+                clock.estimate_done(now)
+            clock.settle()
+            after = clock.next_due
+            assert after is not None
+            p += 1
+            if after > now:  # else (a feed due) the next message has a step due
+                later = np.flatnonzero(times[p:end] >= after)
+                p = end if later.size == 0 else p + int(later[0])
+            if p >= end:
+                return end
 
     def _commands_end(self, view: BlockView, i: int, c0: int, end: int) -> int:
         """Where the stretch from ``i`` ends for its commands (ordinals from ``c0``)."""
@@ -708,7 +750,7 @@ class BacklashPipeline:
         silence = health.silence_ns
         if t[e0] <= last or t[e0] - last > silence:
             return first
-        stop = min(e1, e0 + max(self._feed_at_count - align.pending - 1, 0))  # it feeds
+        stop = min(e1, e0 + self._to_feed())  # the last reading feeds
         k = bisect.bisect_right(view.enc_disorder, e0)
         if k < len(view.enc_disorder) and view.enc_disorder[k] < stop:
             stop = view.enc_disorder[k]
@@ -787,8 +829,12 @@ class BacklashPipeline:
                 break
         return stop
 
-    def _take_stretch(self, view: BlockView, i: int, end: int, out: _BatchResult) -> None:
-        """Accept the messages ``i .. end - 1`` (all quiet) in one step."""
+    def _take_stretch(
+        self, view: BlockView, i: int, end: int, out: _BatchResult, marks: list[int]
+    ) -> None:
+        """Accept the messages ``i .. end - 1`` (all quiet) in one step; at the commands of
+        ``marks`` the periodic steps due, and when its last reading brings the pending
+        readings to the feed count, the feed, as the per-message path makes them."""
         c0, c1 = view.cmd_before[i], view.cmd_before[end]
         e0, e1 = view.enc_before[i], view.enc_before[end]
         align, health, led = self._align, self._health, self._ledger
@@ -830,7 +876,21 @@ class BacklashPipeline:
             health.accept_readings(last, gaps, view.enc_rx[final], still)
             align.add_readings(t[e0:e1], y[e0:e1], gaps)
             led.encoders += e1 - e0
-        self._clock.tick(int(view.times[i:end].max()))
+        outputs: list[Output] = []
+        for p in marks:  # before the clock moves past them (in order, all before ``end``)
+            if p >= end:
+                break
+            self._advance(int(view.times[p]), outputs, heavy=False)
+            out.outputs.extend((p, item) for item in outputs)
+            outputs.clear()
+        if e1 > e0 and align.pending >= self._feed_at_count:  # the last message feeds
+            if end - 1 > i:
+                self._clock.tick(int(view.times[i : end - 1].max()))
+            self._feed()
+            self._advance(view.enc_t[e1 - 1], outputs, heavy=True)
+            out.outputs.extend((end - 1, item) for item in outputs)
+        else:
+            self._clock.tick(int(view.times[i:end].max()))
 
     def on_encoder(self, msg: object, receive_ns: int) -> list[Output]:
         """An encoder message received at ``receive_ns``: any periodic outputs now due."""

@@ -121,6 +121,12 @@ class Schedule:
         False for each)."""
         return None if self.now is None else self._next_due
 
+    def copy(self) -> Schedule:
+        """An independent copy (to look ahead at what would come due, leaving this one)."""
+        twin = Schedule.__new__(Schedule)
+        twin.__dict__.update(self.__dict__)
+        return twin
+
     def due(self, now: int) -> Due:
         """What is due at ``now``."""
         return Due(

@@ -181,6 +181,12 @@ class EncoderPeriod:
     @property
     def value(self) -> float | None:
         """The period in ns (None before the first difference)."""
-        if self._cached is None and self._steps:
-            self._cached = float(np.median(np.fromiter(self._steps, np.int64, len(self._steps))))
+        steps = self._steps
+        if self._cached is None and steps:
+            ordered = sorted(steps)  # the median as numpy's: the middle one, or the mean of two
+            half = len(ordered) // 2
+            if len(ordered) % 2:
+                self._cached = float(ordered[half])
+            else:
+                self._cached = (float(ordered[half - 1]) + float(ordered[half])) / 2.0
         return self._cached

@@ -13,6 +13,7 @@ from genbacklash_core import GenBacklashError, GeneralBacklash, paper_example
 from genbacklash_core.structure import Structure
 
 from ._helpers import backlash_of, eq1_ideal
+from .test_inverse import monotone_models
 
 EXAMPLE1 = GeneralBacklash((0.5, -0.3, 0.3), 0.7, (0.6, 0.4, 0.2), 0.8)
 
@@ -317,3 +318,17 @@ def test_branches_at_one_input_are_left_and_right_of_it(
         return
     left, right = model.branches_at(u)
     assert (left, right) == (float(model.left([u])[0]), float(model.right([u])[0]))
+
+
+@settings(max_examples=200, deadline=None, derandomize=True, database=None)
+@given(monotone_models(), st.lists(st.floats(-1e3, 1e3), max_size=30))
+def test_branches_are_left_and_right_to_the_bit(
+    model_range: tuple[GeneralBacklash, float, float], u: list[float]
+) -> None:
+    """``branches`` (the hot loops' form, no input checks) gives exactly what ``left`` and
+    ``right`` give."""
+    model = model_range[0]
+    uu = np.array(u, dtype=np.float64)
+    left, right = model.branches(uu)
+    assert left.tobytes() == model.left(uu).tobytes()  # to the bit, signed zeros too
+    assert right.tobytes() == model.right(uu).tobytes()

@@ -5,6 +5,7 @@ and the compensator built on it against the same compensator on the root solve."
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -16,6 +17,7 @@ from genbacklash_core import (
     CompensatorOptions,
     GenBacklashError,
     GeneralBacklash,
+    InverseBacklash,
     branch_inverse,
     compensate,
     paper_example,
@@ -155,3 +157,48 @@ def test_branch_inverse_public_form() -> None:
         branch_inverse(model, [0.3], 0)
     with pytest.raises(GenBacklashError, match="finite"):
         branch_inverse(model, [math.nan], 1)
+
+
+@settings(max_examples=150, deadline=None, derandomize=True, database=None)
+@given(
+    monotone_models(),
+    st.lists(st.tuples(st.floats(-3.0, 3.0), st.integers(1, 6)), min_size=1, max_size=25),
+    st.lists(st.integers(0, 60), max_size=4),
+    st.sampled_from([0, 3]),
+    st.sampled_from([math.inf, 0.05]),
+    st.sampled_from([1.0, 0.35]),
+)
+def test_property_steps_over_dwells_are_the_steps_one_by_one(
+    model_range: tuple[GeneralBacklash, float, float],
+    dwells: list[tuple[float, int]],
+    cuts: list[int],
+    smoothing: int,
+    max_rate: float,
+    confidence: float,
+) -> None:
+    """``steps`` answers a dwell's repeated target from the step before when that step left
+    the state as it was, also across calls: the commands and the state are those of
+    ``step`` one by one (smoothing ramps, rate limits and gating included)."""
+    model, low, high = model_range
+    options = CompensatorOptions(smoothing=smoothing, max_rate=max_rate, valid_range=(low, high))
+    targets = [value for value, count in dwells for _ in range(count)]
+    one, two = InverseBacklash(model, options), InverseBacklash(model, options)
+    expected = [one.step(x, confidence) for x in targets]
+    got: list[float] = []
+    for a, b in itertools.pairwise([0, *sorted(c for c in cuts if c < len(targets)), len(targets)]):
+        got += two.steps(targets[a:b], confidence)
+    assert got == expected
+    assert two.state == one.state
+
+
+def test_steps_forget_a_settled_step_when_the_model_or_state_changes() -> None:
+    """A settled step is answered again only on the state and plan it was worked out on."""
+    wide, narrow = GeneralBacklash.ideal(1.0, 0.5, 0.5), GeneralBacklash.ideal(1.0, 0.2, 0.2)
+    comp, ref = InverseBacklash(wide), InverseBacklash(wide)
+    assert comp.steps([1.0, 1.0]) == [ref.step(1.0), ref.step(1.0)] == [1.5, 1.5]
+    comp.set_model(narrow)  # the same state, another plan: the command moves in to 1.2
+    ref.set_model(narrow)
+    assert comp.steps([1.0]) == [ref.step(1.0)] == [1.2]
+    assert comp.steps([1.0]) == [1.2]
+    comp.state = ref.state = InverseBacklash(narrow, x0=2.0, u0=2.0).state  # another state
+    assert comp.steps([1.0]) == [ref.step(1.0)] == [0.8]

@@ -17,9 +17,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from genbacklash_core.scenarios import OperationSettings, operation_record
 from genbacklash_ros.node.messages import MessageError, read_command, read_encoder
 from genbacklash_ros.node.parameters import NodeParameters
 from genbacklash_ros.node.pipeline import BacklashPipeline, Output
+from genbacklash_ros.node.publish import Schedule
 from genbacklash_ros.node.sample_rule import EncoderPeriod
 from genbacklash_ros.node.silence import SilentStreams
 from tests.ros.node.test_faults import FAULTS, PARAMS, Event, Fault, Scenario, drivetrain
@@ -232,3 +234,78 @@ def test_a_stretch_starting_at_the_command_that_reveals_a_stuck_encoder(
     a = per_message(one, events)
     assert one.stats.dropped["encoder_stuck"] > 0  # the scenario does find the stuck encoder
     assert_same(one, two, a, batched(two, events, [jump + offset]))
+
+
+def _operation_events(seed: int) -> tuple[np.ndarray, ...]:
+    """A drivetrain in operation (moves, dwells with the command held at 100 Hz, a
+    quantised 1 kHz encoder losing 2 % of its readings) as ``on_batch`` takes it: kinds,
+    header stamps, values, receive times, in the order a node receives them."""
+    rec = operation_record(OperationSettings(duration=12.0), seed)
+    cmd_t, enc_t = rec.command_t_ns, rec.encoder_t_ns
+    receive = np.concatenate([cmd_t, enc_t + 200_000])
+    kinds = np.concatenate([np.ones(cmd_t.size, dtype=bool), np.zeros(enc_t.size, dtype=bool)])
+    heads = np.concatenate([np.zeros(cmd_t.size, dtype=np.int64), enc_t])
+    values = np.concatenate([rec.command_u, rec.encoder_y])
+    order = np.lexsort((~kinds, receive))  # a command and a reading at once: the command first
+    return kinds[order], heads[order], values[order], receive[order]
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_operation_batches_match_and_keep_off_the_per_message_path(seed: int) -> None:
+    """On a drivetrain in operation the batch path publishes what the per-message path does
+    and sends the same commands; it takes the feeds, the estimate steps that come due at
+    commands and a dwell's repeated commands itself, so few messages go one by one."""
+    kinds, heads, values, receive = _operation_events(seed)
+    params = NodeParameters(command_type="float64", encoder_type="float64")
+    one, two = BacklashPipeline(params), BacklashPipeline(params)
+    a = Run()
+    for k, (is_cmd, head, value, rx) in enumerate(
+        zip(kinds.tolist(), heads.tolist(), values.tolist(), receive.tolist(), strict=True)
+    ):
+        if is_cmd:
+            taken = one.on_command_value(head, value, rx)
+            outs = []
+            if taken is not None:
+                stamp, sent, outs = taken
+                a.sent[k] = (stamp, sent)
+        else:
+            outs = one.on_encoder_value(head, value, rx)
+        _record(a, k, outs)
+    _record(a, kinds.size, one.finish())
+    alone = [0]
+
+    def counted(method: Any) -> Any:
+        def call(*args: Any) -> Any:
+            alone[0] += 1
+            return method(*args)
+
+        return call
+
+    two.on_command_value = counted(two.on_command_value)  # type: ignore[method-assign]
+    two.on_encoder_value = counted(two.on_encoder_value)  # type: ignore[method-assign]
+    b = Run()
+    for start in range(0, kinds.size, 4096):
+        end = start + 4096
+        out = two.on_batch(
+            kinds[start:end], heads[start:end], values[start:end], receive[start:end]
+        )
+        for k in np.flatnonzero(out.accepted).tolist():
+            b.sent[start + k] = (int(out.stamps[k]), float(out.sent[k]))
+        for k, item in out.outputs:
+            _record(b, start + k, [item])
+    _record(b, kinds.size, two.finish())
+    assert_same(one, two, a, b)
+    assert sum(topic == "estimate" for _, topic, _, _ in b.published) > 50
+    # before the feeds and estimate steps were taken in stretches, 2.7 % went one by one
+    assert alone[0] < 0.01 * kinds.size, alone[0]
+
+
+def test_a_schedule_copy_looks_ahead_without_moving_the_schedule() -> None:
+    clock = Schedule(publish_ns=100, checkpoint_ns=None, feed_ns=1000)
+    clock.tick(0)
+    ahead = clock.copy()
+    assert ahead.tick(150) and ahead.due(150).estimate
+    ahead.estimate_done(150)
+    ahead.settle()
+    assert (ahead.now, ahead.next_due) == (150, 200)
+    assert (clock.now, clock.next_due) == (0, 100)  # the original as it was

@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from genbacklash_core import GeneralBacklash, identify_backlash, paper_example
 from genbacklash_core.samples import sample_breaks
@@ -66,6 +68,26 @@ def test_encoder_period_is_a_running_median() -> None:
     assert period.value == 2 * MS  # it follows a new rate
     period.reset()
     assert period.value is None
+
+
+@settings(max_examples=200, deadline=None, derandomize=True, database=None)
+@given(
+    steps=st.lists(st.integers(-5, 3 * MS), max_size=40),
+    window=st.integers(1, 12),
+    big=st.booleans(),
+)
+def test_encoder_period_is_numpys_median(steps: list[int], window: int, big: bool) -> None:
+    """The running median is numpy's, to the bit: the middle step, or the mean of the two
+    middle ones as float64 (stamps of 2**62 ns too)."""
+    period = EncoderPeriod(window=window)
+    kept: list[int] = []
+    for step in steps:
+        step = step + 2**62 if big and step > 0 else step
+        period.add(step)
+        if step > 0:
+            kept = [*kept, step][-window:]
+        expected = float(np.median(np.array(kept, dtype=np.int64))) if kept else None
+        assert period.value == expected
 
 
 def test_record_period_and_time_breaks_in_any_unit() -> None:
