@@ -326,6 +326,35 @@ class RawValueReader:
 
     # ------------------------------------------------------------------ writing
 
+    def patch_many(self, raws: Sequence[bytes], values: np.ndarray) -> list[bytes]:
+        """:meth:`patch` of many commands, in numpy steps per learnt layout (a message of
+        another layout, or a value that is not finite, goes through :meth:`patch`)."""
+        n = len(raws)
+        out: list[bytes | None] = [None] * n
+        lengths = np.fromiter(map(len, raws), dtype=np.int64, count=n)
+        sent = np.asarray(values, dtype="<f8")
+        for length in np.unique(lengths).tolist() if n and self.role == "command" else []:
+            layout = self._layouts.get(length)
+            if layout is None:
+                continue
+            index = np.flatnonzero(lengths == length)
+            joined = bytearray(b"".join([raws[k] for k in index.tolist()]))
+            rows = np.frombuffer(joined, dtype=np.uint8).reshape(index.size, length)
+            good = np.isfinite(sent[index])
+            for start, expected in layout.constant:
+                same = rows[:, start : start + len(expected)] == np.frombuffer(expected, np.uint8)
+                good &= same.all(axis=1)
+            at = layout.value_at
+            rows[:, at : at + 8] = sent[index].view(np.uint8).reshape(index.size, 8)
+            patched = bytes(joined)
+            for j, k in enumerate(index.tolist()):
+                if good[j]:
+                    out[k] = patched[j * length : (j + 1) * length]
+        return [
+            self.patch(raw, float(value)) if done is None else done
+            for raw, value, done in zip(raws, sent.tolist(), out, strict=True)
+        ]
+
     def patch(self, raw: bytes, value: float) -> bytes:
         """The bytes of the compensated command: ``raw`` (a command this reader read) with
         its value replaced by ``value`` (finite), everything else (stamp, other elements)

@@ -332,12 +332,12 @@ class _Feed:
         # the input copied as read, each accepted command followed by its compensated
         # command and each message by what it made the node publish: whole runs of input
         # records go into the list at once, between the messages that add something
-        patch = self.read_cmd.patch
         comp_topic = OUTPUT_TOPICS["compensated_command"]
         comp_type = self.command_type
-        sent_list = sent.tolist()
-        writer = self.writer
         events = cmd.tolist()
+        patched = self.read_cmd.patch_many([raws[k] for k in events], sent[cmd])
+        compensated = dict(zip(events, patched, strict=True))
+        writer = self.writer
         if outputs:
             events = sorted({*events, *outputs})
         accepted_list = accepted.tolist()
@@ -348,11 +348,7 @@ class _Feed:
             done = k + 1
             item = items[k]
             if accepted_list[k]:
-                records.append(
-                    RawMessage(
-                        comp_topic, item.log_time_ns, comp_type, patch(item.raw, sent_list[k])
-                    )
-                )
+                records.append(RawMessage(comp_topic, item.log_time_ns, comp_type, compensated[k]))
             due = outputs.get(k)
             if due:
                 records += self.publish(due, item.log_time_ns)

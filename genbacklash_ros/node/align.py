@@ -34,7 +34,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from genbacklash_core.samples import monotone_paths
 from genbacklash_ros.node.sample_rule import EncoderPeriod
 
 __all__ = ["MAX_COMMANDS", "AlignedBatch", "Aligner"]
@@ -84,6 +83,25 @@ class AlignedBatch:
     def size(self) -> int:
         """Number of samples."""
         return int(self.times.size)
+
+
+def _monotone_paths(values: list[float], start: np.ndarray, stop: np.ndarray) -> np.ndarray:
+    """:func:`~genbacklash_core.samples.monotone_paths` of a short list of commands (the
+    pending ones: a few per batch), its rises and falls counted in Python."""
+    ups, downs = [0], [0]
+    rises = falls = 0
+    previous = values[0]
+    for value in values[1:]:
+        if value > previous:  # as step > 0 of the difference (the same for any floats)
+            rises += 1
+        elif value < previous:
+            falls += 1
+        ups.append(rises)
+        downs.append(falls)
+        previous = value
+    up, down = np.array(ups), np.array(downs)
+    out: np.ndarray = (stop >= start) & ((up[stop] == up[start]) | (down[stop] == down[start]))
+    return out
 
 
 class Aligner:
@@ -277,7 +295,7 @@ class Aligner:
             marks[0] = True  # the samples before it were taken out
         commands = np.array(self.cmd_u)
         us = commands[k]
-        monotone = None if self._grid_ns else self._monotone(commands, k, linked)
+        monotone = None if self._grid_ns else self._monotone(k, linked)
         keep = int(k[-1])  # the command holding at the last sample, and later ones
         if keep:
             del self.cmd_t[:keep], self.cmd_u[:keep]
@@ -285,7 +303,7 @@ class Aligner:
         self._last_time = int(times[-1])
         return AlignedBatch(times, us, ys, held, marks, period, linked, early, monotone)
 
-    def _monotone(self, commands: np.ndarray, k: np.ndarray, linked: bool) -> np.ndarray:
+    def _monotone(self, k: np.ndarray, linked: bool) -> np.ndarray:
         """Per sample, whether the commands in force since the sample before were monotone
         (the first sample: since the last sample of the batch before, when linked)."""
         before = np.empty_like(k)
@@ -297,7 +315,7 @@ class Aligner:
             before[0] = bisect.bisect_right(self.cmd_t, last) - 1
         else:
             before[0] = k[0]
-        out = monotone_paths(commands, before, k)
+        out = _monotone_paths(self.cmd_u, before, k)
         if not first_known:
             out[0] = False
         return out

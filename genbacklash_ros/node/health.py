@@ -47,15 +47,18 @@ to be reset, so compensation resumes at once with the current estimate.
   diverges), each sample is predicted one step ahead from the previous accepted reading and
   its command (the clamp of eq. 20); a reading more than ``SPIKE_SIGMAS`` (8) residual
   scales from its prediction is not fed to the identifier (``encoder_spike`` drops), the
-  prediction standing in for it in the next prediction. The scale is a running average
-  (weight 0.2 per batch) of the batches' upper quartile of the absolute prediction errors /
+  prediction standing in for it in the next prediction. A feed is judged in steps of
+  ``SCREEN_SAMPLES`` (64) samples, whatever its size; the scale is a running average
+  (weight 0.2 per step) of the steps' upper quartile of the absolute prediction errors /
   1.15 (a normal sigma, robust to a quarter of outliers; at least 1e-3 of the readings'
-  magnitude). The limit is at least ``SPIKE_COUNTS`` (2) encoder counts, the count being
+  magnitude). (Judged a feed at a time, a large feed after a dwell met a scale that had
+  not followed the errors for hundreds of samples: the bundled operation bag, which has no
+  spike, lost 9 readings as spikes with feeds of 64 and 28 with feeds of 128.) The limit is at least ``SPIKE_COUNTS`` (2) encoder counts, the count being
   the smallest change between consecutive readings seen: a quantised reading is up to one
   count from what it measures, so an error of one count and a little is no spike, however
   small the scale of the errors while the load rests. When more than ``SPIKE_MAX_SHARE``
-  (20 %) of a batch would be rejected the model, not the encoder, is taken to be off and
-  the batch is fed whole.
+  (20 %) of a step would be rejected the model, not the encoder, is taken to be off and
+  the step is fed whole.
 * **Encoder stuck** -- with a trusted estimate of a general backlash (as for spikes), the
   reading has not changed for ``STUCK_NS`` (50 ms) although the model says the command in
   force ``STUCK_INPUT_NS`` (20 ms) before the reading has moved the load by more than
@@ -147,7 +150,8 @@ MAX_LOSS = 0.2  # share of the expected readings missing that is a fault
 REANCHOR_COUNT = 3  # consecutive far-back messages of a stream that mean a clock jump back
 REANCHOR_BACK_NS = 100_000_000  # ... each this far before the stream's last time
 SPIKE_SIGMAS = 8.0  # a reading this many residual scales from its prediction is a spike
-SPIKE_MAX_SHARE = 0.2  # more of a batch than this: the model is off, not the encoder
+SPIKE_MAX_SHARE = 0.2  # more of a step than this: the model is off, not the encoder
+SCREEN_SAMPLES = 64  # samples the screen judges with one residual scale (it follows each step)
 SPIKE_COUNTS = 2.0  # ... and at least this many encoder counts (a quantised reading's error)
 RESYNC_NS = 500_000_000  # after a gap, samples wait this long at most for a consistent one
 STUCK_NS = 50_000_000  # an unchanged reading this long, while the model says it moves ...
@@ -157,7 +161,7 @@ STILL_HOLD_NS = 1_000_000_000  # equal readings wait this long at most before be
 # a move starts (the new command just sent, the load not moved yet) is not a stuck encoder
 STUCK_INPUT_NS = 20_000_000
 SATURATION_NS = 200_000_000  # commands at or beyond a limit this long: saturated
-_SCALE_SMOOTHING = 0.2  # weight of a new batch in the residual scale
+_SCALE_SMOOTHING = 0.2  # weight of a new step in the residual scale
 
 
 @dataclass(frozen=True, slots=True)
@@ -585,29 +589,91 @@ class StreamHealth:
         spikes nor those held back after a gap (see the module notes), judged with ``est``,
         the estimate in use; tracks the scale of the one-step prediction errors.
 
+        The samples are judged in steps of ``SCREEN_SAMPLES``, the scale following each
+        step: a feed is judged the same whatever its size (a large one after a dwell, or
+        feeds of another size, meet the limits a steady stream of small ones would). The
+        usual steps (each reading predicted from the one before it, none too far) are
+        judged at once, in numpy steps over the whole feed.
+
         Returns the mask of the samples to keep (None to keep them all) and the drops. The
         screen stage breaks the chain of consecutive samples at the next kept sample after
         each one taken out (:func:`~genbacklash_ros.node.sample_rule.keep_breaks`)."""
-        t_prev, y_prev = self._fed_t, self._fed_y
-        self._fed_t, self._fed_y = int(times[-1]), float(ys[-1])
         model = est.model
         if not isinstance(model, GeneralBacklash):
+            self._fed_t, self._fed_y = int(times[-1]), float(ys[-1])
             return Screening(None, [])
         self._track_quantum(ys)
         left, right = model.branches(us)
         low, high = np.minimum(left, right), np.maximum(left, right)
+        t_prev, y_prev = self._fed_t, self._fed_y
         # a gap before a sample (or no sample before it): not predicted from the one before
         fresh = np.empty(times.size, dtype=bool)
         np.greater(times[1:] - times[:-1], self._silence, out=fresh[1:])
         fresh[0] = t_prev is None or y_prev is None or int(times[0]) - t_prev > self._silence
+        n, step = int(ys.size), SCREEN_SAMPLES
+        start = 0
+        if self._resync_since is None and y_prev is not None and not fresh.any():
+            # the usual case at once: each reading predicted from the one before it
+            previous = np.concatenate(([y_prev], ys[:-1]))
+            with np.errstate(all="ignore"):
+                errs = np.abs(ys - np.minimum(np.maximum(previous, low), high))
+            trusted = self._trusted(est)
+            while start < n:
+                part = slice(start, start + step)
+                if np.any(errs[part] > self._limit(trusted)):
+                    break  # a spike: this step and those after it sample by sample
+                self._track_scale(errs[part], ys[part])
+                start += step
+            if start >= n:
+                self._fed_t, self._fed_y = int(times[-1]), float(ys[-1])
+                return Screening(None, [])
+            if start:
+                self._fed_t, self._fed_y = int(times[start - 1]), float(ys[start - 1])
+        keeps: list[np.ndarray | None] = [None] if start else []
+        events: list[HealthEvent] = []
+        for first in range(start, n, step):
+            part = slice(first, first + step)
+            found = self._screen_step(
+                times[part], ys[part], low[part], high[part], fresh[part], est
+            )
+            keeps.append(found.keep)
+            events += found.events
+        if all(keep is None for keep in keeps):
+            return Screening(None, events)
+        sizes = [start] if start else []
+        sizes += [min(step, n - first) for first in range(start, n, step)]
+        keep = np.concatenate(
+            [
+                np.ones(size, dtype=bool) if part is None else part
+                for size, part in zip(sizes, keeps, strict=True)
+            ]
+        )
+        return Screening(keep, events)
+
+    def _limit(self, trusted: bool) -> float:
+        """The spike limit now (infinite while the estimate may not judge)."""
         scale = self._scale
-        trusted = self._trusted(est)
-        limit = math.inf
         if trusted and scale is not None:
-            limit = max(SPIKE_SIGMAS * scale, SPIKE_COUNTS * self._quantum)
+            return max(SPIKE_SIGMAS * scale, SPIKE_COUNTS * self._quantum)
+        return math.inf
+
+    def _screen_step(
+        self,
+        times: np.ndarray,
+        ys: np.ndarray,
+        low: np.ndarray,
+        high: np.ndarray,
+        fresh: np.ndarray,
+        est: Estimate,
+    ) -> Screening:
+        """:meth:`screen` of one step: the samples (``times``, readings ``ys``, the band
+        ``low .. high`` of their commands, ``fresh``: after a gap), sample by sample."""
+        y_prev = self._fed_y
+        self._fed_t, self._fed_y = int(times[-1]), float(ys[-1])
+        trusted = self._trusted(est)
+        limit = self._limit(trusted)
         resync = self._resync_since
         if resync is None and y_prev is not None and not fresh.any():
-            # the usual case at once: each reading predicted from the one before it
             previous = np.concatenate(([y_prev], ys[:-1]))
             with np.errstate(all="ignore"):
                 errs = np.abs(ys - np.minimum(np.maximum(previous, low), high))
@@ -803,7 +869,7 @@ class StreamHealth:
                 self._quantum = min(self._quantum, float(steps.min()))
 
     def _track_scale(self, errors: np.ndarray, ys: np.ndarray) -> None:
-        """Blend a batch's absolute prediction errors into the residual scale (their upper
+        """Blend a step's absolute prediction errors into the residual scale (their upper
         quartile / 1.15, a normal sigma; at least 1e-3 of the readings' magnitude)."""
         errors = errors[np.isfinite(errors)]  # an overflowing branch gives NaN or inf
         if errors.size == 0:

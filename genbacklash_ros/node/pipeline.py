@@ -206,7 +206,7 @@ WorkerFactory: TypeAlias = Callable[[OnlineIdentifier], IdentifierWorker]
 """Makes the identify stage's worker for an identifier (``SyncWorker``, ``ThreadWorker``)."""
 
 COMMAND_WAIT_NS = 100_000_000  # encoder time after which a sample's command counts as held
-BATCH_SAMPLES = 64  # encoder messages per identifier feed (at most)
+BATCH_SAMPLES = 128  # encoder messages per identifier feed (at most)
 BATCH_NS = 100_000_000  # data time between identifier feeds at most
 
 _COMMAND_CLASSES: dict[str, type] = {
@@ -610,10 +610,11 @@ class BacklashPipeline:
         out = _BatchResult(n)
         i = 0
         while i < n:
-            end = self._quiet(view, i, out)
-            if end > i:  # a stretch taken: the next may start right after it (after a feed)
+            end, ended = self._quiet(view, i, out)
+            if end > i:  # a stretch taken
                 i = end
-                continue
+                if ended or i >= n:  # the next may start right after it
+                    continue
             # this message makes something happen: the per-message path
             value, received = float(view.values[i]), int(receive_ns[i])
             head = int(header_ns[i])
@@ -631,19 +632,21 @@ class BacklashPipeline:
             i += 1
         return BatchOutputs(out.accepted, out.stamps, out.sent, out.outputs)
 
-    def _quiet(self, view: BlockView, i: int, out: _BatchResult) -> int:
+    def _quiet(self, view: BlockView, i: int, out: _BatchResult) -> tuple[int, bool]:
         """Take the messages from ``i`` on that make nothing happen but bookkeeping in one
-        step (see :meth:`on_batch`); where they end."""
+        step (see :meth:`on_batch`): where they end, and whether the stretch ended by itself
+        (else the message there takes the per-message path)."""
         self._take_results()
         clock = self._clock
         due = clock.next_due
         now = clock.now
         if due is None or now is None or now >= due:
-            return i
+            return i, False
         end = min(view.n, i + _STRETCH_MAX)
         feeds = view.enc_before[i] + self._to_feed() - 1
         if feeds < len(view.enc_pos):  # the reading that feeds ends it at the latest
             end = min(end, view.enc_pos[feeds] + 1)
+        natural = end  # where the stretch ends by itself (its last message's steps made)
         k = bisect.bisect_left(view.nonfinite, i)
         if k < len(view.nonfinite):
             end = min(end, view.nonfinite[k])
@@ -651,9 +654,9 @@ class BacklashPipeline:
         if end > i:
             late = np.flatnonzero(view.times[i:end] >= due)  # a periodic step is due
             if late.size:
-                end = self._periodic_end(view, i + int(late[0]), end, marks)
+                end = natural = self._periodic_end(view, i + int(late[0]), end, marks)
         if end == i:
-            return i
+            return i, False
         c0, e0 = view.cmd_before[i], view.enc_before[i]
         if view.cmd_before[end] > c0:
             end = self._commands_end(view, i, c0, end)
@@ -661,7 +664,7 @@ class BacklashPipeline:
             end = self._readings_end(view, e0, c0, end)
         if end > i:
             self._take_stretch(view, i, end, out, marks)
-        return end
+        return end, end == natural
 
     def _to_feed(self) -> int:
         """Encoder readings to accept until the identifier is fed (the last of them feeds)."""
@@ -669,25 +672,27 @@ class BacklashPipeline:
 
     def _periodic_end(self, view: BlockView, p: int, end: int, marks: list[int]) -> int:
         """Where a stretch whose message ``p`` is the first with a periodic step due ends
-        (at most ``end``); appends to ``marks`` the messages inside it where steps are due.
+        (at most ``end``); appends to ``marks`` the commands inside it where steps are due.
 
         A command's message steps only the estimate (:meth:`_advance` with ``heavy``
         False): while no diagnostics report is due either, the stretch goes on through it
-        and :meth:`_take_stretch` makes the step there; an encoder reading (which may feed)
-        or a report (it counts what came before) ends the stretch. What comes due next is
-        worked out on a copy of the schedule, with the steps the stretch would make.
+        and :meth:`_take_stretch` makes the step there. An encoder reading (it may feed) or
+        a report (it counts what came before) ends the stretch: the message is its last,
+        whose steps :meth:`_take_stretch` makes after all the stretch's bookkeeping, as the
+        per-message path makes them. What comes due next is worked out on a copy of the
+        schedule, with the steps the stretch would make.
         """
         clock = self._clock.copy()
         times, cmd_before = view.times, view.cmd_before
         while True:
             if cmd_before[p + 1] == cmd_before[p]:  # an encoder reading
-                return p
+                return p + 1
             clock.tick(int(times[p]))
             now = clock.now
             assert now is not None
             due = clock.due(now)
             if due.diagnostics:
-                return p
+                return p + 1
             marks.append(p)
             if due.estimate:
                 clock.estimate_done(now)
@@ -833,8 +838,9 @@ class BacklashPipeline:
         self, view: BlockView, i: int, end: int, out: _BatchResult, marks: list[int]
     ) -> None:
         """Accept the messages ``i .. end - 1`` (all quiet) in one step; at the commands of
-        ``marks`` the periodic steps due, and when its last reading brings the pending
-        readings to the feed count, the feed, as the per-message path makes them."""
+        ``marks`` the periodic steps due, and at the last message what the per-message path
+        does after its bookkeeping (the feed when its reading brings the pending readings to
+        the feed count, the periodic steps due), as that path does them."""
         c0, c1 = view.cmd_before[i], view.cmd_before[end]
         e0, e1 = view.enc_before[i], view.enc_before[end]
         align, health, led = self._align, self._health, self._ledger
@@ -877,20 +883,21 @@ class BacklashPipeline:
             align.add_readings(t[e0:e1], y[e0:e1], gaps)
             led.encoders += e1 - e0
         outputs: list[Output] = []
-        for p in marks:  # before the clock moves past them (in order, all before ``end``)
-            if p >= end:
+        last = end - 1
+        for p in marks:  # before the clock moves past them (in order)
+            if p >= last:
                 break
             self._advance(int(view.times[p]), outputs, heavy=False)
             out.outputs.extend((p, item) for item in outputs)
             outputs.clear()
-        if e1 > e0 and align.pending >= self._feed_at_count:  # the last message feeds
-            if end - 1 > i:
-                self._clock.tick(int(view.times[i : end - 1].max()))
+        if last > i:
+            self._clock.tick(int(view.times[i:last].max()))
+        # the last message, as on_encoder_value / on_command_value end
+        reading = e1 > e0 and view.enc_pos[e1 - 1] == last
+        if reading and align.pending >= self._feed_at_count:
             self._feed()
-            self._advance(view.enc_t[e1 - 1], outputs, heavy=True)
-            out.outputs.extend((end - 1, item) for item in outputs)
-        else:
-            self._clock.tick(int(view.times[i:end].max()))
+        self._advance(int(view.times[last]), outputs, heavy=reading)
+        out.outputs.extend((last, item) for item in outputs)
 
     def on_encoder(self, msg: object, receive_ns: int) -> list[Output]:
         """An encoder message received at ``receive_ns``: any periodic outputs now due."""

@@ -31,12 +31,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from genbacklash_core import Estimate
-from genbacklash_core.samples import lift_bridged, missing_readings
+from genbacklash_core.samples import lift_bridged
 from genbacklash_ros.node.align import AlignedBatch
 from genbacklash_ros.node.health import HealthEvent, StreamHealth
 from genbacklash_ros.node.sample_rule import keep_breaks, link_breaks
 
-__all__ = ["Screen", "Screened", "bridged"]
+__all__ = ["Screen", "Screened", "linked_breaks"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -65,25 +65,34 @@ class Screened:
         return int(self.us.size)
 
 
-def bridged(
-    breaks: np.ndarray,
+def linked_breaks(
     held: np.ndarray,
     period: float,
     previous: int | None,
-    monotone: np.ndarray,
+    monotone: np.ndarray | None = None,
 ) -> np.ndarray:
-    """``breaks`` (of stamp gaps only) with those lifted that lost readings made where the
-    commands in force were monotone: the rule of
-    :func:`~genbacklash_core.samples.lift_bridged` (a backlash alone is rate independent, so
-    the readings around such a gap are consecutive states), the first sample linked to the
-    stamp ``previous`` (None: it stays a break).
+    """The sample rule's breaks of samples holding the readings stamped ``held`` (see
+    :func:`~genbacklash_ros.node.sample_rule.link_breaks`), the first linked to the stamp
+    ``previous`` (None: it breaks); with ``monotone`` (a backlash alone), those lifted that
+    lost readings made where the commands in force were monotone (the rule of
+    :func:`~genbacklash_core.samples.lift_bridged`: the backlash is rate independent, so the
+    readings around such a gap are consecutive states).
 
-    >>> bridged(np.array([False, True, True]), np.array([10, 30, 60]), 10.0, 0,
-    ...         np.array([True, True, False])).tolist()
+    The stamp differences are taken in integer nanoseconds, exactly, and counted in periods
+    once for both rules.
+
+    >>> linked_breaks(np.array([10, 30, 60]), 10.0, 0).tolist()
+    [False, True, True]
+    >>> linked_breaks(np.array([10, 30, 60]), 10.0, 0, np.array([True, True, False])).tolist()
     [False, False, True]
     """
-    linked = np.concatenate(([held[0] if previous is None else previous], held))
-    return lift_bridged(breaks, missing_readings(linked, period)[1:], monotone)
+    steps = np.rint(np.diff(held, prepend=held[0] if previous is None else previous) / period)
+    breaks: np.ndarray = steps != 1.0
+    if previous is None:
+        breaks[0] = True
+    if monotone is None:
+        return breaks
+    return lift_bridged(breaks, steps - 1.0, monotone)  # steps - 1: readings lost before
 
 
 class Screen:
@@ -99,9 +108,11 @@ class Screen:
         """The samples of ``batch`` to identify from, judged with ``estimate`` (the estimate
         in use) by ``health``."""
         previous = self._last_t if batch.linked else None
-        breaks = link_breaks(batch.held, batch.period, previous_ns=previous)
-        if self._bridge and batch.monotone is not None and batch.period is not None:
-            breaks = bridged(breaks, batch.held, batch.period, previous, batch.monotone)
+        if batch.period is None:  # no period known yet: every sample breaks
+            breaks = link_breaks(batch.held, None, previous_ns=previous)
+        else:
+            bridge = batch.monotone if self._bridge else None
+            breaks = linked_breaks(batch.held, batch.period, previous, bridge)
         breaks |= batch.marks
         us, ys, held = batch.us, batch.ys, batch.held
         screening = health.screen(batch.times, us, ys, estimate)

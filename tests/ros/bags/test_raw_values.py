@@ -220,3 +220,41 @@ def test_read_many_steady_topic_and_damage() -> None:
         else:
             assert ok[k] and (int(stamps[k]), float(values[k])) == expected
     assert not ok[7] and not ok[9] and ok[11]
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(
+    st.lists(multi_arrays(), min_size=1, max_size=15),
+    st.integers(0, 3),
+    st.lists(st.floats(-10.0, 10.0), min_size=15, max_size=15),
+)
+def test_patch_many_is_patch_one_by_one(
+    msgs: list[Float64MultiArray], index: int, sent: list[float]
+) -> None:
+    """The compensated commands patched in numpy steps are :meth:`patch`'s, byte for byte
+    (layouts learnt or not, a constant byte that differs, a command patch cannot take)."""
+    reader = RawValueReader(Float64MultiArray.ros_type, "command", index=index)
+    raws = [cdr(m) for m in msgs]
+    readable = []
+    for raw in raws:  # learn the layouts; patch takes only commands the reader can read
+        try:
+            reader.read(raw)
+        except MessageError:
+            continue
+        readable.append(raw)
+    if len(readable) > 2:
+        damaged = bytearray(readable[1])
+        damaged[-1] ^= 0xFF  # a constant byte (the padding or the data after the value) differs
+        readable[1] = bytes(damaged)
+    values = np.array(sent[: len(readable)])
+    expected = []
+    for raw, value in zip(readable, values.tolist(), strict=True):
+        try:
+            expected.append(reader.patch(raw, value))
+        except MessageError:
+            expected.append(MessageError)
+    if MessageError in expected:
+        with pytest.raises(MessageError):
+            reader.patch_many(readable, values)
+    else:
+        assert reader.patch_many(readable, values) == expected

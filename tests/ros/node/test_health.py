@@ -168,3 +168,55 @@ def test_an_encoder_dithering_by_one_count_is_no_spike() -> None:
     assert screening.keep is not None
     assert np.flatnonzero(~screening.keep).tolist() == [50]
     assert [e.key for e in screening.events] == ["encoder_spike"]
+
+
+def _converged(model: GeneralBacklash) -> Estimate:
+    return Estimate(
+        Structure(1),
+        np.array(model.parameters()),
+        np.eye(4) * 1e-10,
+        residual=1e-4,
+        excitation=0.5,
+        state=EstimatorState.CONVERGED,
+        confidence=0.99,
+        samples=10_000,
+    )
+
+
+def _moving(seed: int, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A backlash driven back and forth, read by a noisy encoder: (times, u, y)."""
+    rng = np.random.default_rng(seed)
+    u = 0.8 * np.sin(np.arange(n) * 2 * np.pi / 400.0)
+    x = np.zeros(n)
+    for k in range(n):  # the play operator (eq. 20) of an ideal backlash, gap 0.05 each side
+        prev = x[k - 1] if k else 0.0
+        x[k] = min(max(prev, u[k] - 0.05), u[k] + 0.05)
+    return np.arange(n, dtype=np.int64) * MS, u, x + rng.normal(0.0, 1e-4, n)
+
+
+def test_a_feed_is_screened_in_steps_whatever_its_size() -> None:
+    """One feed of 640 samples is judged as ten feeds of 64 are: the same samples kept, the
+    same drops, the same residual scale after it; a spike deep inside the large feed is
+    caught with the scale of its own step."""
+    model = GeneralBacklash((1.0,), 0.05, (1.0,), 0.05)
+    est = _converged(model)
+    times, u, y = _moving(3, 1280)
+    y[900] += 0.05  # a spike in the second half
+    one, many = StreamHealth(), StreamHealth()
+    for health in (one, many):  # the same history: a scale learnt on the first half
+        for k in range(0, 640, 64):
+            assert health.screen(times[k : k + 64], u[k : k + 64], y[k : k + 64], est).keep is None
+    whole = one.screen(times[640:], u[640:], y[640:], est)
+    parts = [
+        many.screen(times[k : k + 64], u[k : k + 64], y[k : k + 64], est)
+        for k in range(640, 1280, 64)
+    ]
+    keep = np.concatenate([np.ones(64, bool) if p.keep is None else p.keep for p in parts])
+    assert whole.keep is not None and np.array_equal(whole.keep, keep)
+    assert np.flatnonzero(~whole.keep).tolist() == [900 - 640]
+    assert (
+        [e.key for e in whole.events]
+        == [e.key for p in parts for e in p.events]
+        == ["encoder_spike"]
+    )
+    assert one._scale == many._scale  # the scale followed each step alike
