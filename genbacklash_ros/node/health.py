@@ -53,8 +53,9 @@ to be reset, so compensation resumes at once with the current estimate.
   1.15 (a normal sigma, robust to a quarter of outliers; at least 1e-3 of the readings'
   magnitude). (Judged a feed at a time, a large feed after a dwell met a scale that had
   not followed the errors for hundreds of samples: the bundled operation bag, which has no
-  spike, lost 9 readings as spikes with feeds of 64 and 28 with feeds of 128.) The limit is at least ``SPIKE_COUNTS`` (2) encoder counts, the count being
-  the smallest change between consecutive readings seen: a quantised reading is up to one
+  spike, lost 9 readings as spikes with feeds of 64 and 28 with feeds of 128.) The limit
+  is at least ``SPIKE_COUNTS`` (2) encoder counts, the count being the smallest change
+  between consecutive readings seen: a quantised reading is up to one
   count from what it measures, so an error of one count and a little is no spike, however
   small the scale of the errors while the load rests. When more than ``SPIKE_MAX_SHARE``
   (20 %) of a step would be rejected the model, not the encoder, is taken to be off and

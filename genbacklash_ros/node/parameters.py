@@ -30,8 +30,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal, TypeAlias
 
-import yaml
-
 from genbacklash_core import (
     CompensatorOptions,
     GenBacklashError,
@@ -707,6 +705,8 @@ def read_params_file(
         raise GenBacklashError(f"cannot read params file {file}: {err.strerror or err}") from err
     except UnicodeDecodeError as err:
         raise GenBacklashError(f"params file {file} is not UTF-8 text: {err}") from err
+    import yaml  # here: a replay without a params file does not pay for the import
+
     try:
         document = yaml.safe_load(text)
     except yaml.YAMLError as err:
@@ -782,6 +782,8 @@ def _yaml_value(item: str, text: str) -> object:
     """``text`` read as the YAML scalar a params file would hold; empty: the empty string."""
     if not text.strip():
         return ""
+    import yaml
+
     try:
         value: object = yaml.safe_load(text)
     except yaml.YAMLError as err:
