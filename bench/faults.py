@@ -27,7 +27,7 @@ from _common import ROOT, command_line, machine_description, md_table, parse_arg
 
 sys.path.insert(0, str(ROOT))  # the fault driver lives with its tests
 
-from tests.ros.test_faults import (
+from tests.ros.node.test_faults import (
     FAULT_HOLD_NS,
     FAULTS,
     TRUTH,
