@@ -145,6 +145,9 @@ class RawMessage(NamedTuple):
     raw: bytes
 
 
+_new = tuple.__new__
+
+
 def _one_line(err: BaseException) -> str:
     text = " ".join(str(a) for a in err.args) if err.args else type(err).__name__
     return " ".join(text.split()) or type(err).__name__
@@ -172,8 +175,8 @@ class _ChunksInOrder:
             start, stop = chunk.message_start_time, chunk.message_end_time + 1
             source = self._msgsrc(chunk, channels, start, stop, self._bio)
             next(source)  # its first item marks the chunk's start time (for a merge)
-            batch = [
-                RawMessage(topics[conn.id], log_time, types[conn.id], raw)
+            batch = [  # tuple.__new__: a RawMessage without its Python-level __new__
+                _new(RawMessage, (topics[conn.id], log_time, types[conn.id], raw))
                 for log_time, _offset, conn, raw in source
             ]
             yield from batch
