@@ -524,7 +524,8 @@ class StreamHealth:
         self, last: int, gaps: list[int], receive_ns: int, still_since: int | None
     ) -> None:
         """Readings that :meth:`check_reading` would pass without finding anything (no gap
-        beyond the silence, no rate window closed, none stuck), accepted after the stream's
+        beyond the silence, no rate window closed but by the last one: then
+        :meth:`close_rate_window` follows, none stuck), accepted after the stream's
         last time ``last``: their ``gaps`` to the reading before each, the last one's
         receive time and the start of the still run it ends in (None: it changed)."""
         if not gaps:
@@ -539,6 +540,13 @@ class StreamHealth:
         self._still_since = still_since
         if still_since is None:
             self._stuck = False
+
+    def close_rate_window(self, stamp: int) -> list[HealthEvent]:
+        """The reading at ``stamp``, accepted by :meth:`accept_readings` as the last of its
+        readings, closes the rate window (:attr:`rate_window`): what :meth:`check_reading`
+        does then (learn the period, or find lost readings), and what it found."""
+        self._check_rate(stamp)
+        return self._found()
 
     def jumped_back(self, stream: str, stamp: int, last: int) -> int | None:
         """Whether a message of ``stream`` (``"command"`` or ``"encoder"``) at ``stamp``, not

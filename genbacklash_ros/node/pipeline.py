@@ -378,6 +378,7 @@ class BacklashPipeline:
         )
         self._wait = command_wait_ns
         self._batch = batch
+        self._closing = -1  # batch path: the message whose reading closes the rate window
         self._make_worker = worker
         self._ledger = Ledger()
         self._health = StreamHealth()
@@ -642,6 +643,7 @@ class BacklashPipeline:
         now = clock.now
         if due is None or now is None or now >= due:
             return i, False
+        self._closing = -1
         end = min(view.n, i + _STRETCH_MAX)
         feeds = view.enc_before[i] + self._to_feed() - 1
         if feeds < len(view.enc_pos):  # the reading that feeds ends it at the latest
@@ -664,7 +666,7 @@ class BacklashPipeline:
             end = self._readings_end(view, e0, c0, end)
         if end > i:
             self._take_stretch(view, i, end, out, marks)
-        return end, end == natural
+        return end, end == natural or end - 1 == self._closing
 
     def _to_feed(self) -> int:
         """Encoder readings to accept until the identifier is fed (the last of them feeds)."""
@@ -767,11 +769,17 @@ class BacklashPipeline:
             k += 1
         start, count = health.rate_window
         low = e0 + max(LOSS_WINDOW_READINGS - count - 1, 1 if start is None else 0)
+        closing = e1
         if low < stop:  # the readings up to stop are in order: bisect their times
             base = last if start is None else start
-            stop = bisect.bisect_left(t, base + LOSS_WINDOW_NS, low, stop)
+            closing = bisect.bisect_left(t, base + LOSS_WINDOW_NS, low, stop)
+            if closing < stop:  # it closes the rate window: the stretch's last message
+                stop = closing + 1
         if stop > e0:
             stop = self._stuck_end(view, e0, c0, stop)
+        if stop == closing + 1:
+            self._closing = view.enc_pos[closing]
+            return self._closing + 1
         return view.enc_pos[stop] if stop < e1 else end
 
     def _stuck_end(self, view: BlockView, e0: int, c0: int, stop: int) -> int:
@@ -894,6 +902,8 @@ class BacklashPipeline:
             self._clock.tick(int(view.times[i:last].max()))
         # the last message, as on_encoder_value / on_command_value end
         reading = e1 > e0 and view.enc_pos[e1 - 1] == last
+        if last == self._closing:  # its reading closes the rate window
+            self._events(health.close_rate_window(view.enc_t[e1 - 1]))
         if reading and align.pending >= self._feed_at_count:
             self._feed()
         self._advance(int(view.times[last]), outputs, heavy=reading)
