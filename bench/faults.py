@@ -27,6 +27,7 @@ from _common import ROOT, command_line, machine_description, md_table, parse_arg
 
 sys.path.insert(0, str(ROOT))  # the fault driver lives with its tests
 
+from genbacklash_ros.node.messages import DiagnosticStatus
 from tests.ros.node.test_faults import (
     FAULT_HOLD_NS,
     FAULTS,
@@ -35,8 +36,6 @@ from tests.ros.node.test_faults import (
     numbers_in,
     run_fault,
 )
-
-from genbacklash_ros.node.messages import DiagnosticStatus
 
 LEVELS = {DiagnosticStatus.OK: "OK", DiagnosticStatus.WARN: "WARN", DiagnosticStatus.ERROR: "ERROR"}
 

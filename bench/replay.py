@@ -432,9 +432,10 @@ def profile_split(bag: Path, out: Path) -> tuple[float, list[tuple[str, float]]]
             - cum("compensate.py", "command"),
         ),
         (
-            "write the output (BagWriter.write_messages, RawValueReader.patch, BagWriter.encode)",
+            "write the output (BagWriter.write_messages, RawValueReader.patch_many, "
+            "BagWriter.encode)",
             cum("bagio.py", "_write_records")
-            + cum("raw_values.py", "patch")
+            + cum("raw_values.py", "patch_many")
             + cum("bagio.py", "encode"),
         ),
     ]
