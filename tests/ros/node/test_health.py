@@ -136,13 +136,8 @@ def test_reset_forgets_every_fault() -> None:
     assert not health.faults and not health.report(0).parts
 
 
-def test_an_encoder_dithering_by_one_count_is_no_spike() -> None:
-    """A quantised encoder at rest toggles between two counts. The errors' scale falls to
-    its floor while the load rests, below one count; a one-count change is still no spike
-    (the limit is at least SPIKE_COUNTS counts), while a jump of 20 counts is one."""
-    count = 2 * np.pi / 4096
-    model = GeneralBacklash((1.0,), 0.05, (1.0,), 0.05)
-    est = Estimate(
+def _converged(model: GeneralBacklash) -> Estimate:
+    return Estimate(
         Structure(1),
         np.array(model.parameters()),
         np.eye(4) * 1e-10,
@@ -152,6 +147,15 @@ def test_an_encoder_dithering_by_one_count_is_no_spike() -> None:
         confidence=0.99,
         samples=10_000,
     )
+
+
+def test_an_encoder_dithering_by_one_count_is_no_spike() -> None:
+    """A quantised encoder at rest toggles between two counts. The errors' scale falls to
+    its floor while the load rests, below one count; a one-count change is still no spike
+    (the limit is at least SPIKE_COUNTS counts), while a jump of 20 counts is one."""
+    count = 2 * np.pi / 4096
+    model = GeneralBacklash((1.0,), 0.05, (1.0,), 0.05)
+    est = _converged(model)
     health = StreamHealth()
     rest = 65 * count  # inside the dead band of u = rest
     u = np.full(100, rest)
@@ -168,19 +172,6 @@ def test_an_encoder_dithering_by_one_count_is_no_spike() -> None:
     assert screening.keep is not None
     assert np.flatnonzero(~screening.keep).tolist() == [50]
     assert [e.key for e in screening.events] == ["encoder_spike"]
-
-
-def _converged(model: GeneralBacklash) -> Estimate:
-    return Estimate(
-        Structure(1),
-        np.array(model.parameters()),
-        np.eye(4) * 1e-10,
-        residual=1e-4,
-        excitation=0.5,
-        state=EstimatorState.CONVERGED,
-        confidence=0.99,
-        samples=10_000,
-    )
 
 
 def _moving(seed: int, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
