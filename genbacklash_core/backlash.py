@@ -9,7 +9,9 @@ Degree 1 is the ideal backlash of eqs. (1)/(7).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.polynomial import Polynomial
@@ -57,11 +59,17 @@ def evaluate_branch(m: FloatArray, shifted: FloatArray) -> FloatArray:
     # Beyond the float range the value saturates to +-inf (finite input and coefficients give
     # no NaN); callers check what must be finite.
     with np.errstate(over="ignore", invalid="ignore"):
-        acc = shifted * coefficients[-1]
-        for coefficient in coefficients[-2::-1]:
-            acc += coefficient
-            acc *= shifted
-    return np.asarray(acc, dtype=np.float64)
+        return np.asarray(_horner(coefficients, shifted), dtype=np.float64)
+
+
+def _horner(m: Sequence[float], shifted: Any) -> Any:
+    """``sum_i m[i-1] * shifted**i`` by Horner's rule (eqs. 11-12), for a float or an array
+    (every branch evaluation takes these operations, so that all give the same bits)."""
+    acc = shifted * m[-1]
+    for coefficient in m[-2::-1]:
+        acc += coefficient
+        acc *= shifted
+    return acc
 
 
 def branch_input(u: ArrayLike) -> FloatArray:
@@ -216,14 +224,9 @@ class GeneralBacklash:
         >>> GeneralBacklash.ideal(1.0, 0.1, 0.2).branches_at(1.0)
         (1.1, 0.8)
         """
-        values = []
-        for m, shifted in ((self.m_left, u + self.c_left), (self.m_right, u - self.c_right)):
-            acc = shifted * m[-1]  # Horner's rule, as evaluate_branch
-            for coefficient in m[-2::-1]:
-                acc += coefficient
-                acc *= shifted
-            values.append(acc)
-        return values[0], values[1]
+        left = _horner(self.m_left, u + self.c_left)  # eqs. (11), (16)
+        right = _horner(self.m_right, u - self.c_right)  # eqs. (12), (17)
+        return float(left), float(right)
 
     def branches(self, u: FloatArray) -> tuple[FloatArray, FloatArray]:
         """``(L(u), R(u))`` of a float64 array in one step, exactly as :meth:`left` and
@@ -233,15 +236,10 @@ class GeneralBacklash:
         >>> GeneralBacklash.ideal(1.0, 0.1, 0.2).branches(np.array([1.0, 2.0]))
         (array([1.1, 2.1]), array([0.8, 1.8]))
         """
-        out = []
         with np.errstate(over="ignore", invalid="ignore"):
-            for m, shifted in ((self.m_left, u + self.c_left), (self.m_right, u - self.c_right)):
-                acc = shifted * m[-1]  # Horner's rule, as evaluate_branch (eqs. 11-12, 16-17)
-                for coefficient in m[-2::-1]:
-                    acc += coefficient
-                    acc *= shifted
-                out.append(acc)
-        return out[0], out[1]
+            left = _horner(self.m_left, u + self.c_left)  # eqs. (11), (16)
+            right = _horner(self.m_right, u - self.c_right)  # eqs. (12), (17)
+        return left, right
 
     def left(self, u: ArrayLike) -> FloatArray:
         """Left branch ``L(u)`` (eq. 11); ``+-inf`` where it exceeds the float range.

@@ -539,6 +539,18 @@ class _Branch:
             acc = acc * s + c
         return np.asarray(acc * s, dtype=np.float64)  # eq. (11) / (12)
 
+    def values_and_slopes(self, u: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """:meth:`value_and_slope` of many inputs (the same operations, elementwise; an
+        overflow gives inf or NaN, no warning)."""
+        with np.errstate(all="ignore"):
+            s = u + self.shift
+            p = np.full_like(s, self.m[-1])
+            dp = np.zeros_like(s)
+            for c in self.rev:  # value and slope in one Horner pass
+                dp = dp * s + p
+                p = p * s + c
+            return p * s, dp * s + p
+
     def invert_many(self, y: FloatArray) -> FloatArray:
         """:meth:`invert_fast` of many targets at once (numpy steps; the targets the table
         cannot take are inverted one by one)."""
@@ -552,13 +564,7 @@ class _Branch:
             table = self.table = _InverseTable(self)
         with np.errstate(all="ignore"):
             u = table.guesses(self.sense * y)
-            s = u + self.shift
-            p = np.full_like(s, self.m[-1])
-            dp = np.zeros_like(s)
-            for c in self.rev:  # value and slope in one Horner pass
-                dp = dp * s + p
-                p = p * s + c
-            value, slope = p * s, dp * s + p
+            value, slope = self.values_and_slopes(u)
             step = (value - y) / slope
             u_new = u - step
             good = (
@@ -589,15 +595,9 @@ class _InverseTable:
         hi = branch.b if math.isfinite(branch.b) else -branch.shift + width
         lo, hi = max(lo, -branch.shift - _BIG), min(hi, -branch.shift + _BIG)
         u = np.linspace(lo, hi, _TABLE_NODES) if lo < hi else np.array([lo])
-        with np.errstate(all="ignore"):
-            s = u + branch.shift
-            p = np.full_like(s, branch.m[-1])
-            dp = np.zeros_like(s)
-            for c in branch.rev:
-                dp = dp * s + p
-                p = p * s + c
-            g = branch.sense * (p * s)  # eq. (11) / (12), sense-signed: increasing
-            slope = branch.sense * (dp * s + p)
+        value, slope = branch.values_and_slopes(u)
+        g = branch.sense * value  # eq. (11) / (12), sense-signed: increasing
+        slope = branch.sense * slope
         usable = np.isfinite(g) & np.isfinite(slope)
         # the table holds where g strictly increases and the slope is positive; elsewhere
         # (a turning point at a piece end, an overflow) the guess is NaN

@@ -102,6 +102,20 @@ class _Layout:
     checked: tuple[tuple[int, int], ...]  # (offset, count) of floats that must be finite
 
 
+def _rows_of(
+    raws: Sequence[bytes], index: np.ndarray, length: int, layout: _Layout
+) -> tuple[np.ndarray, np.ndarray]:
+    """The messages ``raws[index]`` (all ``length`` bytes long) as the rows of a read-only
+    ``(messages, length)`` byte array, and which rows hold the layout's constant bytes."""
+    joined = b"".join([raws[k] for k in index.tolist()])
+    rows = np.frombuffer(joined, dtype=np.uint8).reshape(index.size, length)
+    good = np.ones(index.size, dtype=bool)
+    for start, expected in layout.constant:
+        same = rows[:, start : start + len(expected)] == np.frombuffer(expected, np.uint8)
+        good &= same.all(axis=1)
+    return rows, good
+
+
 class RawValueReader:
     """Read the command (or encoder) value of raw CDR messages of one topic.
 
@@ -180,12 +194,7 @@ class RawValueReader:
             if layout is None:
                 continue
             index = np.flatnonzero(lengths == length)
-            joined = b"".join([raws[k] for k in index.tolist()])
-            rows = np.frombuffer(joined, dtype=np.uint8).reshape(index.size, length)
-            good = np.ones(index.size, dtype=bool)
-            for start, expected in layout.constant:
-                same = rows[:, start : start + len(expected)] == np.frombuffer(expected, np.uint8)
-                good &= same.all(axis=1)
+            rows, good = _rows_of(raws, index, length, layout)
             at = layout.value_at
             value = rows[:, at : at + 8].copy().view("<f8")[:, 0]
             good &= np.isfinite(value)
@@ -338,15 +347,12 @@ class RawValueReader:
             if layout is None:
                 continue
             index = np.flatnonzero(lengths == length)
-            joined = bytearray(b"".join([raws[k] for k in index.tolist()]))
-            rows = np.frombuffer(joined, dtype=np.uint8).reshape(index.size, length)
-            good = np.isfinite(sent[index])
-            for start, expected in layout.constant:
-                same = rows[:, start : start + len(expected)] == np.frombuffer(expected, np.uint8)
-                good &= same.all(axis=1)
+            rows, good = _rows_of(raws, index, length, layout)
+            good &= np.isfinite(sent[index])
             at = layout.value_at
+            rows = rows.copy()  # writable
             rows[:, at : at + 8] = sent[index].view(np.uint8).reshape(index.size, 8)
-            patched = bytes(joined)
+            patched = rows.tobytes()
             for j, k in enumerate(index.tolist()):
                 if good[j]:
                     out[k] = patched[j * length : (j + 1) * length]

@@ -250,6 +250,17 @@ def _held_input(stamp: int, commands: list[int], inputs: list[float]) -> float |
     return inputs[k] if k >= 0 else None
 
 
+def _one_step_errors(
+    y_prev: float, ys: np.ndarray, low: np.ndarray, high: np.ndarray
+) -> np.ndarray:
+    """``|y - clamp(y before, low, high)|`` of each reading ``ys`` predicted from the one
+    before it (the first from ``y_prev``): the one-step errors of eq. (20)'s clamp."""
+    previous = np.concatenate(([y_prev], ys[:-1]))
+    with np.errstate(all="ignore"):
+        errors: np.ndarray = np.abs(ys - np.minimum(np.maximum(previous, low), high))
+    return errors
+
+
 class StreamHealth:
     """The faults of a pipeline's command and encoder streams and what detects them.
 
@@ -623,9 +634,7 @@ class StreamHealth:
         start = 0
         if self._resync_since is None and y_prev is not None and not fresh.any():
             # the usual case at once: each reading predicted from the one before it
-            previous = np.concatenate(([y_prev], ys[:-1]))
-            with np.errstate(all="ignore"):
-                errs = np.abs(ys - np.minimum(np.maximum(previous, low), high))
+            errs = _one_step_errors(y_prev, ys, low, high)
             trusted = self._trusted(est)
             while start < n:
                 part = slice(start, start + step)
@@ -683,9 +692,7 @@ class StreamHealth:
         limit = self._limit(trusted)
         resync = self._resync_since
         if resync is None and y_prev is not None and not fresh.any():
-            previous = np.concatenate(([y_prev], ys[:-1]))
-            with np.errstate(all="ignore"):
-                errs = np.abs(ys - np.minimum(np.maximum(previous, low), high))
+            errs = _one_step_errors(y_prev, ys, low, high)
             if not np.any(errs > limit):
                 self._track_scale(errs, ys)
                 return Screening(None, [])
