@@ -33,6 +33,7 @@ BENCHMARKS = (
     "faults",
     "restart",
     "fleet",
+    "fleet_kill",
 )
 # sections written by another script's run with arguments (the ROS 2 ones need the bundle
 # sourced; without it they write a section that says so)
