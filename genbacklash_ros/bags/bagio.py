@@ -48,6 +48,7 @@ import numpy as np
 
 from genbacklash_core import GenBacklashError
 from genbacklash_core.samples import lift_bridged, missing_readings, monotone_paths
+from genbacklash_ros.bags.output_marker import mark_output
 from genbacklash_ros.bags.raw_values import RawValueReader
 from genbacklash_ros.bags.rosbags_types import from_rosbags, jazzy_typestore, to_rosbags
 from genbacklash_ros.node.messages import (
@@ -770,6 +771,7 @@ class BagWriter:
             kind = fast_mcap.FoxgloveWriter if self.compiled else Writer
             self._writer: Any = kind(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
             self._writer.open()
+            mark_output(self.path)  # --overwrite replaces only directories carrying it
         except Exception as err:
             raise BagError(f"cannot create {self.path}: {_one_line(err)}") from err
         self._connections: dict[str, tuple[Any, str]] = {}

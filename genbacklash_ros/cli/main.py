@@ -29,6 +29,7 @@ from genbacklash_core import (
 from genbacklash_core.data import NonFinitePolicy
 from genbacklash_ros.bags.csvio import Series, write_series_csv
 from genbacklash_ros.cli import replay as replay_cli
+from genbacklash_ros.cli.paths import check_paths
 
 __all__ = ["main"]
 
@@ -394,6 +395,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser(words[0] if words else None)
     args = parser.parse_args(words)
     try:
+        check_paths(args)  # before any work: no output may destroy an input
         code: int = args.func(args)
         sys.stdout.flush()  # a buffered stdout (no PYTHONUNBUFFERED) fails here, not at exit
     except GenBacklashError as err:

@@ -10,7 +10,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import shutil
 import sys
 from collections.abc import Collection, Sequence
 from pathlib import Path
@@ -514,22 +513,10 @@ def _summary(result: ReplayResult) -> str:
     return "\n".join(lines)
 
 
-def _remove_old_output(path: Path) -> None:
-    """Delete a previous output bag (a rosbag2 directory or an .mcap file), nothing else."""
-    if path.is_dir() and (path / "metadata.yaml").is_file():
-        shutil.rmtree(path)
-    elif path.is_file() and path.suffix == ".mcap":
-        path.unlink()
-    elif path.exists():
-        raise BagError(f"--overwrite: {path} exists but is not a bag; not removing it")
-
-
 def cmd_replay(args: argparse.Namespace) -> int:
     """Run ``genbacklash replay``."""
     used = [s.name for s in PARAMETER_SPECS if s.name not in _SET_BY_REPLAY]
     params = node_parameters(args, used).params
-    if args.overwrite:
-        _remove_old_output(Path(args.output))
     result = replay(
         args.bag,
         args.output,
@@ -579,7 +566,10 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
         "-o", "--output", required=True, metavar="OUT", help="output bag directory (new)"
     )
     parser.add_argument(
-        "--overwrite", action="store_true", help="replace OUT if it is a bag from an earlier run"
+        "--overwrite",
+        action="store_true",
+        help="replace OUT if it is a bag an earlier genbacklash run wrote (it holds "
+        "genbacklash-output.json and nothing but the bag); anything else is never removed",
     )
     parser.add_argument("--report", metavar="DIR", help="write PNG plots and index.html into DIR")
     parser.add_argument(
