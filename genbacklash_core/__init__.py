@@ -24,6 +24,7 @@ from .excite import (
     check_commissioning,
     commissioning_trajectory,
 )
+from .guard import CompensationGuard, GuardSettings, GuardVerdict
 from .identify import (
     Fit,
     IdentificationResult,
@@ -61,6 +62,7 @@ __all__ = [
     "Cascade",
     "CascadeOutput",
     "CommissioningCheck",
+    "CompensationGuard",
     "CompensatorOptions",
     "CompensatorState",
     "Estimate",
@@ -69,6 +71,8 @@ __all__ = [
     "Fit",
     "GenBacklashError",
     "GeneralBacklash",
+    "GuardSettings",
+    "GuardVerdict",
     "IdentificationResult",
     "InverseBacklash",
     "IterationHistory",

@@ -47,6 +47,9 @@ class CompensateStage:
         self._on = compensate
         self._comp: InverseBacklash | None = None
         self._comp_estimate: Estimate | None = None
+        # the compensation guard's trust in [0, 1] (genbacklash_core.guard), a factor on the
+        # estimate's confidence: compensation fades out where it does not help
+        self.trust = 1.0
         self.last_sent: float | None = None
         self.problems: list[str] = []  # why a model was not taken (the caller reports them)
 
@@ -59,7 +62,7 @@ class CompensateStage:
         """How much of the inverse is applied at ``est``'s confidence (0 without a model)."""
         if not self._on or est.model is None:
             return 0.0
-        return self._options.weight(est.confidence)
+        return self._options.weight(est.confidence * self.trust)
 
     def command(
         self, value: float, est: Estimate, *, passing: Callable[[], bool], last_y: float | None
@@ -78,7 +81,7 @@ class CompensateStage:
             return []
         if not self._on or comp is None or est is not self._comp_estimate:
             return [self.command(v, est, passing=_no_fault, last_y=last_y) for v in values]
-        sent = comp.steps(values, est.confidence)
+        sent = comp.steps(values, est.confidence * self.trust)
         for k, command in enumerate(sent):
             if not math.isfinite(command):  # as _command: within the limits instead
                 if k:
@@ -97,7 +100,7 @@ class CompensateStage:
         comp = self._comp
         if comp is None:
             return self._limit(value)
-        confidence = 0.0 if passing() else est.confidence
+        confidence = 0.0 if passing() else est.confidence * self.trust
         sent = comp.step(value, confidence)
         return sent if math.isfinite(sent) else self._limit(value)
 

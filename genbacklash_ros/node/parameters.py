@@ -40,6 +40,7 @@ from genbacklash_core import (
     WindowedIdentifier,
     WindowedSettings,
 )
+from genbacklash_core.guard import GuardSettings
 from genbacklash_ros.node.messages import COMMAND_TYPES, ENCODER_TYPES, CommandType, EncoderType
 
 __all__ = [
@@ -259,6 +260,14 @@ PARAMETER_SPECS: tuple[ParameterSpec, ...] = (
         restarts=True,
     ),
     ParameterSpec(
+        "compensation_guard",
+        "bool",
+        True,
+        "Judge from the data whether compensation helps (the model's error on the commands "
+        "against the error with no model) and fade it out where it does not; false: only "
+        "report the judgement.",
+    ),
+    ParameterSpec(
         "u_min", "double", -math.inf, "Lower limit of the compensated command.", unit="command"
     ),
     ParameterSpec(
@@ -382,6 +391,7 @@ class NodeParameters:
     encoder_type: EncoderType = "joint_state"
     compensate: bool = True
     compensation_in_loop: bool = False
+    compensation_guard: bool = True
     u_min: float = -math.inf
     u_max: float = math.inf
     max_rate: float = math.inf
@@ -480,6 +490,10 @@ class NodeParameters:
             gate_low=self.gate_low,
             gate_high=self.gate_high,
         )
+
+    def guard_settings(self) -> GuardSettings:
+        """How the compensation guard judges (:class:`~genbacklash_core.guard.GuardSettings`)."""
+        return GuardSettings(enabled=self.compensation_guard)
 
     @property
     def sample_period_ns(self) -> int:

@@ -134,6 +134,7 @@ from typing import Literal, TypeAlias
 import numpy as np
 
 from genbacklash_core import Estimate, GenBacklashError, OnlineIdentifier
+from genbacklash_core.guard import CompensationGuard
 from genbacklash_ros.node.align import Aligner
 from genbacklash_ros.node.batch import BlockView
 from genbacklash_ros.node.checkpoint import Checkpoint, CheckpointError, save_checkpoint, warm_start
@@ -427,6 +428,7 @@ class BacklashPipeline:
         )
         self._screen = Screen(bridge=params.model == "backlash")
         self._comp = CompensateStage(params.compensator_options(), compensate=params.compensate)
+        self._guard = CompensationGuard(params.guard_settings())
         self._feed_at_count = self._batch
         self._clock.restart()
 
@@ -449,6 +451,7 @@ class BacklashPipeline:
             )
             return
         self._comp.reconfigure(params.compensator_options(), compensate=params.compensate)
+        self._comp.trust = self._guard.configure(params.guard_settings()).trust
         self._problems(self._comp.problems)
         self._clock.configure(
             publish_ns=params.publish_period_ns, checkpoint_ns=self._checkpoint_period()
@@ -1027,6 +1030,11 @@ class BacklashPipeline:
         if period.problems:
             level = max(level, DiagnosticStatus.WARN)
             parts.extend(period.problems)
+        guard = self._guard.verdict
+        if est.available and self._params.compensate and guard.state in ("faded", "off"):
+            parts.append(guard.reason)
+            if guard.state == "off":
+                level = max(level, DiagnosticStatus.WARN)
         if stale:
             level = DiagnosticStatus.STALE
             parts.insert(0, "no data")
@@ -1037,6 +1045,9 @@ class BacklashPipeline:
             ("identifier_state", own.state.value),
             ("identifier_confidence", format(own.confidence, ".3g")),
             ("compensation_weight", format(0.0 if passing else self._comp.weight(est), ".3g")),
+            ("compensation_guard", guard.state),
+            ("compensation_trust", format(guard.trust, ".3g")),
+            ("guard_error_ratio", format(guard.ratio, ".3g") if guard.ratio < math.inf else "none"),
             ("faults", ",".join(health.active) or "none"),
             ("commands", str(led.commands)),
             ("encoder_messages", str(led.encoders)),
@@ -1092,6 +1103,11 @@ class BacklashPipeline:
         self._events(screened.events)
         if screened.size == 0:
             return
+        # does compensating with the model in use help on these samples? (fades it if not)
+        verdict = self._guard.update(
+            screened.us, screened.ys, screened.breaks, self._use.current.model
+        )
+        self._comp.trust = verdict.trust
         assert self._worker is not None
         self._worker.submit(screened.us, screened.ys, screened.breaks)
         self._take_results()

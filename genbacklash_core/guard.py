@@ -1,0 +1,254 @@
+"""Does the compensation help? A guard that judges it from the data and fades it out if not.
+
+The inverse compensator sends ``u = B^-1(r)`` for a desired load position ``r``, so the
+load ends at ``y = B_true(u)`` and the tracking error it leaves is the model's own error at
+the commands sent, ``y - r = B_true(u) - B(u)``. Without compensation the error would be
+``B_true(r) - r``: what a model with no play ("the load is where the command is") gets
+wrong. Both can be measured from the samples the identifier is fed, whatever the commands
+were:
+
+* the **model error** ``e_m = y - B(u)``, the free-run simulation of the estimate in use on
+  the commands ``u`` the gear received (eq. 8 run forward: the play operator of the paper's
+  general backlash), compared with
+* the **no-model error** ``e_0 = y - u``.
+
+Their ratio ``rho = rms(e_m) / rms(e_0)`` (exponentially weighted over a window of samples)
+is what the compensation keeps of the tracking error: about 0 where the model describes the
+drivetrain, 1 or more where it does not (a servo lag, a load that coasts into the play, a
+compliant coupling: effects the play operator lacks; or an estimate of the play far from the
+truth). The guard's **trust** is 1 below ``rho_full``, 0 above ``rho_off`` and linear in
+between, once ``min_samples`` samples have been judged with a model (before that it moves
+from 1, the estimate's confidence gate alone, towards that value as the evidence grows); the
+node multiplies the estimate's confidence by it, so compensation fades out where it would
+not help and the reason is said.
+
+Examples
+--------
+>>> import numpy as np
+>>> from genbacklash_core import GeneralBacklash, simulate_backlash
+>>> true = GeneralBacklash.ideal(1.0, 0.05, 0.05)
+>>> u = 0.3 * np.sin(np.linspace(0.0, 40.0, 4000))
+>>> y = simulate_backlash(true, u)
+>>> guard = CompensationGuard(GuardSettings(window=2000, min_samples=500))
+>>> guard.update(u, y, np.zeros(u.size, dtype=bool), true).state
+'on'
+>>> wrong = GeneralBacklash.ideal(1.0, 0.15, 0.15)  # three times the play
+>>> guard = CompensationGuard(GuardSettings(window=2000, min_samples=500))
+>>> verdict = guard.update(u, y, np.zeros(u.size, dtype=bool), wrong)
+>>> verdict.state, verdict.trust
+('off', 0.0)
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ._typing import FloatArray
+from .backlash import GeneralBacklash
+from .cascade import Cascade
+from .errors import GenBacklashError
+from .simulate import simulate_backlash
+
+__all__ = ["CompensationGuard", "GuardSettings", "GuardVerdict"]
+
+
+@dataclass(frozen=True)
+class GuardSettings:
+    """How the guard judges the compensation.
+
+    Parameters
+    ----------
+    window : int
+        Samples of the exponential window (``e``-folding length) over which both errors'
+        mean squares are taken.
+    min_samples : int
+        Samples judged with a model before the guard's judgement counts in full; before,
+        trust moves linearly from 1 towards it with the evidence.
+    rho_full, rho_off : float
+        The error ratio ``rho`` at or below which compensation is applied in full, and at or
+        above which it is off; linear in between (``0 < rho_full < rho_off``).
+    enabled : bool
+        False: trust is always 1; the guard only judges (its state and reason still say
+        whether compensation helps).
+
+    Examples
+    --------
+    >>> GuardSettings(rho_full=0.9, rho_off=0.5)
+    Traceback (most recent call last):
+    ...
+    genbacklash_core.errors.GenBacklashError: rho_full must be > 0 and below rho_off, got 0.9 and 0.5
+    """
+
+    window: int = 5000
+    min_samples: int = 1000
+    rho_full: float = 0.75
+    rho_off: float = 0.95
+    enabled: bool = True
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.window, int) and self.window >= 1):
+            raise GenBacklashError(f"window must be a whole number >= 1, got {self.window!r}")
+        if not (isinstance(self.min_samples, int) and self.min_samples >= 0):
+            raise GenBacklashError(
+                f"min_samples must be a whole number >= 0, got {self.min_samples!r}"
+            )
+        full, off = float(self.rho_full), float(self.rho_off)
+        if not (math.isfinite(full) and math.isfinite(off) and 0.0 < full < off):
+            raise GenBacklashError(
+                f"rho_full must be > 0 and below rho_off, got {self.rho_full} and {self.rho_off}"
+            )
+
+
+@dataclass(frozen=True)
+class GuardVerdict:
+    """The guard's judgement after a batch.
+
+    Attributes
+    ----------
+    trust : float
+        In ``[0, 1]``: the factor on the estimate's confidence.
+    state : str
+        ``"judging"`` (no sample judged yet: trust 1), ``"on"`` (trust 1), ``"faded"`` or
+        ``"off"`` (trust 0).
+    ratio : float
+        ``rho = rms(y - B(u)) / rms(y - u)`` over the window (NaN before any sample).
+    model_rms, no_model_rms : float
+        The two root-mean-square errors over the window (rad).
+    samples : int
+        Samples judged with a model so far.
+    reason : str
+        One sentence: why compensation is on, faded or off.
+    """
+
+    trust: float
+    state: str
+    ratio: float
+    model_rms: float
+    no_model_rms: float
+    samples: int
+    reason: str
+
+
+_JUDGING = "no samples judged with a model yet: the estimate's confidence alone gates"
+
+
+class CompensationGuard:
+    """Judges, batch by batch, whether compensating with a model helps (module notes).
+
+    Parameters
+    ----------
+    settings : GuardSettings
+    """
+
+    def __init__(self, settings: GuardSettings | None = None) -> None:
+        self.settings = settings or GuardSettings()
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget every judgement (a restart of identification)."""
+        self._x: float | None = None  # the model's free-run output after the last sample
+        self._sum_model = 0.0  # exponentially weighted sums of the squared errors
+        self._sum_none = 0.0
+        self._weight = 0.0  # exponentially weighted sample count
+        self._samples = 0
+        self.verdict: GuardVerdict = self._judge()
+
+    def configure(self, settings: GuardSettings) -> GuardVerdict:
+        """New settings, the evidence kept; returns the verdict under them."""
+        self.settings = settings
+        if self._weight > 0.0:
+            self.verdict = self._judge()
+        return self.verdict
+
+    def update(
+        self,
+        us: FloatArray,
+        ys: FloatArray,
+        breaks: np.ndarray,
+        model: GeneralBacklash | Cascade | None,
+    ) -> GuardVerdict:
+        """Judge a batch of samples (the gear's input ``us``, the load ``ys``; ``breaks[k]``:
+        sample ``k`` does not follow sample ``k - 1``) with ``model``, the model the
+        compensator used for them. Returns the new :attr:`verdict`."""
+        u = np.asarray(us, dtype=np.float64)
+        y = np.asarray(ys, dtype=np.float64)
+        if u.size == 0:
+            return self.verdict
+        if model is None:
+            self._x = None
+            return self.verdict
+        backlash = model.backlash if isinstance(model, Cascade) else model
+        brk = np.asarray(breaks, dtype=bool)
+        if brk.size and brk[0]:
+            self._x = None  # the batch does not follow the last one
+        starts = [0, *(np.flatnonzero(brk[1:]) + 1).tolist()]
+        ends = [*starts[1:], u.size]
+        predicted = np.empty_like(y)
+        for start, stop in zip(starts, ends, strict=True):
+            if start > 0:
+                self._x = None  # a break: the chain starts again at the measured load
+            x0 = self._x
+            if x0 is None:
+                lo, hi = sorted(backlash.branches_at(float(u[start])))
+                x0 = min(max(float(y[start]), lo), hi)
+            try:
+                predicted[start:stop] = simulate_backlash(backlash, u[start:stop], x0)  # eq. 8
+            except GenBacklashError:
+                predicted[start:stop] = np.nan
+            self._x = float(predicted[stop - 1])
+        self._accumulate(y - predicted, y - u)
+        self.verdict = self._judge()
+        return self.verdict
+
+    def _accumulate(self, e_model: FloatArray, e_none: FloatArray) -> None:
+        ok = np.isfinite(e_model) & np.isfinite(e_none)
+        e_model, e_none = e_model[ok], e_none[ok]
+        n = e_model.size
+        if n == 0:
+            return
+        decay = math.exp(-1.0 / self.settings.window)
+        # weights of the batch's samples, newest 1: decay**(n-1-k)
+        w = decay ** np.arange(n - 1, -1, -1, dtype=np.float64)
+        old = decay**n
+        self._sum_model = self._sum_model * old + float(w @ (e_model * e_model))
+        self._sum_none = self._sum_none * old + float(w @ (e_none * e_none))
+        self._weight = self._weight * old + float(w.sum())
+        self._samples += n
+
+    def _judge(self) -> GuardVerdict:
+        s = self.settings
+        if self._weight <= 0.0:
+            nan = math.nan
+            return GuardVerdict(1.0, "judging", nan, nan, nan, 0, _JUDGING)
+        model_rms = math.sqrt(self._sum_model / self._weight)
+        none_rms = math.sqrt(self._sum_none / self._weight)
+        ratio = model_rms / none_rms if none_rms > 0 else (0.0 if model_rms == 0 else math.inf)
+        fit = min(max((s.rho_off - ratio) / (s.rho_off - s.rho_full), 0.0), 1.0)
+        evidence = 1.0 if s.min_samples == 0 else min(self._samples / s.min_samples, 1.0)
+        # without evidence the confidence gate alone decides; with it, the fit
+        judged = 1.0 - evidence * (1.0 - fit)
+        kept = f"the model leaves {100 * ratio:.0f} % of the tracking error"
+        numbers = (
+            f"(model error {model_rms:.4g} rad rms against {none_rms:.4g} rad without "
+            f"compensation, over the last {min(self._samples, s.window)} samples)"
+        )
+        if judged == 0.0:
+            state = "off"
+            why = (
+                f"compensation off: {kept}, at or above {100 * s.rho_off:.0f} %; the model "
+                "does not describe this drivetrain well enough to cancel its play"
+            )
+        elif judged < 1.0:
+            state = "faded"
+            why = f"compensation faded to {100 * judged:.0f} %: {kept}"
+        else:
+            state, why = "on", f"compensation on: {kept}"
+        trust = judged
+        if not s.enabled:
+            trust, why = 1.0, f"guard disabled, compensation kept in full; judged: {why}"
+        return GuardVerdict(
+            trust, state, ratio, model_rms, none_rms, self._samples, f"{why} {numbers}"
+        )
