@@ -172,7 +172,7 @@ def _cmd_identify(args: argparse.Namespace) -> int:
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
-    if args.bag or args.scenario:
+    if args.bag or args.scenario or args.physics:
         return replay_cli.simulate_bag(args)
     if args.example is None or not args.output:
         raise GenBacklashError("give --example N and -o FILE.csv (or --bag DIR for a bag)")
