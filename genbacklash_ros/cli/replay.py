@@ -538,8 +538,6 @@ def simulate_bag(args: argparse.Namespace) -> int:
         topics = ", ".join(f"{t} ({m}, {n})" for t, (m, n) in physics.counts.items())
         print(f"wrote {physics.path}: {physics.description}; {topics}", file=sys.stderr)
         return EXIT_OK
-    if args.bandwidth is not None or args.motor_encoder:
-        raise GenBacklashError("--bandwidth and --motor-encoder apply to --physics VARIANT")
     phases = getattr(args, "phases", None)
     what = "--phases" if phases else "--scenario"
     if not args.bag:
