@@ -26,7 +26,16 @@ from genbacklash_ros.cli.main import EXIT_BAD_INPUT, EXIT_OK, main
 from genbacklash_ros.node.messages import Float64MultiArray, JointState
 from genbacklash_ros.physics import MISSING, physics_record, variant, write_physics_bag
 
+try:
+    import mujoco  # noqa: F401
 
+    HAVE_MUJOCO = True
+except ImportError:
+    HAVE_MUJOCO = False
+needs_mujoco = pytest.mark.skipif(not HAVE_MUJOCO, reason="needs mujoco (genbacklash[physics])")
+
+
+@needs_mujoco
 def test_the_bag_round_trips_with_its_truth(tmp_path: Path) -> None:
     p = variant("compliant", bandwidth=30.0)
     cfg = OperationSettings(duration=1.5, travel=(-0.4, 0.4))  # a short sweep for the truth
@@ -59,6 +68,7 @@ def test_the_bag_round_trips_with_its_truth(tmp_path: Path) -> None:
     assert np.allclose(truth.c_left, truth.model.c_left, rtol=0.0, atol=1e-9)  # rounded
 
 
+@needs_mujoco
 def test_simulate_physics_writes_the_operation_topics(tmp_path: Path) -> None:
     bag = tmp_path / "bag"
     args = ["simulate", "--physics", "gravity", "--bag", str(bag), "--duration", "1"]

@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+pytest.importorskip("mujoco", reason="the physics drivetrains need mujoco (genbacklash[physics])")
+
 from genbacklash_core import GenBacklashError
 from genbacklash_ros.physics.engine import Drivetrain, Trajectory, simulate_commands
 from genbacklash_ros.physics.variants import variant

@@ -6,6 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+pytest.importorskip("mujoco", reason="the physics drivetrains need mujoco (genbacklash[physics])")
+
 from genbacklash_core.scenarios import OperationSettings, operation_record
 from genbacklash_ros.physics.engine import Drivetrain, Trajectory
 from genbacklash_ros.physics.record import physics_record

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import pytest
 
+pytest.importorskip("mujoco", reason="the physics drivetrains need mujoco (genbacklash[physics])")
+
 from genbacklash_ros.physics.truth import quasi_static
 from genbacklash_ros.physics.variants import variant
 
