@@ -59,8 +59,11 @@ __all__ = [
     "HiddenEffects",
     "OperationRecord",
     "OperationSettings",
+    "operation_commands",
     "operation_record",
+    "readings",
     "simulate_worn",
+    "timeline",
     "trapezoid",
     "worn",
 ]
@@ -537,10 +540,11 @@ _MOTIONS = {
 }
 
 
-def _commands(
+def operation_commands(
     rng: np.random.Generator, cfg: OperationSettings
 ) -> tuple[FloatArray, tuple[tuple[str, float], ...]]:
-    """Command values at the nominal ticks, phase by phase."""
+    """Command values at the nominal ticks of ``cfg.command_rate``, phase by phase, and each
+    phase's kind and start (s); the first random draws of :func:`operation_record`."""
     dt = 1.0 / cfg.command_rate
     pos = 0.5 * (cfg.travel[0] + cfg.travel[1])
     pieces: list[FloatArray] = []
@@ -554,6 +558,68 @@ def _commands(
         pos = float(piece[-1])
         elapsed += n
     return np.clip(np.concatenate(pieces), *cfg.travel), tuple(starts)
+
+
+def timeline(
+    rng: np.random.Generator,
+    n_commands: int,
+    *,
+    command_rate: float,
+    encoder_rate: float,
+    command_jitter_ns: int,
+    stamp_jitter_ns: float,
+) -> tuple[IntArray, IntArray]:
+    """The clocks of a drivetrain in operation (see the module notes): ``(command stamps,
+    reading stamps)`` in ns from the start, for ``n_commands`` commands at the nominal ticks of
+    ``command_rate`` (each up to ``command_jitter_ns`` late) and readings at ``encoder_rate``
+    over the same span (Gaussian ``stamp_jitter_ns``, clipped to a third of the period, kept
+    in order, the first not before the first command). Draws from ``rng`` in this order:
+    command jitter, stamp jitter (each only when non-zero).
+
+    >>> cmd_t, t = timeline(np.random.default_rng(0), 3, command_rate=100.0,
+    ...                     encoder_rate=1000.0, command_jitter_ns=0, stamp_jitter_ns=0.0)
+    >>> cmd_t.tolist(), t.size
+    ([0, 10000000, 20000000], 30)
+    """
+    cmd_period = 1e9 / command_rate
+    cmd_t = np.round(np.arange(n_commands) * cmd_period).astype(np.int64)
+    if command_jitter_ns > 0:
+        cmd_t += rng.integers(0, command_jitter_ns + 1, n_commands)
+    total_ns = n_commands * cmd_period
+    enc_period = 1e9 / encoder_rate
+    n = math.floor(total_ns / enc_period)
+    nominal = np.round(np.arange(n) * enc_period)
+    jitter = rng.normal(0.0, stamp_jitter_ns, n) if stamp_jitter_ns > 0 else 0.0
+    clip = enc_period / 3.0
+    t = (nominal + np.clip(jitter, -clip, clip)).astype(np.int64)
+    t[0] = max(int(t[0]), int(cmd_t[0]))  # the first reading after the first command
+    return cmd_t, np.maximum.accumulate(t)
+
+
+def readings(
+    rng: np.random.Generator,
+    x: FloatArray,
+    *,
+    noise: float = 0.0,
+    quantum: float = 0.0,
+    loss: float = 0.0,
+) -> tuple[FloatArray, BoolArray]:
+    """What an encoder makes of the positions ``x`` (see the module notes): ``(readings,
+    received)``, white ``noise`` added, quantised to ``quantum``, each lost with probability
+    ``loss`` (the first always received). Draws from ``rng`` in this order: noise (only when
+    non-zero), loss (always).
+
+    >>> y, ok = readings(np.random.default_rng(0), np.array([0.0, 0.26, 0.74]), quantum=0.5)
+    >>> y.tolist(), ok.tolist()
+    ([0.0, 0.5, 0.5], [True, True, True])
+    """
+    n = x.size
+    y = x + (rng.normal(0.0, noise, n) if noise > 0 else 0.0)
+    if quantum > 0:
+        y = np.round(y / quantum) * quantum
+    received = rng.random(n) >= loss
+    received[0] = True
+    return np.asarray(y, dtype=np.float64), received
 
 
 def drive(
@@ -576,23 +642,19 @@ def drive(
     """The drivetrain's time line for commands ``values`` at the nominal command ticks (see
     the module notes): ``(command stamps, reading stamps, held input, load, reading,
     received, c_left, c_right)``, every reading included. Draws from ``rng`` in this order:
-    command jitter, stamp jitter, noise, loss (each only when non-zero, loss always).
+    command jitter, stamp jitter, noise, loss (each only when non-zero, loss always;
+    :func:`timeline`, then :func:`readings`).
     ``hidden`` adds effects beyond the backlash (:class:`HiddenEffects`; it draws nothing):
     the held input stays the command, the load is the output before noise."""
-    n_cmd = values.size
-    cmd_period = 1e9 / command_rate
-    cmd_t = np.round(np.arange(n_cmd) * cmd_period).astype(np.int64)
-    if command_jitter_ns > 0:
-        cmd_t += rng.integers(0, command_jitter_ns + 1, n_cmd)
-    total_ns = n_cmd * cmd_period
-    enc_period = 1e9 / encoder_rate
-    n = math.floor(total_ns / enc_period)
-    nominal = np.round(np.arange(n) * enc_period)
-    jitter = rng.normal(0.0, stamp_jitter_ns, n) if stamp_jitter_ns > 0 else 0.0
-    clip = enc_period / 3.0
-    t = (nominal + np.clip(jitter, -clip, clip)).astype(np.int64)
-    t[0] = max(int(t[0]), int(cmd_t[0]))  # the first reading after the first command
-    t = np.maximum.accumulate(t)
+    cmd_t, t = timeline(
+        rng,
+        values.size,
+        command_rate=command_rate,
+        encoder_rate=encoder_rate,
+        command_jitter_ns=command_jitter_ns,
+        stamp_jitter_ns=stamp_jitter_ns,
+    )
+    n = t.size
     k = np.searchsorted(cmd_t, t, side="right") - 1
     u = values[np.maximum(k, 0)]
     # the drivetrain, with linear wear of the dead zones, in blocks
@@ -606,12 +668,8 @@ def drive(
     x = simulate_worn(model, v, x0, c_left, c_right)
     if hidden is not None:
         x = hidden.load(x, t)
-    y = x + (rng.normal(0.0, noise, n) if noise > 0 else 0.0)
-    if quantum > 0:
-        y = np.round(y / quantum) * quantum
-    received = rng.random(n) >= loss
-    received[0] = True
-    return cmd_t, t, u, x, np.asarray(y, dtype=np.float64), received, c_left, c_right
+    y, received = readings(rng, x, noise=noise, quantum=quantum, loss=loss)
+    return cmd_t, t, u, x, y, received, c_left, c_right
 
 
 def operation_record(
@@ -635,7 +693,7 @@ def operation_record(
     if not isinstance(cfg, OperationSettings):
         raise GenBacklashError(f"settings must be OperationSettings, got {cfg!r}")
     rng = np.random.default_rng([int(seed), 12])
-    values, phase_starts = _commands(rng, cfg)
+    values, phase_starts = operation_commands(rng, cfg)
     driven = drive(
         rng,
         values,

@@ -68,6 +68,7 @@ __all__ = [
     "COMMAND_TOPIC",
     "ENCODER_TOPIC",
     "JOINT",
+    "MOTOR_TOPIC",
     "START_NS",
     "TRUTH_KEY",
     "BagTruth",
@@ -78,10 +79,13 @@ __all__ = [
     "write_drivetrain_bag",
     "write_example_bag",
     "write_operation_bag",
+    "write_record_bag",
 ]
 
 COMMAND_TOPIC = "/command"
 ENCODER_TOPIC = "/encoder"
+MOTOR_TOPIC = "/motor_encoder"
+"""A motor-side encoder (physics bags with a motor encoder)."""
 JOINT = "drive_joint"
 OTHER_JOINT = "wheel_joint"
 START_NS = 1_700_000_000 * 1_000_000_000  # recordings start at a plausible wall-clock time
@@ -501,7 +505,6 @@ def write_operation_bag(
     grid = np.arange(0.0, sample_t[-1] / 1e9, TRUTH_STEP_S)
     grid = np.append(grid, sample_t[-1] / 1e9) if sample_t[-1] / 1e9 > grid[-1] else grid
     index = np.clip(np.searchsorted(sample_t, np.round(grid * 1e9)), 0, sample_t.size - 1)
-    received = int(rec.received.sum())
     branches = "straight" if cfg.model.degree == 1 else f"curved (degree {cfg.model.degree})"
     end = rec.truth_end
     description = (
@@ -525,44 +528,87 @@ def write_operation_bag(
         _settings_dict(cfg),
     )
     custom = {TRUTH_KEY: truth.to_json()}
+    counts = write_record_bag(
+        path,
+        custom,
+        rng,
+        rec.command_t_ns,
+        rec.command_u,
+        sample_t,
+        rec.received,
+        rec.y_all,
+    )
+    return SimulatedBag(Path(path), description, cfg.model, end, counts, total, custom)
+
+
+def write_record_bag(
+    path: str | Path,
+    custom: Mapping[str, str],
+    rng: np.random.Generator,
+    command_t_ns: np.ndarray,
+    command_u: np.ndarray,
+    sample_t_ns: np.ndarray,
+    received: np.ndarray,
+    y_all: np.ndarray,
+    motor: tuple[np.ndarray, np.ndarray] | None = None,
+) -> dict[str, tuple[str, int]]:
+    """Write a simulated record's messages (see :func:`write_operation_bag`'s notes) with
+    ``custom`` as the metadata's ``custom_data``; returns topic -> (type, count).
+
+    ``sample_t_ns``, ``received`` and ``y_all`` hold every encoder sampling instant (ns from
+    the start), whether it arrived, and its reading. ``motor`` adds :data:`MOTOR_TOPIC`:
+    ``(readings, received)`` of a motor encoder sampled at the same instants, one
+    ``sensor_msgs/JointState`` (``drive_joint``) per reading that arrived, logged 0.1-0.3 ms
+    after its stamp. Draws from ``rng``: the second joint's commands and positions, the
+    encoder's latencies, then the motor encoder's latencies.
+    """
     # a second joint: the wheel turning slowly (the distractor element / joint)
-    cmd_n = rec.command_t_ns.size
+    cmd_n = command_t_ns.size
     wheel_cmd = np.cumsum(rng.normal(0.0, 2e-3, cmd_n))
-    k = np.clip(np.searchsorted(rec.command_t_ns, sample_t, side="right") - 1, 0, cmd_n - 1)
-    wheel_pos = wheel_cmd[k] + rng.normal(0.0, 1e-4, sample_t.size)
-    enc_stamp = START_NS + sample_t[rec.received]
-    enc_y, enc_wheel = rec.y_all[rec.received], wheel_pos[rec.received]
+    k = np.clip(np.searchsorted(command_t_ns, sample_t_ns, side="right") - 1, 0, cmd_n - 1)
+    wheel_pos = wheel_cmd[k] + rng.normal(0.0, 1e-4, sample_t_ns.size)
+    enc_stamp = START_NS + sample_t_ns[received]
+    enc_y, enc_wheel = y_all[received], wheel_pos[received]
     enc_log = enc_stamp + _latencies(rng, enc_stamp.size)
-    cmd_log = START_NS + rec.command_t_ns
+    cmd_log = START_NS + command_t_ns
+    logs, kinds, items = [cmd_log, enc_log], [0, 1], [cmd_n, enc_log.size]
+    mot_stamp = mot_y = np.empty(0)
+    if motor is not None:
+        mot_stamp = START_NS + sample_t_ns[motor[1]]
+        mot_y = motor[0][motor[1]]
+        logs.append(mot_stamp + _latencies(rng, mot_stamp.size))
+        kinds.append(2)
+        items.append(mot_stamp.size)
     # log-time order (a command first when both arrive at the same nanosecond)
-    log = np.concatenate([cmd_log, enc_log])
-    kind = np.concatenate([np.zeros(cmd_n, np.int8), np.ones(enc_log.size, np.int8)])
-    item = np.concatenate([np.arange(cmd_n), np.arange(enc_log.size)])
+    log = np.concatenate(logs)
+    kind = np.concatenate([np.full(n, k_, np.int8) for k_, n in zip(kinds, items, strict=True)])
+    item = np.concatenate([np.arange(n) for n in items])
     order = np.lexsort((item, kind, log))
     with BagWriter(path) as writer:
-        writer.set_custom_data(TRUTH_KEY, custom[TRUTH_KEY])
+        for key, value in custom.items():
+            writer.set_custom_data(key, value)
         writer.add_topic(COMMAND_TOPIC, Float64MultiArray.ros_type)
         writer.add_topic(ENCODER_TOPIC, JointState.ros_type)
+        if motor is not None:
+            writer.add_topic(MOTOR_TOPIC, JointState.ros_type)
         for j in order:
             i = int(item[j])
             if kind[j] == 0:
-                values = (float(rec.command_u[i]), float(wheel_cmd[i]))
+                values = (float(command_u[i]), float(wheel_cmd[i]))
                 writer.write(COMMAND_TOPIC, int(log[j]), command_message(values))
-            else:
+            elif kind[j] == 1:
                 msg = _encoder(int(enc_stamp[i]), (float(enc_y[i]), float(enc_wheel[i])))
                 writer.write(ENCODER_TOPIC, int(log[j]), msg)
-    return SimulatedBag(
-        Path(path),
-        description,
-        cfg.model,
-        end,
-        {
-            COMMAND_TOPIC: (Float64MultiArray.ros_type, cmd_n),
-            ENCODER_TOPIC: (JointState.ros_type, received),
-        },
-        total,
-        custom,
-    )
+            else:
+                msg = _encoder(int(mot_stamp[i]), (float(mot_y[i]),))
+                writer.write(MOTOR_TOPIC, int(log[j]), msg)
+    counts = {
+        COMMAND_TOPIC: (Float64MultiArray.ros_type, cmd_n),
+        ENCODER_TOPIC: (JointState.ros_type, int(enc_stamp.size)),
+    }
+    if motor is not None:
+        counts[MOTOR_TOPIC] = (JointState.ros_type, int(mot_stamp.size))
+    return counts
 
 
 class FedRecord(NamedTuple):

@@ -173,7 +173,9 @@ def _cmd_identify(args: argparse.Namespace) -> int:
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
-    if args.bag or args.scenario:
+    if not args.physics and (args.bandwidth is not None or args.motor_encoder):
+        raise GenBacklashError("--bandwidth and --motor-encoder apply to --physics VARIANT")
+    if args.bag or args.scenario or args.physics:
         return replay_cli.simulate_bag(args)
     if args.example is None or not args.output:
         raise GenBacklashError("give --example N and -o FILE.csv (or --bag DIR for a bag)")

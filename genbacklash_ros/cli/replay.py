@@ -20,7 +20,7 @@ from genbacklash_core.scenarios import PHASE_KINDS
 from genbacklash_ros.bags.bagio import BagError, read_aligned
 from genbacklash_ros.bags.csvio import Series, read_series_csv
 from genbacklash_ros.bags.replay import OUTPUT_TOPICS, ReplayResult, replay
-from genbacklash_ros.bags.simbags import COMMAND_TOPIC, ENCODER_TOPIC, SimulatedBag
+from genbacklash_ros.bags.simbags import COMMAND_TOPIC, ENCODER_TOPIC, MOTOR_TOPIC, SimulatedBag
 from genbacklash_ros.node.parameters import (
     PARAMETER_SPECS,
     NodeParameters,
@@ -28,6 +28,7 @@ from genbacklash_ros.node.parameters import (
     parameter_table,
     parse_param_overrides,
 )
+from genbacklash_ros.physics.variants import DEFAULT_BANDWIDTH, VARIANTS
 
 __all__ = [
     "BATCH_PARAMETERS",
@@ -294,9 +295,24 @@ bag stores its truth (models at start and end, dead zones over time) in its meta
 """
 
 
+PHYSICS_VARIANTS = tuple(VARIANTS)
+"""``--physics`` values (:data:`genbacklash_ros.physics.variants.VARIANTS`)."""
+
+_PHYSICS_HELP = """\
+--physics VARIANT runs the operation scenario's motion, clocks and encoder on a drivetrain
+simulated by MuJoCo (pip install 'genbacklash[physics]'): a position servo (--bandwidth, 10 N m)
+drives a rotor whose pin sits in a slot of the load with 4 degrees of play. near_ideal: a
+stiff, frictional load; coasting: a load that coasts into the play; compliant: a spring
+coupling after the play; gravity: gravity holds the load on one flank over part of the
+travel. The truth in the metadata is the quasi-static characteristic measured by a slow sweep
+in the simulator; the geometric play and every physics parameter are stored with it.
+"""
+
+
 def add_simulate_bag_options(parser: argparse.ArgumentParser) -> None:
     """The bag options of ``simulate``: ``--bag DIR``, ``--scenario``, ``--phases``,
-    ``--duration``, ``--wear``, ``--loss``, ``--noise``, ``--straight``."""
+    ``--duration``, ``--wear``, ``--loss``, ``--noise``, ``--straight``, ``--physics``,
+    ``--bandwidth``, ``--motor-encoder``."""
     parser.add_argument(
         "--bag",
         metavar="DIR",
@@ -356,6 +372,29 @@ def add_simulate_bag_options(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="operation scenarios: straight branches (the ideal backlash, same play) instead "
         "of mildly curved ones",
+    )
+    physics = parser.add_argument_group("physics drivetrains", _PHYSICS_HELP)
+    physics.add_argument(
+        "--physics",
+        metavar="VARIANT",
+        choices=PHYSICS_VARIANTS,
+        default=None,
+        help="simulate the operation scenario on a physics drivetrain: "
+        f"{', '.join(PHYSICS_VARIANTS)} (needs --bag; takes --duration (default 40) or "
+        "--phases, --loss, --noise)",
+    )
+    physics.add_argument(
+        "--bandwidth",
+        type=float,
+        metavar="HZ",
+        default=None,
+        help=f"--physics: the servo's bandwidth, Hz (default {DEFAULT_BANDWIDTH:g})",
+    )
+    physics.add_argument(
+        "--motor-encoder",
+        action="store_true",
+        help=f"--physics: also write the rotor's position on {MOTOR_TOPIC} "
+        "(sensor_msgs/JointState, joint drive_joint)",
     )
 
 
@@ -427,13 +466,77 @@ def _write_operation_bag(args: argparse.Namespace) -> SimulatedBag:
     return write_operation_bag(args.bag, settings, args.seed)
 
 
+def _write_physics_bag(args: argparse.Namespace) -> SimulatedBag:
+    """``--physics VARIANT``: the operation scenario on a physics drivetrain as a bag."""
+    import math
+
+    from genbacklash_ros.physics import require_mujoco
+
+    if not args.bag:
+        raise GenBacklashError("--physics writes a bag: give --bag DIR")
+    clashing = [
+        name
+        for name, given in (
+            ("-o", bool(args.output)),
+            ("--example", args.example is not None),
+            ("--scenario", bool(args.scenario)),
+            ("--wear", args.wear is not None),
+            ("--straight", args.straight),
+            ("--snr", args.snr is not None),
+            ("--samples", args.samples is not None),
+        )
+        if given
+    ]
+    if clashing:
+        raise GenBacklashError(
+            f"--physics does not take {', '.join(clashing)} (it takes --duration or --phases, "
+            "--loss, --noise, --bandwidth, --motor-encoder, --seed)"
+        )
+    if args.phases:
+        if args.duration is not None:
+            raise GenBacklashError("--phases sets the length of the record: drop --duration")
+        phases = parse_phases(args.phases)
+    else:
+        duration = 40.0 if args.duration is None else args.duration
+        if not (math.isfinite(duration) and 0 < duration <= 3600):
+            raise GenBacklashError(f"--duration must lie in (0, 3600] seconds, got {duration:g}")
+        phases = (("operation", float(duration)),)
+    loss = 0.02 if args.loss is None else args.loss
+    noise = 0.0 if args.noise is None else args.noise
+    if not 0.0 <= loss <= 0.95:
+        raise GenBacklashError(f"--loss must lie in [0, 0.95], got {loss:g}")
+    if not (math.isfinite(noise) and noise >= 0.0):
+        raise GenBacklashError(f"--noise must be >= 0 radians, got {noise:g}")
+    from genbacklash_core.scenarios import OperationSettings
+    from genbacklash_ros.physics.variants import BANDWIDTH_RANGE, variant
+
+    low, high = BANDWIDTH_RANGE
+    if args.bandwidth is not None and not low <= args.bandwidth <= high:  # NaN fails too
+        raise GenBacklashError(
+            f"--bandwidth must lie in [{low:g}, {high:g}] Hz, got {args.bandwidth:g}"
+        )
+    params = variant(args.physics, bandwidth=args.bandwidth)
+    require_mujoco()
+    from genbacklash_ros.physics.bag import write_physics_bag
+
+    settings = OperationSettings(phases=phases, loss=loss, noise=noise)
+    return write_physics_bag(
+        args.bag, params, settings, args.seed, motor_encoder=args.motor_encoder
+    )
+
+
 def simulate_bag(args: argparse.Namespace) -> int:
-    """Write the bag ``simulate`` asked for (``--bag`` with ``--example``, ``--scenario`` or
-    ``--phases``)."""
+    """Write the bag ``simulate`` asked for (``--bag`` with ``--example``, ``--scenario``,
+    ``--phases`` or ``--physics``)."""
     import math
 
     from genbacklash_ros.bags.simbags import write_drivetrain_bag, write_example_bag
 
+    if getattr(args, "physics", None):
+        physics = _write_physics_bag(args)
+        topics = ", ".join(f"{t} ({m}, {n})" for t, (m, n) in physics.counts.items())
+        print(f"wrote {physics.path}: {physics.description}; {topics}", file=sys.stderr)
+        return EXIT_OK
     phases = getattr(args, "phases", None)
     what = "--phases" if phases else "--scenario"
     if not args.bag:
