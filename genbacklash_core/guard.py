@@ -76,10 +76,11 @@ class GuardSettings:
 
     Examples
     --------
-    >>> GuardSettings(rho_full=0.9, rho_off=0.5)
-    Traceback (most recent call last):
-    ...
-    genbacklash_core.errors.GenBacklashError: rho_full must be > 0 and below rho_off, got 0.9 and 0.5
+    >>> try:
+    ...     GuardSettings(rho_full=0.9, rho_off=0.5)
+    ... except GenBacklashError as err:
+    ...     print(err)
+    rho_full must be > 0 and below rho_off, got 0.9 and 0.5
     """
 
     window: int = 5000

@@ -229,8 +229,8 @@ def check_paths(args: argparse.Namespace) -> None:
         clash = _conflict(real, inputs)
         if clash:
             raise OutputPathError(
-                f"{option.label} {value} {clash}; choose a path for {option.label} outside every input "
-                "(nothing was written)"
+                f"{option.label} {value} {clash}; choose a path for {option.label} outside "
+                "every input (nothing was written)"
             )
     overwrite = bool(getattr(args, "overwrite", False))
     for option, value, real in outputs:

@@ -3,6 +3,7 @@ cuts, and it fades compensation out where it would not help (issue 23, deliverab
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -12,8 +13,8 @@ from hypothesis import strategies as st
 
 from genbacklash_core import (
     CompensationGuard,
-    GeneralBacklash,
     GenBacklashError,
+    GeneralBacklash,
     GuardSettings,
     compensate,
     simulate_backlash,
@@ -104,7 +105,7 @@ def test_evidence_moves_trust_from_one_to_the_judgement() -> None:
         part = slice(start, start + 200)
         trusts.append(guard.update(u[part], y[part], np.zeros(200, dtype=bool), wrong).trust)
     assert trusts[0] == pytest.approx(0.8)  # 200 of 1000 samples of evidence, fit 0
-    assert all(a >= b for a, b in zip(trusts, trusts[1:], strict=False))
+    assert all(a >= b for a, b in itertools.pairwise(trusts))
     assert trusts[-1] == 0.0
 
 
