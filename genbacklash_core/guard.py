@@ -52,7 +52,11 @@ from .cascade import Cascade
 from .errors import GenBacklashError
 from .simulate import simulate_backlash
 
-__all__ = ["CompensationGuard", "GuardSettings", "GuardVerdict"]
+__all__ = ["HISTORY", "CompensationGuard", "GuardSettings", "GuardVerdict"]
+
+HISTORY = 3
+"""Windows of samples the guard remembers to judge a new model on (the exponential weight
+of older samples is below exp(-3), 5 %)."""
 
 
 @dataclass(frozen=True)
@@ -150,6 +154,10 @@ class CompensationGuard:
 
     def reset(self) -> None:
         """Forget every judgement (a restart of identification)."""
+        # the latest samples (up to HISTORY windows): a new model is judged on them at once
+        self._history: list[tuple[FloatArray, FloatArray, np.ndarray]] = []
+        self._held = 0
+        self._model: GeneralBacklash | Cascade | None = None
         self._x: float | None = None  # the model's free-run output after the last sample
         self._sum_model = 0.0  # exponentially weighted sums of the squared errors
         self._sum_none = 0.0
@@ -178,11 +186,49 @@ class CompensationGuard:
         y = np.asarray(ys, dtype=np.float64)
         if u.size == 0:
             return self.verdict
+        brk = np.asarray(breaks, dtype=bool)
+        self._remember(u, y, brk)
         if model is None:
             self._x = None
             return self.verdict
+        if model != self._model:
+            return self.adopt(model)  # the batch is in the history it is judged on
+        self._judge_batch(u, y, brk, model)
+        self.verdict = self._judge()
+        return self.verdict
+
+    def adopt(self, model: GeneralBacklash | Cascade | None) -> GuardVerdict:
+        """A new model is in use: judge it at once on the samples remembered (the last
+        ``HISTORY`` windows), so that its verdict does not wait for new evidence."""
+        if model is None or model == self._model:
+            self._model = model if model is not None else self._model
+            return self.verdict
+        self._model = model
+        self._x = None
+        self._sum_model = self._sum_none = self._weight = 0.0
+        self._samples = 0
+        if self._history:
+            u = np.concatenate([h[0] for h in self._history])
+            y = np.concatenate([h[1] for h in self._history])
+            brk = np.concatenate([h[2] for h in self._history])
+            brk[0] = True
+            self._judge_batch(u, y, brk, model)
+        self.verdict = self._judge()
+        return self.verdict
+
+    def _remember(self, u: FloatArray, y: FloatArray, brk: np.ndarray) -> None:
+        history = self._history
+        history.append((u, y, brk))
+        self._held += u.size
+        cap = HISTORY * self.settings.window
+        while self._held - history[0][0].size >= cap:
+            self._held -= history.pop(0)[0].size
+
+    def _judge_batch(
+        self, u: FloatArray, y: FloatArray, brk: np.ndarray, model: GeneralBacklash | Cascade
+    ) -> None:
+        """Run the model free on one batch and add both errors to the window."""
         backlash = model.backlash if isinstance(model, Cascade) else model
-        brk = np.asarray(breaks, dtype=bool)
         if brk.size and brk[0]:
             self._x = None  # the batch does not follow the last one
         starts = [0, *(np.flatnonzero(brk[1:]) + 1).tolist()]
@@ -201,8 +247,6 @@ class CompensationGuard:
                 predicted[start:stop] = np.nan
             self._x = float(predicted[stop - 1])
         self._accumulate(y - predicted, y - u)
-        self.verdict = self._judge()
-        return self.verdict
 
     def _accumulate(self, e_model: FloatArray, e_none: FloatArray) -> None:
         ok = np.isfinite(e_model) & np.isfinite(e_none)

@@ -48,6 +48,7 @@ import numpy as np
 
 from genbacklash_core import GenBacklashError
 from genbacklash_core.samples import lift_bridged, missing_readings, monotone_paths
+from genbacklash_core.settling import carry_marks, settling_keep
 from genbacklash_ros.bags.output_marker import mark_output
 from genbacklash_ros.bags.raw_values import RawValueReader
 from genbacklash_ros.bags.rosbags_types import from_rosbags, jazzy_typestore, to_rosbags
@@ -914,6 +915,7 @@ def align(
     *,
     marks: np.ndarray | None = None,
     bridge: bool = False,
+    settle_ns: int = 0,
 ) -> AlignedSeries:
     """Zero-order-hold alignment of a command stream to encoder times (batch form).
 
@@ -940,6 +942,17 @@ def align(
     ct = np.asarray(cmd_t, dtype=np.int64)
     et = np.asarray(enc_t, dtype=np.int64)
     k = np.searchsorted(ct, et, side="right") - 1
+    if settle_ns:  # the node's settling rule: such readings are taken out as lost ones
+        held = k >= 0
+        settled, _ = settling_keep(
+            et[held], np.asarray(cmd_u, dtype=np.float64)[k[held]], settle_ns
+        )
+        if not settled.all():
+            taken = np.ones(et.size, dtype=bool)
+            taken[np.flatnonzero(held)[~settled]] = False
+            if marks is not None:
+                marks = carry_marks(marks, taken)
+            et, enc_y, k = et[taken], np.asarray(enc_y)[taken], k[taken]
     keep = k >= 0
     period = record_period(et)
     linked = link_breaks(et, period)
@@ -995,9 +1008,10 @@ def read_aligned(
     joint: str = "",
     command_index: int = 0,
     bridge: bool = False,
+    settle_ns: int = 0,
 ) -> AlignedSeries:
     """Read a command and an encoder topic from a bag and align them (see :func:`align`;
-    ``bridge`` for a backlash alone).
+    ``bridge`` for a backlash alone; ``settle_ns`` the servo's settling rule, as the node).
 
     Times are header stamps when the message has a non-zero one, else the log time (the
     pipeline's default ``stamp_source = "header"``). Messages the adapters reject (joint
@@ -1052,7 +1066,7 @@ def read_aligned(
         seen = np.cumsum(e_m)[unique]
         e_m = np.diff(seen, prepend=0) > 0
         e_t, e_y = e_t[unique], e_y[unique]
-    series = align(c_t, c_u, e_t, e_y, marks=e_m, bridge=bridge)
+    series = align(c_t, c_u, e_t, e_y, marks=e_m, bridge=bridge, settle_ns=settle_ns)
     if series.t.size == 0:
         raise BagError(f"no encoder reading on {encoder_topic!r} follows the first command")
     return series

@@ -141,6 +141,7 @@ def load_bag_series(
         joint=joint,
         command_index=index,
         bridge=bridge,
+        settle_ns=params.settle_ns if params is not None else 0,
     )
     if series.skipped:
         print(
@@ -178,7 +179,7 @@ def load_series(
 # --------------------------------------------------------------------------- node parameters
 
 # what identify and diagnose use of the node's parameters (the rest is validated, then ignored)
-BATCH_PARAMETERS = ("model", "degree", "na", "nb")
+BATCH_PARAMETERS = ("model", "degree", "na", "nb", "settle_time")
 _BAG_PARAMETERS = ("joint", "command_index")
 # set by the replay itself (genbacklash_ros.bags.replay): the bag's message types, the recorded
 # command, no checkpoint

@@ -34,6 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from genbacklash_core.settling import SettleState, carry_marks, settling_keep
 from genbacklash_ros.node.sample_rule import EncoderPeriod
 
 __all__ = ["MAX_COMMANDS", "AlignedBatch", "Aligner"]
@@ -116,12 +117,18 @@ class Aligner:
         Sample on the grid ``k * grid_ns`` (0: one sample per encoder reading).
     wait_ns : int
         Encoder time after which a sample's command is taken as held.
+    settle_ns : int
+        The servo's settling time (:mod:`genbacklash_core.settling`): samples taken sooner
+        after their command changed are taken out as lost readings are (0: none). Not on a
+        grid.
     """
 
-    def __init__(self, *, use_header: bool, grid_ns: int, wait_ns: int) -> None:
+    def __init__(self, *, use_header: bool, grid_ns: int, wait_ns: int, settle_ns: int = 0) -> None:
         self._use_header = use_header
         self._grid_ns = grid_ns
         self._wait = wait_ns
+        self._settle_ns = 0 if grid_ns else settle_ns
+        self._settle = SettleState()
         # streams: accepted times and values (commands: what the identifier takes)
         self.cmd_t: list[int] = []
         self.cmd_u: list[float] = []
@@ -295,6 +302,19 @@ class Aligner:
             marks[0] = True  # the samples before it were taken out
         commands = np.array(self.cmd_u)
         us = commands[k]
+        if self._settle_ns:
+            settled, self._settle = settling_keep(times, us, self._settle_ns, self._settle)
+            if not settled.all():  # taken out as lost readings: bridged where monotone
+                marks = carry_marks(marks, settled)
+                k, us, ys, times, held = (
+                    k[settled],
+                    us[settled],
+                    ys[settled],
+                    times[settled],
+                    held[settled],
+                )
+                if k.size == 0:
+                    return None
         monotone = None if self._grid_ns else self._monotone(k, linked)
         keep = int(k[-1])  # the command holding at the last sample, and later ones
         if keep:

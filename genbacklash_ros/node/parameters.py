@@ -323,6 +323,18 @@ PARAMETER_SPECS: tuple[ParameterSpec, ...] = (
         unit="Hz",
     ),
     ParameterSpec(
+        "settle_time",
+        "double",
+        0.005,
+        "Time a new command takes the servo to reach (its settling): samples taken sooner "
+        "after the command changed are not identified from (applies when commands change "
+        "more slowly than the encoder samples); 0: every sample.",
+        0.0,
+        1.0,
+        unit="s",
+        restarts=True,
+    ),
+    ParameterSpec(
         "sample_period",
         "double",
         0.0,
@@ -400,6 +412,7 @@ class NodeParameters:
     checkpoint_file: str = ""
     checkpoint_period: float = 10.0
     publish_rate: float = 10.0
+    settle_time: float = 0.005
     sample_period: float = 0.0
     stamp_source: Literal["header", "receive"] = "header"
 
@@ -494,6 +507,11 @@ class NodeParameters:
     def guard_settings(self) -> GuardSettings:
         """How the compensation guard judges (:class:`~genbacklash_core.guard.GuardSettings`)."""
         return GuardSettings(enabled=self.compensation_guard)
+
+    @property
+    def settle_ns(self) -> int:
+        """``settle_time`` in integer nanoseconds."""
+        return round(self.settle_time * 1e9)
 
     @property
     def sample_period_ns(self) -> int:

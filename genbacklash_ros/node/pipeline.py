@@ -134,7 +134,7 @@ from typing import Literal, TypeAlias
 import numpy as np
 
 from genbacklash_core import Estimate, GenBacklashError, OnlineIdentifier
-from genbacklash_core.guard import CompensationGuard
+from genbacklash_core.guard import CompensationGuard, GuardVerdict
 from genbacklash_ros.node.align import Aligner
 from genbacklash_ros.node.batch import BlockView
 from genbacklash_ros.node.checkpoint import Checkpoint, CheckpointError, save_checkpoint, warm_start
@@ -425,6 +425,7 @@ class BacklashPipeline:
             use_header=params.stamp_source == "header",
             grid_ns=params.sample_period_ns,
             wait_ns=self._wait,
+            settle_ns=params.settle_ns,
         )
         self._screen = Screen(bridge=params.model == "backlash")
         self._comp = CompensateStage(params.compensator_options(), compensate=params.compensate)
@@ -480,6 +481,11 @@ class BacklashPipeline:
         """The estimate in use: the identifier's latest, or the checkpoint's until the
         identifier's own has converged or is at least as confident."""
         return self._use.current
+
+    @property
+    def guard(self) -> GuardVerdict:
+        """The compensation guard's latest verdict (:mod:`genbacklash_core.guard`)."""
+        return self._guard.verdict
 
     @property
     def using_checkpoint(self) -> bool:
@@ -1130,6 +1136,8 @@ class BacklashPipeline:
             else:
                 self._drop("identifier_behind", result.reason, result.samples)
         if adopted is not None:
+            # the new model judged at once on the samples the guard remembers
+            self._comp.trust = self._guard.adopt(self._use.current.model).trust
             self._comp.adopt(self._use.current, self._align.last_y)
             if self._comp.problems:
                 self._problems(self._comp.problems)

@@ -176,3 +176,21 @@ def test_trust_stays_in_range_and_a_state_says_it(
     assert 0.0 <= verdict.trust <= 1.0
     assert verdict.state == {0.0: "off", 1.0: "on"}.get(verdict.trust, "faded")
     assert math.isfinite(verdict.model_rms) and verdict.samples == 800
+
+
+def test_a_new_model_is_judged_at_once_on_the_samples_remembered() -> None:
+    u = 0.3 * np.sin(np.linspace(0.0, 60.0, 6000))
+    true = GeneralBacklash.ideal(1.0, 0.04, 0.04)
+    y = simulate_backlash(true, u)
+    guard = CompensationGuard()
+    for start in range(0, 6000, 500):
+        part = slice(start, start + 500)
+        guard.update(u[part], y[part], np.zeros(500, dtype=bool), true)
+    assert guard.verdict.state == "on"
+    verdict = guard.adopt(GeneralBacklash.ideal(1.0, 0.12, 0.12))
+    assert verdict.state == "off" and verdict.samples == 6000  # no wait for new evidence
+    assert guard.adopt(true).state == "on"
+    # history before the first model counts too
+    fresh = CompensationGuard()
+    fresh.update(u, y, np.zeros(u.size, dtype=bool), None)
+    assert fresh.update(u[:10], y[:10], np.zeros(10, dtype=bool), true).samples == 6010
