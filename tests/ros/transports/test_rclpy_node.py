@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import signal
+import subprocess
 import sys
 import threading
 import time
@@ -287,25 +288,54 @@ def test_ros2_param_set_moves_a_pair_in_either_order(
         node.destroy_node()
 
 
+# A publisher of std_msgs/Float64 on /command, in a process of its own: Fast DDS (the wheels'
+# RMW) refuses a second type on a topic within one process ("create_publisher() called for
+# existing topic name rt/command with incompatible type"), as two ROS 2 nodes do not share one.
+# It says "ready" once the publisher exists and runs until its stdin closes.
+_WRONG_TYPE_PUBLISHER = """
+import sys
+import rclpy
+from std_msgs.msg import Float64
+rclpy.init(domain_id=int(sys.argv[1]))
+node = rclpy.create_node("wrong_type_publisher")
+node.create_publisher(Float64, "/command", 10)
+print("ready", flush=True)
+sys.stdin.read()
+node.destroy_node()
+rclpy.try_shutdown()
+"""
+
+
 @needs_rclpy
 def test_pending_pair_and_wiring_are_in_the_diagnostics(ros_args: list[str]) -> None:
-    """A publisher of std_msgs/Float64 on /command while the node subscribes
-    Float64MultiArray: 0 commands, and the diagnostics name the type and command_type."""
+    """A publisher of std_msgs/Float64 on /command (another process) while the node
+    subscribes Float64MultiArray: 0 commands, and the diagnostics name the type and
+    command_type."""
     import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.executors import SingleThreadedExecutor
-    from std_msgs.msg import Float64 as RosFloat64
 
     from genbacklash_ros.transports import rclpy_node
 
     node = rclpy_node.BacklashIdentifierNode()
-    peer = rclpy.create_node("wrong_type_publisher")
+    peer = rclpy.create_node("diagnostics_listener")
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     executor.add_node(peer)
+    domain = rclpy.get_default_context().get_domain_id()
+    wrong = subprocess.Popen(
+        [sys.executable, "-c", _WRONG_TYPE_PUBLISHER, str(domain)],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert node.check_wiring() == ()
-        peer.create_publisher(RosFloat64, "/command", 10)
-        deadline = time.monotonic() + 10.0
+        assert wrong.stdout is not None and wrong.stdout.readline().strip() == "ready", (
+            wrong.communicate(timeout=30)
+        )
+        deadline = time.monotonic() + 15.0
         while not node.check_wiring():
             assert time.monotonic() < deadline, "discovery did not show the publisher"
             executor.spin_once(timeout_sec=0.05)
@@ -314,8 +344,6 @@ def test_pending_pair_and_wiring_are_in_the_diagnostics(ros_args: list[str]) -> 
         assert "std_msgs/msg/Float64MultiArray" in line
         assert "set parameter command_type to float64" in line
         received: list[Any] = []
-        from diagnostic_msgs.msg import DiagnosticArray
-
         peer.create_subscription(DiagnosticArray, "/diagnostics", received.append, 10)
         deadline = time.monotonic() + 10.0
         while not received:
@@ -327,10 +355,13 @@ def test_pending_pair_and_wiring_are_in_the_diagnostics(ros_args: list[str]) -> 
         assert values["wiring"] == line and line in status.message
         assert status.level >= bytes([1])
         assert values["parameters_pending"] == "ok"
+        assert values["commands"] == "0"  # the Float64 messages never reach the node
     finally:
+        _, err = wrong.communicate(timeout=30)  # closes its stdin: it ends
         executor.shutdown()
         peer.destroy_node()
         node.destroy_node()
+    assert wrong.returncode == 0, err
 
 
 @needs_rclpy
