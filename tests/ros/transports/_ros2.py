@@ -30,8 +30,8 @@ PACKAGE_DIRS = ("resource", "launch", "config", "genbacklash_core", "genbacklash
 
 # the part of a skip reason that says where the pieces missing from PyPI come from
 NOT_ON_PYPI = (
-    "is not on PyPI (the ros extra has rclpy and the messages only); it comes with a ROS 2 "
-    "Jazzy installation (apt), sourced"
+    "not on PyPI (the ros extra has rclpy and the messages only): install ROS 2 Jazzy (apt) "
+    "and source it"
 )
 
 
@@ -50,14 +50,17 @@ def rclpy_missing() -> str:
     return ""
 
 
+def ros2_command_missing() -> str:
+    """Why there is no ``ros2`` command here, or ``""`` (without importing rclpy)."""
+    if shutil.which("ros2") is None:
+        return f"the ros2 command is not on PATH: ros2cli is {NOT_ON_PYPI}"
+    return ""
+
+
 @cache
 def ros2_cli_missing() -> str:
     """Why the ``ros2`` command cannot be used here, or ``""``."""
-    if reason := rclpy_missing():
-        return reason
-    if shutil.which("ros2") is None:
-        return f"the ros2 command is not on PATH: ros2cli {NOT_ON_PYPI}"
-    return ""
+    return rclpy_missing() or ros2_command_missing()
 
 
 @cache
@@ -70,7 +73,10 @@ def launch_missing() -> str:
         return reason
     for name in ("launch_ros", "launch_testing"):
         if importlib.util.find_spec(name) is None:
-            return f"{name} cannot be imported: launch, launch_ros and launch_testing {NOT_ON_PYPI}"
+            return (
+                f"{name} cannot be imported: ROS 2 launch (launch, launch_ros, launch_testing) "
+                f"is {NOT_ON_PYPI}"
+            )
     return ""
 
 

@@ -21,7 +21,6 @@ from __future__ import annotations
 import json
 import os
 import random
-import shutil
 import signal
 import subprocess
 import sys
@@ -37,7 +36,7 @@ import pytest
 from genbacklash_core import paper_example
 
 from ._dds import Subscriber, diagnostic_values, start_node, stop_node, wait_for
-from ._ros2 import NOT_ON_PYPI
+from ._ros2 import ros2_command_missing
 
 pytest.importorskip("cyclonedds", reason="cyclonedds is not installed (pip install .[dds])")
 
@@ -59,9 +58,7 @@ _PROBLEM = _rclpy_problem()
 if _PROBLEM is not None:
     pytest.skip(_PROBLEM, allow_module_level=True)
 
-ROS2_MISSING = (
-    "" if shutil.which("ros2") else f"the ros2 command is not on PATH: ros2cli {NOT_ON_PYPI}"
-)
+ROS2_MISSING = ros2_command_missing()
 needs_ros2 = pytest.mark.skipif(bool(ROS2_MISSING), reason=ROS2_MISSING or "-")
 
 HERE = Path(__file__).parent
