@@ -193,17 +193,11 @@ def test_ros2_topic_echo_reads_the_estimate(interop: Interop) -> None:
     assert "m_left_1,m_left_2" in out and "data:" in out, out
 
 
-def test_no_type_hash_warnings_in_the_rclpy_player(interop: Interop) -> None:
-    """rclpy's RMW reads each DDS endpoint's USER_DATA type hash of the node on discovery."""
-    count = interop.player_stderr.count(TYPE_HASH_WARNING)
-    print(f"'{TYPE_HASH_WARNING}' lines in the rclpy player: {count}")
-    assert count == 0, interop.player_stderr
-
-
 @needs_ros2
 def test_no_type_hash_warnings_in_any_ros2_cli_process(interop: Interop) -> None:
     assert interop.echo and interop.node_list and interop.topic_info
     outputs = {
+        "rclpy player": interop.player_stderr,
         "ros2 topic echo": interop.echo.stderr,
         "ros2 node list": interop.node_list.stderr,
         "ros2 topic info": interop.topic_info.stderr,
@@ -228,6 +222,9 @@ def test_rclpy_sees_the_node_and_its_type_hashes(interop: Interop) -> None:
     theirs = {(e["topic"], e["type"]): e["type_hash"] for e in endpoints if e not in ours}
     for e in ours:
         assert e["type_hash"] == theirs[(e["topic"], e["type"])], e
+    # (rmw_cyclonedds also warns of a hash it cannot parse; Fast DDS, the wheels' RMW, shows
+    # it as INVALID above without a word)
+    assert TYPE_HASH_WARNING not in interop.player_stderr
 
 
 @needs_ros2
