@@ -1,6 +1,6 @@
 """ROS 2 latency: the node launched by ``ros2 launch``, fed at 1 kHz over rclpy, next to an echo.
 
-    source /opt/ros2_jazzy/setup.bash
+    source /opt/ros/jazzy/setup.bash   # ros2 launch is not on PyPI: a ROS 2 Jazzy install
     python bench/ros_latency.py [--seconds S] [--warmup S] [--rate HZ] [--load] [--quick]
 
 Three processes share a DDS domain of their own (an id in 201-231, apart from the tests'):
@@ -52,7 +52,7 @@ from genbacklash_core import paper_example
 from genbacklash_core.scenarios import OperationRecord
 
 sys.path.insert(0, str(ROOT))
-from tests.ros.transports._ros2 import colcon_build, ros2_cli_missing, workspace_env
+from tests.ros.transports._ros2 import colcon_build, ros2_launch_missing, workspace_env
 
 SEED = 1
 PING, PONG = "/ros_latency/ping", "/ros_latency/pong"
@@ -544,7 +544,7 @@ def main(argv: list[str] | None = None) -> int:
         + ("_operation" if args.scenario == "operation" else "")
         + ("_load" if args.load else "")
     )
-    if reason := ros2_cli_missing():
+    if reason := ros2_launch_missing():
         # run_all goes on: the section says why it has no numbers
         level = "##" if name == "ros_latency" else "###"  # the others are its subsections
         write_section(name, f"{level} ROS 2 latency ({name})\n\nSkipped: {reason}.")

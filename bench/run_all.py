@@ -35,8 +35,8 @@ BENCHMARKS = (
     "fleet",
     "fleet_kill",
 )
-# sections written by another script's run with arguments (the ROS 2 ones need the bundle
-# sourced; without it they write a section that says so)
+# sections written by another script's run with arguments (the ROS 2 ones need `ros2 launch`,
+# a sourced ROS 2 installation: not on PyPI; without it they write a section that says so)
 RUNS = {
     "ros_latency_load": ("ros_latency", ["--load", "--rate", "500", "--warmup", "4"]),
     "ros_latency_operation": ("ros_latency", ["--scenario", "operation", "--seeds", "0", "1", "2"]),

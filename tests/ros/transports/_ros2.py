@@ -1,15 +1,18 @@
-"""What the tests that need a real ROS 2 share: whether rclpy imports, and why not; a DDS
-domain of their own; one ``colcon build`` of this repository per test session; the
-environment of that workspace.
+"""What the tests that need a real ROS 2 share: whether rclpy, the ``ros2`` command, launch and
+colcon are there, and why not; a DDS domain of their own; one ``colcon build`` of this
+repository per test session; the environment of that workspace.
 
 rclpy and the ROS message packages are imported lazily, so that this module imports (and is
-collected for doctests) without ROS. The bundled ROS 2 Jazzy (``../shared/ros2``, GUIDE §5)
-is found at ``/opt/ros2_jazzy`` or ``$GENBACKLASH_ROS2_PREFIX``.
+collected for doctests) without ROS. They come from the ROS 2 Jazzy wheels on PyPI (the ``ros``
+extra, part of ``dev``: GUIDE §5) or from a sourced ROS 2 installation. ``ros2`` (ros2cli),
+``launch``/``launch_ros``/``launch_testing`` and ``rosbag2`` are not on PyPI: the tests that need
+them run only in a sourced ROS 2 Jazzy installation and skip elsewhere with that reason.
 """
 
 from __future__ import annotations
 
 import importlib
+import importlib.util
 import os
 import random
 import shutil
@@ -19,11 +22,17 @@ from functools import cache
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[3]
-ROS2_PREFIX = Path(os.environ.get("GENBACKLASH_ROS2_PREFIX") or "/opt/ros2_jazzy")
 
 # What a colcon workspace needs of this repository (the bags, tests and benchmarks are not).
 PACKAGE_FILES = ("pyproject.toml", "setup.py", "setup.cfg", "package.xml", "README.md")
 PACKAGE_DIRS = ("resource", "launch", "config", "genbacklash_core", "genbacklash_ros")
+
+
+# the part of a skip reason that says where the pieces missing from PyPI come from
+NOT_ON_PYPI = (
+    "not on PyPI (the ros extra has rclpy and the messages only): install ROS 2 Jazzy (apt) "
+    "and source it"
+)
 
 
 @cache
@@ -33,33 +42,58 @@ def rclpy_missing() -> str:
         importlib.import_module("rclpy")
         importlib.import_module("std_msgs.msg")
     except Exception as err:  # ImportError, or a shared library that does not load (OSError)
-        if (ROS2_PREFIX / "setup.bash").is_file():
-            return (
-                f"rclpy cannot be imported ({type(err).__name__}: {err}); ROS 2 is installed "
-                f"at {ROS2_PREFIX}: source {ROS2_PREFIX}/setup.bash before running the tests "
-                "(.ci/run does)"
-            )
         return (
-            "rclpy cannot be imported: ROS 2 Jazzy is not installed here (rclpy is not on "
-            "PyPI); install the bundle with `bash ../shared/ros2/install` as root and source "
-            f"{ROS2_PREFIX}/setup.bash (.ci/run does both when ../shared/ros2 is there)"
+            f"rclpy cannot be imported ({type(err).__name__}: {err}): install the ROS 2 wheels "
+            "with pip install -e '.[ros]' (included in '.[dev]'), or source a ROS 2 Jazzy "
+            "installation"
         )
+    return ""
+
+
+def ros2_command_missing() -> str:
+    """Why there is no ``ros2`` command here, or ``""`` (without importing rclpy)."""
+    if shutil.which("ros2") is None:
+        return f"the ros2 command is not on PATH: ros2cli is {NOT_ON_PYPI}"
     return ""
 
 
 @cache
 def ros2_cli_missing() -> str:
-    """Why the ``ros2`` command and colcon cannot be used here, or ``""``."""
+    """Why the ``ros2`` command cannot be used here, or ``""``."""
+    return rclpy_missing() or ros2_command_missing()
+
+
+@cache
+def launch_missing() -> str:
+    """Why ROS 2 launch (``ros2 launch``, ``launch_test``) cannot be used here, or ``""``.
+
+    Looked up by ``launch_ros`` and ``launch_testing``: a bare ``import launch`` would find this
+    repository's ``launch/`` directory (the launch files) as a namespace package."""
     if reason := rclpy_missing():
         return reason
-    if shutil.which("ros2") is None:
-        return "the ros2 command is not on PATH: source the ROS 2 setup.bash"
+    for name in ("launch_ros", "launch_testing"):
+        if importlib.util.find_spec(name) is None:
+            return (
+                f"{name} cannot be imported: ROS 2 launch (launch, launch_ros, launch_testing) "
+                f"is {NOT_ON_PYPI}"
+            )
+    return ""
+
+
+@cache
+def colcon_missing() -> str:
+    """Why ``colcon build`` of this repository cannot run here, or ``""``."""
     try:
         importlib.import_module("colcon_core")
         importlib.import_module("colcon_ros")
     except ImportError:
         return "colcon-core and colcon-ros are not installed (pip install -e '.[dev]')"
     return ""
+
+
+def ros2_launch_missing() -> str:
+    """Why ``ros2 launch`` of this repository's colcon build cannot run here, or ``""``."""
+    return ros2_cli_missing() or launch_missing() or colcon_missing()
 
 
 def domain_id() -> int:

@@ -13,8 +13,8 @@ Run with the ``launch_test`` command in a sourced ROS 2 Jazzy with the package b
 (``test_launch.py`` does that against the session's ``colcon build``):
 ``GENBACKLASH_TEST_DOMAIN_ID=N python -m launch_testing.launch_test
 tests/ros/transports/launch_fed_node.py``. Not a pytest module: launch_testing's pytest plugin
-cannot load under pytest 9 (``../shared/ros2/README.md``). Collected for doctests only, where
-it is skipped without ROS.
+cannot load under pytest 9 (pyproject.toml's addopts). Collected for doctests only, where
+it is skipped without launch_testing.
 """
 
 from __future__ import annotations
@@ -30,8 +30,8 @@ import pytest
 
 pytest.importorskip(
     "launch_testing",
-    reason="launch_testing cannot be imported: this launch_testing file runs under the "
-    "launch_test command in a sourced ROS 2 Jazzy (test_launch.py runs it)",
+    reason="launch_testing cannot be imported (it is not on PyPI): this launch_testing file "
+    "runs under the launch_test command in a sourced ROS 2 Jazzy (test_launch.py runs it)",
 )
 
 import launch_testing.actions

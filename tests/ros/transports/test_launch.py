@@ -1,10 +1,11 @@
 """The launch_testing test (``launch_fed_node.py``) under the ``launch_test`` command, against
 the session's ``colcon build`` of this repository.
 
-launch_testing's pytest plugin cannot load under pytest 9 (``../shared/ros2/README.md``), so
+launch_testing's pytest plugin cannot load under pytest 9 (pyproject.toml's addopts), so
 the test runs as ROS documents it for that case: ``launch_test FILE``, which exits 0 only
 when every test of the file passed (the node fed while it runs, then its exit code and output
-after the launch shut it down). Skipped, with the reason, where ROS 2 or colcon is missing.
+after the launch shut it down). Skipped, with the reason, where launch_testing (not on PyPI:
+it needs a sourced ROS 2 Jazzy installation) or colcon is missing.
 """
 
 from __future__ import annotations
@@ -15,9 +16,10 @@ from pathlib import Path
 
 import pytest
 
-from ._ros2 import built_workspace, domain_id, ros2_cli_missing, workspace_env
+from ._ros2 import built_workspace, colcon_missing, domain_id, launch_missing, workspace_env
 
-pytestmark = pytest.mark.skipif(bool(ros2_cli_missing()), reason=ros2_cli_missing() or "-")
+_MISSING = launch_missing() or colcon_missing()
+pytestmark = pytest.mark.skipif(bool(_MISSING), reason=_MISSING or "-")
 
 LAUNCH_TEST = Path(__file__).resolve().with_name("launch_fed_node.py")
 

@@ -1,13 +1,16 @@
-"""The rclpy node in process, against the real rclpy (the bundled ROS 2 Jazzy, GUIDE §5).
+"""The rclpy node in process, against the real rclpy (ROS 2 Jazzy's wheels from PyPI, the ``ros``
+extra in ``dev``, under Fast DDS; or a sourced ROS 2 installation: GUIDE §5).
 
 Each test makes its own rclpy context on a DDS domain of its own. Skipped, with the reason,
-where rclpy does not import (ROS 2 not installed, or its setup.bash not sourced).
+where rclpy does not import (neither the ros extra installed nor a ROS 2 sourced).
 """
 
 from __future__ import annotations
 
 import os
 import signal
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -23,13 +26,22 @@ from ._ros2 import domain_id, params_file, rclpy_missing
 needs_rclpy = pytest.mark.skipif(bool(rclpy_missing()), reason=rclpy_missing() or "-")
 
 
-@pytest.mark.skipif(not rclpy_missing(), reason="rclpy imports here: the message is not shown")
-def test_without_rclpy_the_cli_says_so(capsys: pytest.CaptureFixture[str]) -> None:
-    with pytest.raises(Exception, match="rclpy cannot be imported"):
+def test_without_rclpy_the_cli_says_so(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Where rclpy does not import, the node's entry points say how to get it: run here with
+    rclpy hidden (``import rclpy`` raises), so it runs whether or not rclpy is installed."""
+    pytest.importorskip("cyclonedds", reason="auto falls back to dds: needs the dds extra")
+    monkeypatch.setitem(sys.modules, "rclpy", None)
+    with pytest.raises(
+        Exception, match=r"rclpy cannot be imported: pip install 'genbacklash\[ros\]'"
+    ):
         choose_transport("rclpy")
     assert choose_transport("auto") == "dds"
     assert ros2_main() == 2
-    assert "genbacklash node --transport dds" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "pip install 'genbacklash[ros]'" in err
+    assert "genbacklash node --transport dds" in err
 
 
 @pytest.fixture
@@ -276,25 +288,54 @@ def test_ros2_param_set_moves_a_pair_in_either_order(
         node.destroy_node()
 
 
+# A publisher of std_msgs/Float64 on /command, in a process of its own: Fast DDS (the wheels'
+# RMW) refuses a second type on a topic within one process ("create_publisher() called for
+# existing topic name rt/command with incompatible type"), as two ROS 2 nodes do not share one.
+# It says "ready" once the publisher exists and runs until its stdin closes.
+_WRONG_TYPE_PUBLISHER = """
+import sys
+import rclpy
+from std_msgs.msg import Float64
+rclpy.init(domain_id=int(sys.argv[1]))
+node = rclpy.create_node("wrong_type_publisher")
+node.create_publisher(Float64, "/command", 10)
+print("ready", flush=True)
+sys.stdin.read()
+node.destroy_node()
+rclpy.try_shutdown()
+"""
+
+
 @needs_rclpy
 def test_pending_pair_and_wiring_are_in_the_diagnostics(ros_args: list[str]) -> None:
-    """A publisher of std_msgs/Float64 on /command while the node subscribes
-    Float64MultiArray: 0 commands, and the diagnostics name the type and command_type."""
+    """A publisher of std_msgs/Float64 on /command (another process) while the node
+    subscribes Float64MultiArray: 0 commands, and the diagnostics name the type and
+    command_type."""
     import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.executors import SingleThreadedExecutor
-    from std_msgs.msg import Float64 as RosFloat64
 
     from genbacklash_ros.transports import rclpy_node
 
     node = rclpy_node.BacklashIdentifierNode()
-    peer = rclpy.create_node("wrong_type_publisher")
+    peer = rclpy.create_node("diagnostics_listener")
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     executor.add_node(peer)
+    domain = rclpy.get_default_context().get_domain_id()
+    wrong = subprocess.Popen(
+        [sys.executable, "-c", _WRONG_TYPE_PUBLISHER, str(domain)],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert node.check_wiring() == ()
-        peer.create_publisher(RosFloat64, "/command", 10)
-        deadline = time.monotonic() + 10.0
+        assert wrong.stdout is not None and wrong.stdout.readline().strip() == "ready", (
+            wrong.communicate(timeout=30)
+        )
+        deadline = time.monotonic() + 15.0
         while not node.check_wiring():
             assert time.monotonic() < deadline, "discovery did not show the publisher"
             executor.spin_once(timeout_sec=0.05)
@@ -303,8 +344,6 @@ def test_pending_pair_and_wiring_are_in_the_diagnostics(ros_args: list[str]) -> 
         assert "std_msgs/msg/Float64MultiArray" in line
         assert "set parameter command_type to float64" in line
         received: list[Any] = []
-        from diagnostic_msgs.msg import DiagnosticArray
-
         peer.create_subscription(DiagnosticArray, "/diagnostics", received.append, 10)
         deadline = time.monotonic() + 10.0
         while not received:
@@ -316,10 +355,13 @@ def test_pending_pair_and_wiring_are_in_the_diagnostics(ros_args: list[str]) -> 
         assert values["wiring"] == line and line in status.message
         assert status.level >= bytes([1])
         assert values["parameters_pending"] == "ok"
+        assert values["commands"] == "0"  # the Float64 messages never reach the node
     finally:
+        _, err = wrong.communicate(timeout=30)  # closes its stdin: it ends
         executor.shutdown()
         peer.destroy_node()
         node.destroy_node()
+    assert wrong.returncode == 0, err
 
 
 @needs_rclpy

@@ -7,7 +7,8 @@ of its own on a DDS domain of its own, and is stopped as a terminal's Ctrl-C sto
 to the whole group (``ros2 launch`` and the node), then a second one. One launch is shared by
 the checks of the default launch (fed, echoed, parameters set), then interrupted; a second
 launch checks the namespace, the params file and the wiring diagnostics. Skipped, with the
-reason, where ROS 2 or colcon is missing.
+reason, where the ``ros2`` command or launch_ros (neither is on PyPI: a sourced ROS 2 Jazzy
+installation has them) or colcon is missing.
 """
 
 from __future__ import annotations
@@ -28,9 +29,9 @@ import yaml
 
 from genbacklash_core import paper_example
 
-from ._ros2 import built_workspace, domain_id, params_file, ros2_cli_missing, workspace_env
+from ._ros2 import built_workspace, domain_id, params_file, ros2_launch_missing, workspace_env
 
-pytestmark = pytest.mark.skipif(bool(ros2_cli_missing()), reason=ros2_cli_missing() or "-")
+pytestmark = pytest.mark.skipif(bool(ros2_launch_missing()), reason=ros2_launch_missing() or "-")
 
 HERE = Path(__file__).resolve().parent
 LAUNCH = ("ros2", "launch", "genbacklash_ros", "backlash_identifier.launch.py")
