@@ -874,9 +874,7 @@ class StreamHealth:
         # a servo's static error or its settling puts a held load a little off the model's
         # band: only a move of a good part of the play is a stuck encoder
         floor = STUCK_PLAY_SHARE * (model.c_left + model.c_right)
-        if not (
-            math.isfinite(move) and move > max(STUCK_SIGMAS * scale, 1e-3 * abs(value), floor)
-        ):
+        if not (math.isfinite(move) and move > max(STUCK_SIGMAS * scale, 1e-3 * abs(value), floor)):
             return ""
         return f" although the model moves the load by {move:.3g} at the command {u:.6g}"
 
