@@ -942,7 +942,7 @@ def align(
     ct = np.asarray(cmd_t, dtype=np.int64)
     et = np.asarray(enc_t, dtype=np.int64)
     k = np.searchsorted(ct, et, side="right") - 1
-    if settle_ns:  # the node's settling rule: such readings are taken out as lost ones
+    if settle_ns and bridge:  # the node's settling rule (a backlash alone): as lost readings
         held = k >= 0
         settled, _ = settling_keep(
             et[held], np.asarray(cmd_u, dtype=np.float64)[k[held]], settle_ns

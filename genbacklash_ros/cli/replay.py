@@ -179,7 +179,9 @@ def load_series(
 # --------------------------------------------------------------------------- node parameters
 
 # what identify and diagnose use of the node's parameters (the rest is validated, then ignored)
-BATCH_PARAMETERS = ("model", "degree", "na", "nb", "settle_time")
+BATCH_PARAMETERS = ("model", "degree", "na", "nb")
+# ... and the rule for which samples are rows (genbacklash_core.settling), on bags
+_ROW_PARAMETERS = ("settle_time",)
 _BAG_PARAMETERS = ("joint", "command_index")
 # set by the replay itself (genbacklash_ros.bags.replay): the bag's message types, the recorded
 # command, no checkpoint
@@ -188,7 +190,7 @@ _SET_BY_REPLAY = ("command_type", "encoder_type", "compensation_in_loop", "check
 
 def batch_parameters(data: str | Path) -> tuple[str, ...]:
     """The node parameters ``identify`` / ``diagnose`` use for ``data`` (a CSV or a bag)."""
-    return BATCH_PARAMETERS + (_BAG_PARAMETERS if is_bag(data) else ())
+    return BATCH_PARAMETERS + (_BAG_PARAMETERS + _ROW_PARAMETERS if is_bag(data) else ())
 
 
 class _ListParams(argparse.Action):

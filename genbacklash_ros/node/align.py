@@ -68,6 +68,9 @@ class AlignedBatch:
         or the last one taken before it when ``linked``) to sample ``k`` were monotone
         (:func:`~genbacklash_core.samples.monotone_paths`), so lost readings between them
         may be bridged for a backlash alone. None on a grid (not judged).
+    resumed : numpy.ndarray of bool or None
+        ``resumed[k]``: samples before ``k`` were taken out while the servo settled
+        (:mod:`genbacklash_core.settling`); None when none were.
     """
 
     times: np.ndarray
@@ -79,6 +82,7 @@ class AlignedBatch:
     linked: bool
     before_first_command: int = 0
     monotone: np.ndarray | None = None
+    resumed: np.ndarray | None = None
 
     @property
     def size(self) -> int:
@@ -129,6 +133,7 @@ class Aligner:
         self._wait = wait_ns
         self._settle_ns = 0 if grid_ns else settle_ns
         self._settle = SettleState()
+        self._settle_tail = False  # the last batch ended with samples taken out settling
         # streams: accepted times and values (commands: what the identifier takes)
         self.cmd_t: list[int] = []
         self.cmd_u: list[float] = []
@@ -302,9 +307,15 @@ class Aligner:
             marks[0] = True  # the samples before it were taken out
         commands = np.array(self.cmd_u)
         us = commands[k]
+        resumed = None
         if self._settle_ns:
             settled, self._settle = settling_keep(times, us, self._settle_ns, self._settle)
-            if not settled.all():  # taken out as lost readings: bridged where monotone
+            tail = self._settle_tail
+            self._settle_tail = not settled[-1] or (tail and not settled.any())
+            if not settled.all() or tail:  # taken out as lost readings: bridged where monotone
+                resumed = carry_marks(~settled, settled)
+                if tail and resumed.size:
+                    resumed[0] = True
                 marks = carry_marks(marks, settled)
                 k, us, ys, times, held = (
                     k[settled],
@@ -321,7 +332,7 @@ class Aligner:
             del self.cmd_t[:keep], self.cmd_u[:keep]
         self._linked = True
         self._last_time = int(times[-1])
-        return AlignedBatch(times, us, ys, held, marks, period, linked, early, monotone)
+        return AlignedBatch(times, us, ys, held, marks, period, linked, early, monotone, resumed)
 
     def _monotone(self, k: np.ndarray, linked: bool) -> np.ndarray:
         """Per sample, whether the commands in force since the sample before were monotone

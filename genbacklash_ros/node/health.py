@@ -252,11 +252,19 @@ def _held_input(stamp: int, commands: list[int], inputs: list[float]) -> float |
 
 
 def _one_step_errors(
-    y_prev: float, ys: np.ndarray, low: np.ndarray, high: np.ndarray
+    y_prev: float,
+    ys: np.ndarray,
+    low: np.ndarray,
+    high: np.ndarray,
+    resumed: np.ndarray | None = None,
 ) -> np.ndarray:
     """``|y - clamp(y before, low, high)|`` of each reading ``ys`` predicted from the one
-    before it (the first from ``y_prev``): the one-step errors of eq. (20)'s clamp."""
+    before it (the first from ``y_prev``): the one-step errors of eq. (20)'s clamp. A
+    ``resumed`` reading (after samples taken out while the servo settled: the commands
+    between may have reversed) is judged by the band alone, ``|y - clamp(y, low, high)|``."""
     previous = np.concatenate(([y_prev], ys[:-1]))
+    if resumed is not None:
+        previous[resumed] = ys[resumed]
     with np.errstate(all="ignore"):
         errors: np.ndarray = np.abs(ys - np.minimum(np.maximum(previous, low), high))
     return errors
@@ -605,7 +613,14 @@ class StreamHealth:
             return min(horizon, still)
         return horizon
 
-    def screen(self, times: np.ndarray, us: np.ndarray, ys: np.ndarray, est: Estimate) -> Screening:
+    def screen(
+        self,
+        times: np.ndarray,
+        us: np.ndarray,
+        ys: np.ndarray,
+        est: Estimate,
+        resumed: np.ndarray | None = None,
+    ) -> Screening:
         """Which of the samples (``times``, inputs ``us``, readings ``ys``) to feed: not the
         spikes nor those held back after a gap (see the module notes), judged with ``est``,
         the estimate in use; tracks the scale of the one-step prediction errors.
@@ -615,6 +630,9 @@ class StreamHealth:
         feeds of another size, meet the limits a steady stream of small ones would). The
         usual steps (each reading predicted from the one before it, none too far) are
         judged at once, in numpy steps over the whole feed.
+
+        ``resumed`` marks samples after ones taken out while the servo settled
+        (:mod:`genbacklash_core.settling`): they are judged against the model's band alone.
 
         Returns the mask of the samples to keep (None to keep them all) and the drops. The
         screen stage breaks the chain of consecutive samples at the next kept sample after
@@ -635,7 +653,7 @@ class StreamHealth:
         start = 0
         if self._resync_since is None and y_prev is not None and not fresh.any():
             # the usual case at once: each reading predicted from the one before it
-            errs = _one_step_errors(y_prev, ys, low, high)
+            errs = _one_step_errors(y_prev, ys, low, high, resumed)
             trusted = self._trusted(est)
             while start < n:
                 part = slice(start, start + step)
@@ -653,7 +671,13 @@ class StreamHealth:
         for first in range(start, n, step):
             part = slice(first, first + step)
             found = self._screen_step(
-                times[part], ys[part], low[part], high[part], fresh[part], est
+                times[part],
+                ys[part],
+                low[part],
+                high[part],
+                fresh[part],
+                est,
+                None if resumed is None else resumed[part],
             )
             keeps.append(found.keep)
             events += found.events
@@ -684,16 +708,18 @@ class StreamHealth:
         high: np.ndarray,
         fresh: np.ndarray,
         est: Estimate,
+        resumed: np.ndarray | None = None,
     ) -> Screening:
         """:meth:`screen` of one step: the samples (``times``, readings ``ys``, the band
-        ``low .. high`` of their commands, ``fresh``: after a gap), sample by sample."""
+        ``low .. high`` of their commands, ``fresh``: after a gap, ``resumed``: after the
+        servo settled), sample by sample."""
         y_prev = self._fed_y
         self._fed_t, self._fed_y = int(times[-1]), float(ys[-1])
         trusted = self._trusted(est)
         limit = self._limit(trusted)
         resync = self._resync_since
         if resync is None and y_prev is not None and not fresh.any():
-            errs = _one_step_errors(y_prev, ys, low, high)
+            errs = _one_step_errors(y_prev, ys, low, high, resumed)
             if not np.any(errs > limit):
                 self._track_scale(errs, ys)
                 return Screening(None, [])
@@ -702,19 +728,23 @@ class StreamHealth:
         held: list[int] = []  # after a gap, until a sample follows from the one before it
         worst = (0.0, 0.0, 0.0)
         x = y_prev
-        for i, (t, y, lo, hi, new) in enumerate(
+        again = [False] * ys.size if resumed is None else resumed.tolist()
+        for i, (t, y, lo, hi, new, res) in enumerate(
             zip(
                 times.tolist(),
                 ys.tolist(),
                 low.tolist(),
                 high.tolist(),
                 fresh.tolist(),
+                again,
                 strict=True,
             )
         ):
             if x is None or (new and not trusted):
                 x = y
                 continue
+            if res:
+                x = y  # the band alone judges it (see _one_step_errors)
             if new:
                 resync = t
             predicted = min(max(x, lo), hi)  # the clamp of eq. (20)

@@ -327,8 +327,8 @@ PARAMETER_SPECS: tuple[ParameterSpec, ...] = (
         "double",
         0.005,
         "Time a new command takes the servo to reach (its settling): samples taken sooner "
-        "after the command changed are not identified from (applies when commands change "
-        "more slowly than the encoder samples); 0: every sample.",
+        "after the command changed are not identified from (a backlash alone, where commands "
+        "change more slowly than the encoder samples); 0: every sample.",
         0.0,
         1.0,
         unit="s",

@@ -115,7 +115,7 @@ class Screen:
             breaks = linked_breaks(batch.held, batch.period, previous, bridge)
         breaks |= batch.marks
         us, ys, held = batch.us, batch.ys, batch.held
-        screening = health.screen(batch.times, us, ys, estimate)
+        screening = health.screen(batch.times, us, ys, estimate, batch.resumed)
         kept = screening.keep
         last_t: int | None = int(held[-1])
         if kept is not None:

@@ -67,7 +67,10 @@ def test_the_node_bridges_lost_readings_for_a_backlash_alone(model: str) -> None
         return workers[-1]
 
     pipe = BacklashPipeline(
-        NodeParameters(command_type="float64", encoder_type="float64", model=model),
+        # the record's plant has no servo: every reading is a sample (no settling rule)
+        NodeParameters(
+            command_type="float64", encoder_type="float64", model=model, settle_time=0.0
+        ),
         worker=make,
     )
     feed_record(pipe, rec, DELAY_NS)

@@ -122,7 +122,9 @@ def assert_all_finite(outputs: list[Output]) -> None:
         assert all(math.isfinite(v) for v in numbers_in(out.message)), out
 
 
-PARAMS = NodeParameters(joint="drive", command_index=1)
+# the streams' plant answers a command at once (no servo): every reading is a sample, no
+# settling rule (genbacklash_core.settling, tested in tests/core/test_settling.py)
+PARAMS = NodeParameters(joint="drive", command_index=1, settle_time=0.0)
 
 
 # --------------------------------------------------------------------------- identification
@@ -538,7 +540,7 @@ def test_set_params_restarts_only_when_needed() -> None:
 
 # --------------------------------------------------------------------------- the sample rule
 
-FLOATS = NodeParameters(command_type="float64", encoder_type="float64")
+FLOATS = NodeParameters(command_type="float64", encoder_type="float64", settle_time=0.0)
 
 
 class Recorder:
