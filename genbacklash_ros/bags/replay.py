@@ -44,6 +44,7 @@ from genbacklash_ros.bags.bagio import (
     RawMessage,
 )
 from genbacklash_ros.bags.raw_values import RawValueReader, UndecodableMessage
+from genbacklash_ros.node.compensate import CompensationStatus
 from genbacklash_ros.node.messages import DiagnosticArray, Float64MultiArray, MessageError
 from genbacklash_ros.node.parameters import NodeParameters
 from genbacklash_ros.node.pipeline import BacklashPipeline, Output, PipelineStats
@@ -109,6 +110,10 @@ class ReplayHistory:
         Time, raw value and compensated value of every accepted command.
     encoder_t, encoder_y : list
         Time and value of every readable encoder message.
+    compensation_t, compensation : list
+        Data time of every ``diagnostics`` output and the compensation's status it reported
+        (:class:`~genbacklash_ros.node.compensate.CompensationStatus`: on, faded or off, and
+        why).
     """
 
     names: tuple[str, ...] = ()
@@ -119,6 +124,8 @@ class ReplayHistory:
     command_sent: list[float] = field(default_factory=list)
     encoder_t: list[int] = field(default_factory=list)
     encoder_y: list[float] = field(default_factory=list)
+    compensation_t: list[int] = field(default_factory=list)
+    compensation: list[CompensationStatus] = field(default_factory=list)
 
     def parameters(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(t_s, values, std)``: time in seconds from the first estimate, parameter
@@ -180,6 +187,16 @@ class ReplayResult:
         out["dropped"] = dict(self.stats.dropped)
         out["error"] = self.error or None
         return out
+
+
+def _compensation_of(message: Any) -> CompensationStatus:
+    """The compensation's status a ``/diagnostics`` message reports (its key-value pairs)."""
+    values = {kv.key: kv.value for kv in message.status[0].values}
+    return CompensationStatus(
+        float(values.get("compensation_weight", "nan")),
+        values.get("compensation_state", "off"),
+        values.get("compensation_reason", ""),
+    )
 
 
 class _Progress:
@@ -506,6 +523,9 @@ def replay(
                     if out.topic == "estimate" and out.estimate is not None:
                         history.estimate_t.append(out.stamp_ns)
                         history.estimates.append(out.estimate)
+                    elif out.topic == "diagnostics":
+                        history.compensation_t.append(out.stamp_ns)
+                        history.compensation.append(_compensation_of(message))
                 return records
 
             # Values come straight from the CDR bytes (RawValueReader: a layout learnt from

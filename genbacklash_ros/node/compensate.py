@@ -21,10 +21,38 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 
-from genbacklash_core import CompensatorOptions, Estimate, GenBacklashError, InverseBacklash
+from genbacklash_core import (
+    CompensatorOptions,
+    Estimate,
+    GenBacklashError,
+    GuardVerdict,
+    InverseBacklash,
+)
 
-__all__ = ["CompensateStage"]
+__all__ = ["CompensateStage", "CompensationStatus"]
+
+
+@dataclass(frozen=True, slots=True)
+class CompensationStatus:
+    """Whether the node compensates now, how much, and why (``/diagnostics``, reports).
+
+    Attributes
+    ----------
+    weight : float
+        The share of the inverse applied, in ``[0, 1]``.
+    state : str
+        ``"on"`` (weight 1), ``"faded"`` or ``"off"`` (weight 0).
+    reason : str
+        Why: compensation switched off, no estimate, a fault passing commands through, the
+        estimate's confidence below the gate, or the guard's judgement
+        (:class:`~genbacklash_core.GuardVerdict`).
+    """
+
+    weight: float
+    state: str
+    reason: str
 
 
 def _no_fault() -> bool:
@@ -63,6 +91,30 @@ class CompensateStage:
         if not self._on or est.model is None:
             return 0.0
         return self._options.weight(est.confidence * self.trust)
+
+    def status(
+        self, est: Estimate, faults: tuple[str, ...], guard: GuardVerdict
+    ) -> CompensationStatus:
+        """How much the next command is compensated with ``est`` while ``faults`` (names)
+        pass commands through, ``guard`` being the guard's verdict, and why."""
+        if not self._on:
+            return CompensationStatus(0.0, "off", "compensation switched off (compensate: false)")
+        if est.model is None:
+            return CompensationStatus(0.0, "off", "no estimate yet")
+        if faults:
+            names = ", ".join(name.replace("_", " ") for name in faults)
+            return CompensationStatus(0.0, "off", f"a fault passes commands through: {names}")
+        weight = self.weight(est)
+        state = "on" if weight >= 1.0 else "off" if weight <= 0.0 else "faded"
+        parts = []
+        if self._options.weight(est.confidence) < 1.0:
+            parts.append(
+                f"the estimate's confidence {est.confidence:.2f} is below gate_high "
+                f"{self._options.gate_high:g}"
+            )
+        if guard.state != "judging" and (guard.trust < 1.0 or state == "on"):
+            parts.append(guard.reason)
+        return CompensationStatus(weight, state, "; ".join(parts) or f"compensation {state}")
 
     def command(
         self, value: float, est: Estimate, *, passing: Callable[[], bool], last_y: float | None

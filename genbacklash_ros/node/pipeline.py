@@ -138,7 +138,7 @@ from genbacklash_core.guard import CompensationGuard, GuardVerdict
 from genbacklash_ros.node.align import Aligner
 from genbacklash_ros.node.batch import BlockView
 from genbacklash_ros.node.checkpoint import Checkpoint, CheckpointError, save_checkpoint, warm_start
-from genbacklash_ros.node.compensate import CompensateStage
+from genbacklash_ros.node.compensate import CompensateStage, CompensationStatus
 
 # the fault thresholds live with the rules in health.py; importable from here as before
 from genbacklash_ros.node.health import _SCALE_SMOOTHING as _SCALE_SMOOTHING
@@ -392,6 +392,8 @@ class BacklashPipeline:
             feed_ns=batch_ns,
         )
         self._worker: IdentifierWorker | None = None
+        #: the compensation's status at the last diagnostics report (what it said and why)
+        self.compensation = CompensationStatus(0.0, "off", "no report yet")
         self._start(params)
 
     # ------------------------------------------------------------------ configuration
@@ -1039,6 +1041,8 @@ class BacklashPipeline:
             level = max(level, DiagnosticStatus.WARN)
             parts.extend(period.problems)
         guard = self._guard.verdict
+        status = self._comp.status(est, health.active if passing else (), guard)
+        self.compensation = status
         if est.available and self._params.compensate and guard.state in ("faded", "off"):
             parts.append(guard.reason)
             if guard.state == "off":
@@ -1052,7 +1056,9 @@ class BacklashPipeline:
             ("estimate_source", source if est.available else "none"),
             ("identifier_state", own.state.value),
             ("identifier_confidence", format(own.confidence, ".3g")),
-            ("compensation_weight", format(0.0 if passing else self._comp.weight(est), ".3g")),
+            ("compensation_weight", format(status.weight, ".3g")),
+            ("compensation_state", status.state),
+            ("compensation_reason", status.reason),
             ("compensation_guard", guard.state),
             ("compensation_trust", format(guard.trust, ".3g")),
             ("guard_error_ratio", format(guard.ratio, ".3g") if guard.ratio < math.inf else "none"),
