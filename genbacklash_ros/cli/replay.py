@@ -147,7 +147,9 @@ def load_bag_series(
             f"skipped {series.skipped} encoder samples before the first command",
             file=sys.stderr,
         )
-    return Series(u=series.u, y=series.y, breaks=series.breaks)
+    # t in seconds from the first sample (the report's time axes); stamps are ns
+    seconds = (series.t - series.t[0]) * 1e-9 if series.t.size else None
+    return Series(u=series.u, y=series.y, t=seconds, breaks=series.breaks)
 
 
 BAG_SUFFIXES = (".mcap", ".db3")
