@@ -552,9 +552,11 @@ def cmd_replay(args: argparse.Namespace) -> int:
     else:
         print(_summary(result))
     if args.report:
+        from genbacklash_ros.progress import Progress
         from genbacklash_ros.reports.replay import write_report
 
-        index = write_report(result, args.report)
+        with Progress("genbacklash replay: report", enabled=not args.no_progress) as bar:
+            index = write_report(result, args.report, progress=bar.set_stage)
         print(f"wrote {index}", file=sys.stderr)
     if result.error:
         print(
