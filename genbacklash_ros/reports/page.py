@@ -29,13 +29,22 @@ DASH = "\u2013"  # an en dash: "no value" in a table cell, and date ranges
 class Table:
     """A table: header cells and rows of already formatted cells (text, escaped on output).
 
-    Columns from ``numeric_from`` on are right-aligned (numbers).
+    Columns from ``numeric_from`` on are right-aligned (numbers), unless ``align`` gives
+    each column's alignment: ``"l"`` (text) or ``"r"`` (numbers), e.g. ``"llrr"``.
     """
 
     head: Sequence[str]
     rows: Sequence[Sequence[str]]
     caption: str = ""
     numeric_from: int = 1
+    align: str = ""
+
+    @property
+    def numeric(self) -> list[bool]:
+        """Per column: right-aligned (a number)?"""
+        if self.align:
+            return [a == "r" for a in self.align.ljust(len(self.head), "l")]
+        return [k >= self.numeric_from for k in range(len(self.head))]
 
 
 @dataclass(frozen=True)
