@@ -61,11 +61,11 @@ from genbacklash_ros.bags.replay import ReplayResult
 from genbacklash_ros.bags.simbags import BagTruth, read_truth
 from genbacklash_ros.reports.page import DASH, Section, Table, write_page
 from genbacklash_ros.reports.page import Figure as PageFigure
+from genbacklash_ros.reports.plots import parameter_unit
 
 __all__ = [
     "ReportData",
     "TrackingErrors",
-    "parameter_unit",
     "plot_characteristic_report",
     "plot_compensation",
     "plot_convergence",
@@ -1026,24 +1026,6 @@ def plot_characteristic_report(result: ReplayResult, data: ReportData | None = N
 
 
 # --------------------------------------------------------------------------- page
-
-
-def parameter_unit(name: str) -> str:
-    """The unit of a model parameter when positions are in rad: a branch is
-    ``sum_k m_k (u + c)^k`` (eqs. 11-12), so ``m_k`` is in rad^(1-k); ``c_*`` in rad; the
-    linear block's ``a_i``, ``b_j`` are dimensionless."""
-    if name.startswith("c_"):
-        return "rad"
-    if name.startswith(("m_left_", "m_right_")):
-        k = int(name.rsplit("_", 1)[1])
-        power = "".join(
-            "\u2070\u00b9\u00b2\u00b3\u2074\u2075\u2076\u2077\u2078\u2079"[int(c)]
-            for c in str(k - 1)
-        )
-        return {1: "rad/rad", 2: "1/rad"}.get(k, f"1/rad{power}")
-    if name.startswith(("a_", "b_")):
-        return "1"
-    return ""
 
 
 def _parameter_table(result: ReplayResult, truth: BagTruth | None) -> Table:
