@@ -104,16 +104,20 @@ class Progress:
             if self._bar is not None:
                 self._bar.set_postfix_str(stage, refresh=False)
 
-    def line(self) -> str:
-        """The plain progress line (without a terminal)."""
-        elapsed = time.monotonic() - self._start
-        parts = [self.desc + (f": {self.stage}" if self.stage else "")]
+    def _counted(self) -> str:
+        units = {"msg": "messages", "it": "steps"}.get(self.unit, self.unit + "s")
         if self.total:
-            parts.append(f"{self.count}/{self.total} {self.unit} ({self.count / self.total:.0%})")
-        elif self.count:
-            parts.append(f"{self.count} {self.unit}")
-        parts.append(f"{elapsed:.0f} s")
-        return "; ".join(parts)
+            return f"{self.count}/{self.total} {units} ({self.count / self.total:.0%})"
+        return f"{self.count} {units}" if self.count else ""
+
+    def line(self) -> str:
+        """The plain progress line (without a terminal), e.g. ``genbacklash fleet: 5/40
+        bags (12%), 35 s`` or ``genbacklash diagnose: round 2: judging; 15 s``."""
+        elapsed = f"{time.monotonic() - self._start:.0f} s"
+        rest = ", ".join(part for part in (self._counted(), elapsed) if part)
+        if self.stage:
+            return f"{self.desc}: {self.stage}; {rest}"
+        return f"{self.desc}: {rest}"
 
     def _tick(self) -> None:
         interval = 1.0 if self._tty else self._every
@@ -137,8 +141,8 @@ class Progress:
             self._bar.close()
         elif self._printed:
             elapsed = time.monotonic() - self._start
-            done = f"{self.count}/{self.total} {self.unit}, " if self.total else ""
-            print(f"{self.desc}: done ({done}{elapsed:.0f} s)", file=self._stream, flush=True)
+            done = ", ".join(part for part in (self._counted(), f"{elapsed:.0f} s") if part)
+            print(f"{self.desc}: done ({done})", file=self._stream, flush=True)
 
     def __enter__(self) -> Progress:
         return self

@@ -21,9 +21,17 @@ def test_plain_lines_without_a_terminal() -> None:
         time.sleep(0.3)
     lines = stream.getvalue().splitlines()
     assert 2 <= len(lines) <= 8  # about one per 0.05 s, and the last
-    assert lines[0].startswith("genbacklash test: round 1; 3/10 bag (30%); ")
-    assert lines[-1].startswith("genbacklash test: done (3/10 bag, ")
+    assert lines[0].startswith("genbacklash test: round 1; 3/10 bags (30%), ")
+    assert lines[-1].startswith("genbacklash test: done (3/10 bags (30%), ")
     assert "\r" not in stream.getvalue()  # no carriage returns in a log
+
+
+def test_without_a_stage_or_total() -> None:
+    stream = io.StringIO()
+    with Progress("genbacklash fleet", total=40, unit="bag", every=0.05, stream=stream):
+        time.sleep(0.12)
+    assert stream.getvalue().splitlines()[0].startswith("genbacklash fleet: 0/40 bags (0%), ")
+    assert Progress("x", enabled=False).line().startswith("x: 0 s")
 
 
 def test_short_work_and_disabled_print_nothing() -> None:
