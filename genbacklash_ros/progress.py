@@ -129,9 +129,9 @@ class Progress:
                     print(self.line(), file=self._stream, flush=True)
                     self._printed = True
 
-    def close(self) -> None:
+    def close(self, finished: bool = True) -> None:
         """Stop the ticker; remove the bar (terminal) or print the total time (plain lines,
-        when any was printed)."""
+        when any was printed; ``finished`` False: the work stopped on an error)."""
         if self._thread is None:
             return
         self._stop.set()
@@ -142,7 +142,8 @@ class Progress:
         elif self._printed:
             elapsed = time.monotonic() - self._start
             done = ", ".join(part for part in (self._counted(), f"{elapsed:.0f} s") if part)
-            print(f"{self.desc}: done ({done})", file=self._stream, flush=True)
+            word = "done" if finished else "stopped"
+            print(f"{self.desc}: {word} ({done})", file=self._stream, flush=True)
 
     def __enter__(self) -> Progress:
         return self
@@ -153,4 +154,4 @@ class Progress:
         value: BaseException | None,
         traceback: TracebackType | None,
     ) -> None:
-        self.close()
+        self.close(finished=kind is None)

@@ -52,3 +52,14 @@ def test_a_bar_on_a_terminal() -> None:
         time.sleep(1.3)  # the ticker redraws the bar every second, also while a step runs
     shown = stream.getvalue()
     assert "genbacklash test" in shown and "2/4" in shown and "reading" in shown
+
+
+def test_an_error_says_stopped() -> None:
+    stream = io.StringIO()
+    try:
+        with Progress("genbacklash test", every=0.05, stream=stream):
+            time.sleep(0.08)
+            raise ValueError("bad input")
+    except ValueError:
+        pass
+    assert stream.getvalue().splitlines()[-1].startswith("genbacklash test: stopped (")
