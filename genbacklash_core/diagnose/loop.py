@@ -45,7 +45,7 @@ run, as the contract says), lost readings included.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -379,6 +379,10 @@ class _Run:
         return [], extra
 
 
+def _quiet(stage: str) -> None:
+    """The default progress callback: nothing."""
+
+
 def diagnose(
     u: ArrayLike,
     y: ArrayLike,
@@ -388,6 +392,7 @@ def diagnose(
     catalog: Sequence[Effect] | None = None,
     nonfinite: NonFinitePolicy = "raise",
     breaks: ArrayLike | None = None,
+    progress: Callable[[str], None] | None = None,
 ) -> Diagnosis:
     """Find where a backlash model and the measurements disagree, name the missing effects and
     add them while the validation gap drops significantly.
@@ -429,15 +434,18 @@ def diagnose(
     True
     """
     settings = DiagnoseSettings() if settings is None else settings
+    stage = progress if progress is not None else _quiet
     effects = tuple(CATALOG if catalog is None else catalog)
     uu, yy, bb = _prepare(u, y, nonfinite, breaks)  # a dropped sample breaks the chain
     split = split_record(uu.size, settings.validation)
     u_est, y_est = uu[split.estimation], yy[split.estimation]
     b_est = None if bb is None else bb[split.estimation]
     check_excitation(u_est, y_est, 4)
+    stage("measuring the noise floor")
     floor = noise_floor(uu, yy, split.validation, bb)
     run = _Run(uu, yy, split, effects, settings, b_est, floor.gap if floor.known else None)
 
+    stage("fitting the starting model")
     current = _start_fit(start, u_est, y_est, b_est)
     initial = current
     report = measure_gap(current.model, uu, yy, split)
@@ -446,6 +454,7 @@ def diagnose(
     rounds: list[Round] = []
     reason = f"stopped after the step limit ({settings.max_steps})"
     while True:
+        stage(f"round {len(rounds) + 1}: residual tests and detectors")
         context = build_context(u_est, y_est, current, settings, b_est)
         analysis = context.analysis
         if floor.known and report.gap <= settings.floor_margin * floor.gap:
@@ -474,6 +483,7 @@ def diagnose(
                 "the catalog recognises its signature"
             )
             break
+        stage(f"round {len(rounds) + 1}: judging {len(candidates)} candidate effects")
         accepted: list[tuple[_Candidate, GapReport, str]] = []
         alone: dict[str, str] = {}
         gaps: dict[int, GapReport] = {}
@@ -502,6 +512,7 @@ def diagnose(
                 accepted = [swapped]
         rounds.append(Round(report.gap, analysis, detections, tuple(trials)))
         if not accepted and len(steps) + 2 <= settings.max_steps:
+            stage(f"round {len(rounds)}: trying pairs of effects")
             accepted, extra = run.look_ahead(report, candidates, alone)
             if extra is not None:
                 rounds.append(extra)
@@ -528,6 +539,7 @@ def diagnose(
             current, report = candidate.fit, after
             reports.append(report)
     if len(steps) >= 2:
+        stage("checking that each effect earns its place")
         for effect in dict.fromkeys(step.effect for step in steps):
             pruned = run.earns_place(current, report, effect)
             if pruned is None:

@@ -200,26 +200,28 @@ def _compensation_of(message: Any) -> CompensationStatus:
 
 
 class _Progress:
-    """A tqdm bar on stderr over the input messages (updated in blocks: cheap)."""
+    """Progress over the input messages on stderr (updated in blocks: cheap): a bar on a
+    terminal, a plain line every few seconds otherwise (:class:`~genbacklash_ros.progress.
+    Progress`)."""
 
     def __init__(self, total: int, enabled: bool) -> None:
-        self._bar = None
-        self._pending = 0
-        if enabled:
-            from tqdm import tqdm
+        from genbacklash_ros.progress import Progress
 
-            self._bar = tqdm(total=total, desc="replay", unit="msg", unit_scale=True, leave=False)
+        self._bar = Progress(
+            "genbacklash replay", total=total, unit="msg", enabled=enabled, unit_scale=True
+        )
+        self._pending = 0
 
     def step(self, count: int = 1) -> None:
         self._pending += count
-        if self._pending >= _PROGRESS_EVERY and self._bar is not None:
+        if self._pending >= _PROGRESS_EVERY:
             self._bar.update(self._pending)
             self._pending = 0
 
     def close(self) -> None:
-        if self._bar is not None:
-            self._bar.update(self._pending)
-            self._bar.close()
+        self._bar.update(self._pending)
+        self._pending = 0
+        self._bar.close()
 
 
 class _CorruptMessages:

@@ -28,6 +28,7 @@ from genbacklash_ros.cli.replay import (
     add_bag_input_options,
     add_node_parameter_options,
     batch_parameters,
+    is_bag,
     load_series,
     node_parameters,
 )
@@ -199,25 +200,43 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     """Run the diagnosis for parsed arguments; print text or JSON; write the report."""
     cli = node_parameters(args, batch_parameters(args.data))
     start = _start(args, cli)
-    series = load_series(args, cli.params)
-    settings = DiagnoseSettings(validation=args.validation)
-    result = diagnose(
-        series.u,
-        series.y,
-        start=start,
-        settings=settings,
-        nonfinite="drop" if args.drop_nonfinite else "raise",
-        breaks=series.breaks,
-    )
+    from genbacklash_ros.progress import Progress
+
+    # a line on stderr while it runs (a bar on a terminal, a plain line every few seconds
+    # otherwise): a 40 s bag takes tens of seconds
+    with Progress("genbacklash diagnose") as progress:
+        progress.set_stage(f"reading {args.data}")
+        series = load_series(args, cli.params)
+        settings = DiagnoseSettings(validation=args.validation)
+        result = diagnose(
+            series.u,
+            series.y,
+            start=start,
+            settings=settings,
+            nonfinite="drop" if args.drop_nonfinite else "raise",
+            breaks=series.breaks,
+            progress=progress.set_stage,
+        )
+        written = []
+        if args.report:
+            from genbacklash_ros.reports.diagnose import write_report
+
+            written = write_report(
+                result,
+                series.u,
+                series.y,
+                args.report,
+                series.breaks,
+                t=series.t,
+                unit="rad" if is_bag(args.data) else "units of y",
+                progress=progress.set_stage,
+            )
     if args.json:
         print(json.dumps(result.to_dict()))
     else:
         print(_text(result))
-    if args.report:
-        from genbacklash_ros.reports.diagnose import write_report
-
-        for path in write_report(result, series.u, series.y, args.report, series.breaks):
-            print(f"wrote {path}", file=sys.stderr)
+    for path in written:
+        print(f"wrote {path}", file=sys.stderr)
     return EXIT_OK
 
 
@@ -246,7 +265,7 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
         "--report",
         metavar="DIR",
         help="write plots (measured vs simulated per step, correlations with bounds, the gap "
-        "per step, where the gap sits) and summary.md / report.html into DIR",
+        "per step, where the gap sits), index.html (the page) and summary.md into DIR",
     )
     parser.add_argument(
         "--start",

@@ -153,7 +153,7 @@ def _plot(path: str | Path, trajectory: Trajectory) -> None:
     fig = Figure(figsize=(7.0, 6.5), layout="constrained")
     axes = fig.subplots(3, 1, sharex=True)
     panels = (
-        (trajectory.u, (lim.low, lim.high), "position"),
+        (trajectory.u, (lim.low, lim.high), "position (units)"),
         (trajectory.velocity[:-1], (-lim.v_max, lim.v_max), "velocity (units/s)"),
         (trajectory.acceleration, (-lim.a_max, lim.a_max), "acceleration (units/s²)"),
     )

@@ -167,7 +167,8 @@ def _cmd_identify(args: argparse.Namespace) -> int:
     if args.plot:
         from genbacklash_ros.reports.plots import save_identification_plots
 
-        for path in save_identification_plots(result, args.plot, series.u, series.y):
+        unit = "rad" if replay_cli.is_bag(args.data) else ""  # a CSV says no unit
+        for path in save_identification_plots(result, args.plot, series.u, series.y, unit=unit):
             print(f"wrote {path}", file=sys.stderr)
     return EXIT_OK if result.converged else EXIT_NOT_CONVERGED
 
@@ -206,7 +207,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
     out = Path(args.out)
     write_series_csv(out / "data.csv", series)
-    for path in save_identification_plots(result, out, data.u, data.y, example.model):
+    plots = save_identification_plots(result, out, data.u, data.y, example.model, unit="")
+    for path in plots:  # the paper's examples have no unit
         print(f"wrote {path}")
     (out / "result.json").write_text(json.dumps(result.to_dict(), indent=2) + "\n")
     print(f"wrote {out / 'result.json'} and {out / 'data.csv'}")

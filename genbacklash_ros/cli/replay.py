@@ -148,7 +148,9 @@ def load_bag_series(
             f"skipped {series.skipped} encoder samples before the first command",
             file=sys.stderr,
         )
-    return Series(u=series.u, y=series.y, breaks=series.breaks)
+    # t in seconds from the first sample (the report's time axes); stamps are ns
+    seconds = (series.t - series.t[0]) * 1e-9 if series.t.size else None
+    return Series(u=series.u, y=series.y, t=seconds, breaks=series.breaks)
 
 
 BAG_SUFFIXES = (".mcap", ".db3")
@@ -643,9 +645,11 @@ def cmd_replay(args: argparse.Namespace) -> int:
     else:
         print(_summary(result))
     if args.report:
+        from genbacklash_ros.progress import Progress
         from genbacklash_ros.reports.replay import write_report
 
-        index = write_report(result, args.report)
+        with Progress("genbacklash replay: report", enabled=not args.no_progress) as bar:
+            index = write_report(result, args.report, progress=bar.set_stage)
         print(f"wrote {index}", file=sys.stderr)
     if result.error:
         print(

@@ -22,7 +22,6 @@ path.
 from __future__ import annotations
 
 import dataclasses
-import sys
 import time
 from collections import Counter
 from collections.abc import Iterator
@@ -141,10 +140,11 @@ def run_fleet(
     client : distributed.Client
         From :func:`fleet_client`.
     progress : bool
-        A tqdm bar over the bags on stderr.
+        Progress over the bags on stderr (:class:`~genbacklash_ros.progress.Progress`).
     """
     import distributed
-    from tqdm import tqdm
+
+    from genbacklash_ros.progress import Progress
 
     dask: Any = distributed
 
@@ -153,13 +153,9 @@ def run_fleet(
     root = str(Path(archive).resolve())
     run = FleetRun(bags=len(bags))
     done = store.done_keys()
-    bar = tqdm(
-        total=len(bags),
-        desc="bags",
-        unit="bag",
-        disable=None if progress else True,
-        file=sys.stderr,
-    )
+    # a bar on a terminal, else a plain line on stderr every few seconds (a fleet run
+    # under cron or CI said nothing for minutes)
+    bar = Progress("genbacklash fleet", total=len(bags), unit="bag", enabled=progress)
     kind: dict[Any, tuple[str, str]] = {}
     plans = client.map(inspect_bag, bags, settings=settings, pure=False)
     for future, bag in zip(plans, bags, strict=True):

@@ -1,12 +1,15 @@
 """The ``genbacklash diagnose --report DIR`` report: plots and a readable summary.
 
 Plot functions return figures (compute and plotting split, as in python-control);
-:func:`write_report` saves them with ``summary.md`` and ``report.html`` into a directory.
+:func:`write_report` saves them with ``index.html`` (the page, the layout every report
+shares: :mod:`genbacklash_ros.reports.page`) and ``summary.md`` (the same sections as
+Markdown) into a directory.
 """
 
 from __future__ import annotations
 
-import html
+import json
+from collections.abc import Callable
 from pathlib import Path
 
 import matplotlib
@@ -20,6 +23,8 @@ from matplotlib.figure import Figure
 from genbacklash_core.diagnose import Diagnosis, ResidualAnalysis
 from genbacklash_core.diagnose.context import StepErrorShape, build_context
 from genbacklash_core.diagnose.settings import DiagnoseSettings
+from genbacklash_ros.reports.page import Figure as PageFigure
+from genbacklash_ros.reports.page import Section, Table, render, write_page
 
 __all__ = [
     "gap_map",
@@ -29,6 +34,7 @@ __all__ = [
     "plot_gap_map",
     "plot_gap_steps",
     "plot_step_error",
+    "report_sections",
     "summary_markdown",
     "write_report",
 ]
@@ -41,26 +47,50 @@ def _labels(result: Diagnosis) -> list[str]:
     return ["start"] + [f"+ {step.effect}" for step in result.steps]
 
 
-def plot_fit_steps(result: Diagnosis, y: np.ndarray) -> Figure:
-    """Measured vs simulated output on the validation segment, before and after each step."""
+def _axis(t: np.ndarray | None, n: int) -> tuple[np.ndarray | None, str]:
+    """Seconds from the record's start when ``t`` has one time per sample, else None."""
+    if t is None:
+        return None, ""
+    tt = np.asarray(t, dtype=np.float64)
+    if tt.shape != (n,) or not np.all(np.isfinite(tt)):
+        return None, ""
+    return tt - tt[0], "time [s]"
+
+
+def plot_fit_steps(
+    result: Diagnosis, y: np.ndarray, t: np.ndarray | None = None, unit: str = "rad"
+) -> Figure:
+    """Measured vs simulated output on the validation segment, before and after each step.
+
+    ``t``: the time of each sample in seconds (the x axis is then time, else the sample
+    number); ``unit``: the unit of ``y``.
+    """
     val = result.split.validation
     start = val.start
     stop = min(val.stop, start + _WINDOW)
-    t = np.arange(start, stop)
+    seconds, xlabel = _axis(t, np.asarray(y).size)
+    x = np.arange(start, stop) if seconds is None else seconds[start:stop]
     labels = _labels(result)
+    rows = len(result.reports)
     fig, axes = plt.subplots(
-        len(result.reports), 1, figsize=(9, 2.4 * len(result.reports)), sharex=True, squeeze=False
+        rows,
+        1,
+        figsize=(9, 2.3 * rows + 0.9),
+        sharex=True,
+        squeeze=False,
+        layout="constrained",
     )
     for ax, report, label in zip(axes[:, 0], result.reports, labels, strict=True):
-        ax.plot(t, y[start:stop], color="0.6", lw=1.0, label="measured")
-        ax.plot(t, report.y_sim[start:stop], color="C0", lw=1.2, label="simulated (free run)")
-        ax.plot(t, y[start:stop] - report.y_sim[start:stop], color="C3", lw=0.8, label="error")
-        ax.set_title(f"{label}: validation gap {report.gap:.4f}", fontsize=10)
+        ax.plot(x, y[start:stop], color="0.6", lw=1.0, label="measured")
+        ax.plot(x, report.y_sim[start:stop], color="C0", lw=1.2, label="simulated (free run)")
+        ax.plot(x, y[start:stop] - report.y_sim[start:stop], color="C3", lw=0.8, label="error")
+        ax.set_title(f"{label}: validation gap {report.gap:.4f} (NRMSE)", fontsize=10)
         ax.grid(True, alpha=0.3)
-        ax.set_ylabel("y")
-    axes[0, 0].legend(loc="upper right", fontsize="small", ncol=3)
-    axes[-1, 0].set_xlabel("sample (validation segment)")
-    fig.tight_layout()
+        ax.set_ylabel(f"position [{unit}]")
+    handles, names = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, names, loc="outside lower center", ncol=3, fontsize="small")
+    axes[-1, 0].set_xlabel(xlabel or "sample (validation segment)")
+    fig.suptitle("Measured and simulated position on the held-out validation data", fontsize=11)
     return fig
 
 
@@ -68,31 +98,20 @@ def plot_gap_steps(result: Diagnosis) -> Figure:
     """The validation gap per step as a bar chart."""
     labels = _labels(result)
     gaps = [report.gap for report in result.reports]
-    fig, ax = plt.subplots(figsize=(max(4.0, 1.6 * len(gaps)), 3.6))
-    bars = ax.bar(labels, gaps, color=["C7"] + ["C0"] * (len(gaps) - 1))
-    for bar, gap in zip(bars, gaps, strict=True):
-        ax.annotate(
-            f"{gap:.4f}",
-            (bar.get_x() + bar.get_width() / 2, bar.get_height()),
-            ha="center",
-            va="bottom",
-            fontsize=9,
-        )
+    fig, ax = plt.subplots(figsize=(max(6.0, 1.8 * len(gaps) + 2.5), 4.0), layout="constrained")
+    x = np.arange(len(gaps))
+    bars = ax.bar(x, gaps, color=["C7"] + ["C0"] * (len(gaps) - 1), width=0.6)
+    ax.set_xticks(x, labels)
+    ax.bar_label(bars, [f"{gap:.4f}" for gap in gaps], padding=2, fontsize=9)
     if result.floor is not None:
         floor = result.floor
-        ax.axhline(floor.gap, color="C3", ls="--", lw=1.0)
-        ax.annotate(
-            f"floor {floor.gap:.4f}" + ("" if floor.known else " (quantisation only)"),
-            (len(gaps) - 0.5, floor.gap),
-            ha="right",
-            va="bottom",
-            fontsize=8,
-            color="C3",
-        )
-    ax.set_ylabel("validation gap (NRMSE)")
-    ax.set_title("Gap per step (dashed: what quantisation and noise allow)")
+        name = f"floor {floor.gap:.4f}" + ("" if floor.known else " (quantisation only)")
+        ax.axhline(floor.gap, color="C3", ls="--", lw=1.0, label=name)
+        ax.legend(loc="upper right", fontsize="small", framealpha=0.9)
+    ax.set_ylim(0.0, 1.15 * max(max(gaps), result.floor.gap if result.floor else 0.0))
+    ax.set_ylabel("validation gap (NRMSE, unitless)")
+    ax.set_title("Gap per step\n(dashed: the floor quantisation and noise allow)", fontsize=10)
     ax.grid(True, axis="y", alpha=0.3)
-    fig.tight_layout()
     return fig
 
 
@@ -102,7 +121,7 @@ def plot_gap_breakdown(result: Diagnosis) -> Figure:
     first, last = result.reports[0], result.reports[-1]
     names = [f"{g.aspect}: {g.label}" for g in first.groups]
     y_pos = np.arange(len(names))
-    fig, ax = plt.subplots(figsize=(8, 0.32 * len(names) + 1.5))
+    fig, ax = plt.subplots(figsize=(8, 0.32 * len(names) + 2.2), layout="constrained")
     ax.barh(
         y_pos - 0.27,
         [g.sample_share for g in first.groups],
@@ -115,22 +134,22 @@ def plot_gap_breakdown(result: Diagnosis) -> Figure:
         [g.error_share for g in first.groups],
         0.27,
         color="C3",
-        label=f"share of error, start (gap {first.gap:.3f})",
+        label=f"share of squared error, start (gap {first.gap:.3f})",
     )
     ax.barh(
         y_pos + 0.27,
         [g.error_share for g in last.groups],
         0.27,
         color="C0",
-        label=f"share of error, final (gap {last.gap:.3f})",
+        label=f"share of squared error, final (gap {last.gap:.3f})",
     )
     ax.set_yticks(y_pos, names, fontsize=8)
     ax.invert_yaxis()
-    ax.set_xlabel("share")
+    ax.set_xlim(0.0, 1.0)
+    ax.set_xlabel("share of the validation segment (fraction, 0..1)")
     ax.set_title("Where the validation gap concentrates")
-    ax.legend(fontsize="small", loc="lower right")
+    fig.legend(loc="outside lower center", ncol=3, fontsize="small")
     ax.grid(True, axis="x", alpha=0.3)
-    fig.tight_layout()
     return fig
 
 
@@ -172,14 +191,17 @@ def gap_map(
     return {"travel": travel, "time": time}
 
 
-def plot_gap_map(result: Diagnosis, y: np.ndarray) -> Figure:
+def plot_gap_map(result: Diagnosis, y: np.ndarray, unit: str = "rad") -> Figure:
     """The gap's contributions per range of travel and per slice of time, start and after each
     step (see :func:`gap_map`), with the floor spread evenly over the bins for comparison."""
     mapped = gap_map(result, y)
     labels = _labels(result)
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.0))
-    for ax, aspect, title in zip(
-        axes, ("travel", "time"), ("position (measured)", "validation samples"), strict=True
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.6), layout="constrained")
+    for ax, aspect, xlabel in zip(
+        axes,
+        ("travel", "time"),
+        (f"measured position range [{unit}]", "validation samples (sample numbers)"),
+        strict=True,
     ):
         groups = mapped[aspect]
         x = np.arange(len(groups))
@@ -201,30 +223,14 @@ def plot_gap_map(result: Diagnosis, y: np.ndarray) -> Figure:
                 label="floor, spread evenly",
             )
         ax.set_xticks(x, [name for name, _ in groups], rotation=35, ha="right", fontsize=7)
-        ax.set_xlabel(title)
-        ax.set_ylabel("contribution to the gap")
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel("contribution to the gap (NRMSE)")
         ax.set_yscale("log")
         ax.set_title(f"Where the gap sits: {aspect}", fontsize=10)
         ax.grid(True, axis="y", alpha=0.3)
-    axes[0].legend(fontsize="small")
-    fig.tight_layout()
+    handles, names = axes[0].get_legend_handles_labels()
+    fig.legend(handles, names, loc="outside lower center", ncol=len(names), fontsize="small")
     return fig
-
-
-def _map_lines(result: Diagnosis, y: np.ndarray) -> list[str]:
-    """The gap map as Markdown tables."""
-    mapped = gap_map(result, y)
-    labels = _labels(result)
-    lines: list[str] = []
-    for aspect, first in (("travel", "position range"), ("time", "validation samples")):
-        lines += [
-            f"| {first} | " + " | ".join(labels) + " |",
-            "|---|" + "---|" * len(labels),
-        ]
-        for name, values in mapped[aspect]:
-            lines.append(f"| {name} | " + " | ".join(f"{v:.4f}" for v in values) + " |")
-        lines.append("")
-    return lines
 
 
 def _correlation_row(axes: np.ndarray, analysis: ResidualAnalysis, label: str) -> None:
@@ -237,7 +243,8 @@ def _correlation_row(axes: np.ndarray, analysis: ResidualAnalysis, label: str) -
         ax.axhline(0.0, color="k", lw=0.5)
         ax.set_title(f"{label}: {test.name}\np = {test.test.p_value:.2g}", fontsize=8)
         ax.tick_params(labelsize=7)
-        ax.set_xlabel("lag", fontsize=7)
+        ax.set_xlabel("lag [samples]", fontsize=7)
+        ax.set_ylabel("correlation (normalised)", fontsize=7)
 
 
 def plot_correlations(result: Diagnosis) -> Figure:
@@ -245,21 +252,24 @@ def plot_correlations(result: Diagnosis) -> Figure:
     first = result.rounds[0].analysis
     last = result.rounds[-1].analysis
     columns = 2 + len(first.higher_order)
-    fig, axes = plt.subplots(2, columns, figsize=(3.0 * columns, 5.6), squeeze=False)
+    fig, axes = plt.subplots(
+        2, columns, figsize=(3.2 * columns, 6.0), squeeze=False, layout="constrained"
+    )
     _correlation_row(axes[0], first, "start")
     _correlation_row(axes[1], last, "final")
     fig.suptitle("Residual correlations on the estimation data (dashed: 95% bounds)", fontsize=10)
-    fig.tight_layout()
     return fig
 
 
-def plot_step_error(shape: StepErrorShape, title: str = "starting model") -> Figure:
+def plot_step_error(
+    shape: StepErrorShape, title: str = "starting model", unit: str = "rad"
+) -> Figure:
     """The error step response with its box (dead time) and decay (lag) fits."""
     k = np.arange(shape.taps.size)
-    fig, ax = plt.subplots(figsize=(6.4, 3.6))
-    ax.vlines(k, 0.0, shape.taps, color="C0", lw=2.0, label="taps g_k")
+    fig, ax = plt.subplots(figsize=(7.4, 4.6), layout="constrained")
     se = shape.fir.std_errors[shape.fir.lags >= 0][: shape.taps.size]
-    ax.fill_between(k, -1.96 * se, 1.96 * se, color="0.85", label="95% band of zero")
+    ax.fill_between(k, -1.96 * se, 1.96 * se, color="0.85", label="95% band of zero", zorder=1)
+    ax.vlines(k, 0.0, shape.taps, color="C0", lw=2.0, label="taps g_k", zorder=3)
     box = np.where(k < shape.box_delay, shape.box_height, 0.0)
     ax.step(
         k,
@@ -267,6 +277,7 @@ def plot_step_error(shape: StepErrorShape, title: str = "starting model") -> Fig
         where="mid",
         color="C3",
         label=f"box, d = {shape.box_delay} ({100 * shape.box_fit:.0f}%)",
+        zorder=2,
     )
     decay_scale = float(shape.taps @ shape.decay_pole**k) / float(
         (shape.decay_pole**k) @ (shape.decay_pole**k)
@@ -276,111 +287,148 @@ def plot_step_error(shape: StepErrorShape, title: str = "starting model") -> Fig
         decay_scale * shape.decay_pole**k,
         color="C2",
         label=f"decay, a = {shape.decay_pole:.2f} ({100 * shape.decay_fit:.0f}%)",
+        zorder=2,
     )
     ax.axhline(0.0, color="k", lw=0.5)
-    ax.set_xlabel("lag k")
-    ax.set_ylabel("g_k")
-    ax.set_title(f"Error step response of the {title}: dead time (box) or lag (decay)?", fontsize=9)
-    ax.legend(fontsize="small")
+    ax.set_xlabel("lag k [samples]")
+    ax.set_ylabel(f"g_k: error per unit input step [{unit}/{unit}]")
+    ax.set_title(
+        f"Error step response of the {title}:\ndead time (box) or lag (decay)?", fontsize=10
+    )
+    fig.legend(loc="outside lower center", ncol=4, fontsize="small")
     ax.grid(True, alpha=0.3)
-    fig.tight_layout()
     return fig
 
 
-def summary_markdown(result: Diagnosis, figures: list[str], y: np.ndarray | None = None) -> str:
-    """The readable summary: steps with evidence, the gaps against the floor, where the gap
-    sits (in the travel and in time, when ``y`` is given), the model."""
+def _map_tables(result: Diagnosis, y: np.ndarray, unit: str) -> list[Table]:
+    """The gap map as tables (one per aspect)."""
+    mapped = gap_map(result, y)
+    labels = _labels(result)
+    tables = []
+    for aspect, first, caption in (
+        ("travel", f"position range [{unit}]", "Per range of the measured position"),
+        ("time", "validation samples", "Per slice of the validation segment"),
+    ):
+        rows = [[name, *(f"{v:.4f}" for v in values)] for name, values in mapped[aspect]]
+        tables.append(Table([first, *labels], rows, caption=caption))
+    return tables
+
+
+_CAPTIONS = {
+    "gap_steps.png": "The validation gap (free-run NRMSE on held-out data) after each step, "
+    "with the floor that quantisation and noise allow.",
+    "fit_steps.png": "Measured and simulated (free-run) position on the validation segment, "
+    "and their difference, for the starting model and after each step.",
+    "gap_breakdown.png": "Each group's share of the squared validation error against its "
+    "share of the samples, for the starting and the final model: a group whose error share "
+    "exceeds its sample share is where the model misses.",
+    "gap_map.png": "Contribution to the gap per range of travel and per slice of time "
+    "(log scale; the contributions add up in squares to the gap).",
+    "correlations.png": "Residual autocorrelation, input cross-correlation and higher-order "
+    "correlations of the starting and the final model, with 95% bounds of white noise.",
+    "step_error.png": "The error's response to an input step (FIR taps) for the starting "
+    "model, with a box fit (a dead time) and a decay fit (a lag).",
+}
+
+
+def report_sections(
+    result: Diagnosis, figures: list[str], y: np.ndarray | None = None, unit: str = "rad"
+) -> tuple[str, list[tuple[str, str]], list[Section]]:
+    """The page's subtitle, summary block and sections (shared by ``index.html`` and
+    ``summary.md``)."""
     split = result.split
-    lines = [
-        "# Backlash model diagnosis",
-        "",
+    subtitle = (
         f"Estimation samples 0..{split.n_estimation - 1}; validation (held out) "
         f"{split.n_estimation}..{split.n_samples - 1}. Gap = free-run NRMSE on the validation "
-        "segment.",
-        "",
-        f"**Gap: {result.gap_initial:.4f} -> {result.gap_final:.4f}** "
-        f"({', '.join(result.effects) or 'no effect named'}).",
-        "",
-        (
-            "The floor: " + result.floor.describe() + ". "
-            f"The final gap is {result.gap_final / result.floor.gap:.1f} times it."
-            if result.floor is not None and result.floor.gap > 0
-            else "The floor (what quantisation and noise allow) was not measured."
-        ),
-        "",
-        "## Steps",
-        "",
+        "segment (unitless: the RMS error over the spread of the measured position)."
+    )
+    floor = result.floor
+    floor_text = (
+        floor.describe() + f"; the final gap is {result.gap_final / floor.gap:.1f} times it"
+        if floor is not None and floor.gap > 0
+        else "not measured (no dwells to measure the noise on)"
+    )
+    summary = [
+        ("Gap (NRMSE)", f"{result.gap_initial:.4f} \u2192 {result.gap_final:.4f}"),
+        ("Effects added", ", ".join(result.effects) or "none named"),
+        ("Floor", floor_text),
+        ("Stopped", result.reason),
     ]
     if result.steps:
-        lines += ["| # | effect | gap before | gap after | BIC change |", "|---|---|---|---|---|"]
-        for i, step in enumerate(result.steps, 1):
-            lines.append(
-                f"| {i} | `{step.effect}` | {step.gap_before:.4f} | {step.gap_after:.4f} | "
-                f"{step.bic_change:+.1f} |"
-            )
-        lines.append("")
-        for i, step in enumerate(result.steps, 1):
-            lines += [f"{i}. **{step.effect}**: {step.evidence}", ""]
-    else:
-        lines += ["No missing effect named.", ""]
-    lines += [f"Stopped: {result.reason}.", "", "## Where the gap sits", ""]
-    lines += [f"* start: {result.reports[0].describe()}"]
-    lines += [f"* final: {result.reports[-1].describe()}", ""]
-    if y is not None:
-        lines += [
-            "Contribution to the gap (they add up in squares to it) per range of the measured "
-            "position and per slice of the validation segment, for the start and after each "
-            "step:",
-            "",
+        rows = [
+            [
+                str(i),
+                step.effect,
+                f"{step.gap_before:.4f}",
+                f"{step.gap_after:.4f}",
+                f"{step.bic_change:+.1f}",
+            ]
+            for i, step in enumerate(result.steps, 1)
         ]
-        lines += _map_lines(result, y)
-    lines += ["## Residual tests (estimation data)", ""]
-    lines += [f"* start: {result.rounds[0].analysis.summary()}"]
-    lines += [f"* final: {result.rounds[-1].analysis.summary()}", ""]
-    lines += ["## Detectors per round", ""]
+        head = ["#", "effect", "gap before", "gap after", "BIC change"]
+        steps = Section(
+            "Steps",
+            tables=[Table(head, rows, numeric_from=2)],
+            items=[f"{step.effect}: {step.evidence}" for step in result.steps],
+        )
+    else:
+        steps = Section("Steps", paragraphs=["No missing effect named."])
+    where = Section(
+        "Where the gap sits",
+        items=[
+            f"start: {result.reports[0].describe()}",
+            f"final: {result.reports[-1].describe()}",
+        ],
+        paragraphs=(
+            [
+                "Contribution to the gap (they add up in squares to it) per range of the "
+                "measured position and per slice of the validation segment, for the start and "
+                "after each step."
+            ]
+            if y is not None
+            else []
+        ),
+        tables=_map_tables(result, y, unit) if y is not None else [],
+    )
+    residual = Section(
+        "Residual tests (estimation data)",
+        items=[
+            f"start: {result.rounds[0].analysis.summary()}",
+            f"final: {result.rounds[-1].analysis.summary()}",
+        ],
+    )
+    rounds = []
     for i, rnd in enumerate(result.rounds, 1):
-        lines.append(f"Round {i} (gap {rnd.gap:.4f}):")
-        lines.append("")
-        if not rnd.detections:
-            lines.append("* residual consistent with noise; no detector run")
+        items = [] if rnd.detections else ["residual consistent with noise; no detector run"]
         for found in rnd.detections:
             mark = "fires" if found.fires else "quiet"
-            lines.append(f"* `{found.effect}` ({mark}): {found.evidence}")
+            items.append(f"{found.effect} ({mark}): {found.evidence}")
         for trial in rnd.trials:
-            lines.append(f"  * tried `{trial.effect}`: {trial.verdict}")
-        lines.append("")
-    lines += ["## Final model", "", "```json"]
-    import json
+            items.append(f"tried {trial.effect}: {trial.verdict}")
+        rounds.append(Section(f"Round {i} (gap {rnd.gap:.4f})", items=items))
+    detectors = Section("Detectors per round", subsections=rounds)
+    model = Section("Final model", code=json.dumps(result.model_dict(), indent=2))
+    plots = Section(
+        "Figures", figures=[PageFigure(name, _CAPTIONS.get(name, name)) for name in figures]
+    )
+    return subtitle, summary, [steps, where, plots, residual, detectors, model]
 
-    lines += [json.dumps(result.model_dict(), indent=2), "```", "", "## Figures", ""]
-    lines += [f"![{name}]({name})" for name in figures]
-    return "\n".join(lines) + "\n"
+
+_TITLE = "Backlash model diagnosis"
 
 
-def _html(markdown: str) -> str:
-    """A minimal HTML rendering of the summary (headings, images, paragraphs)."""
-    body = []
-    in_code = False
-    for line in markdown.splitlines():
-        if line.startswith("```"):
-            body.append("</pre>" if in_code else "<pre>")
-            in_code = not in_code
-        elif in_code:
-            body.append(html.escape(line))
-        elif line.startswith("# "):
-            body.append(f"<h1>{html.escape(line[2:])}</h1>")
-        elif line.startswith("## "):
-            body.append(f"<h2>{html.escape(line[3:])}</h2>")
-        elif line.startswith("!["):
-            name = line[line.index("(") + 1 : -1]
-            body.append(f'<p><img src="{html.escape(name)}" style="max-width:100%"></p>')
-        elif line.strip():
-            body.append(f"<p>{html.escape(line)}</p>")
-    return (
-        "<!DOCTYPE html>\n<html><head><meta charset='utf-8'><title>Backlash diagnosis</title>"
-        "</head><body style='font-family:sans-serif;max-width:60em;margin:auto'>\n"
-        + "\n".join(body)
-        + "\n</body></html>\n"
+def summary_markdown(
+    result: Diagnosis, figures: list[str], y: np.ndarray | None = None, unit: str = "rad"
+) -> str:
+    """The readable summary as Markdown: the same sections as the page ``index.html``."""
+    subtitle, summary, sections = report_sections(result, figures, y, unit)
+    return render(
+        "summary.md",
+        title=_TITLE,
+        subtitle=subtitle,
+        summary=summary,
+        alerts=[],
+        sections=sections,
     )
 
 
@@ -390,9 +438,15 @@ def write_report(
     y: np.ndarray,
     out_dir: str | Path,
     breaks: np.ndarray | None = None,
+    *,
+    t: np.ndarray | None = None,
+    unit: str = "rad",
+    progress: Callable[[str], None] | None = None,
 ) -> list[Path]:
-    """Write the plots, ``summary.md`` and ``report.html`` into ``out_dir``; return the paths
-    (``breaks``: the sample rule the diagnosis ran with)."""
+    """Write the plots, ``index.html`` and ``summary.md`` into ``out_dir``; return the paths
+    (``breaks``: the sample rule the diagnosis ran with; ``t``: each sample's time in
+    seconds, for the time axes; ``unit``: the unit of the positions; ``progress``: called
+    with each stage, for a progress line)."""
     directory = Path(out_dir)
     directory.mkdir(parents=True, exist_ok=True)
     uu = np.asarray(u, dtype=np.float64)
@@ -400,22 +454,39 @@ def write_report(
     est = result.split.estimation
     b_est = None if breaks is None else np.asarray(breaks, dtype=bool)[est]
     context = build_context(uu[est], yy[est], result.initial_fit, DiagnoseSettings(), b_est)
-    figures = {
-        "fit_steps.png": plot_fit_steps(result, yy),
-        "gap_steps.png": plot_gap_steps(result),
-        "gap_breakdown.png": plot_gap_breakdown(result),
-        "gap_map.png": plot_gap_map(result, yy),
-        "correlations.png": plot_correlations(result),
-        "step_error.png": plot_step_error(context.step_error),
+    makers: dict[str, Callable[[], Figure]] = {
+        "gap_steps.png": lambda: plot_gap_steps(result),
+        "fit_steps.png": lambda: plot_fit_steps(result, yy, t, unit),
+        "gap_breakdown.png": lambda: plot_gap_breakdown(result),
+        "gap_map.png": lambda: plot_gap_map(result, yy, unit),
+        "correlations.png": lambda: plot_correlations(result),
+        "step_error.png": lambda: plot_step_error(context.step_error, unit=unit),
     }
     written = []
-    for name, fig in figures.items():
+    for k, (name, make) in enumerate(makers.items(), 1):
+        if progress is not None:
+            progress(f"report: figure {k} of {len(makers)}")
+        fig = make()
         path = directory / name
         fig.savefig(path, dpi=110)
         plt.close(fig)
         written.append(path)
-    markdown = summary_markdown(result, list(figures), yy)
+    subtitle, summary, sections = report_sections(result, list(makers), yy, unit)
+    markdown = render(
+        "summary.md",
+        title=_TITLE,
+        subtitle=subtitle,
+        summary=summary,
+        alerts=[],
+        sections=sections,
+    )
     (directory / "summary.md").write_text(markdown, encoding="utf-8")
-    (directory / "report.html").write_text(_html(markdown), encoding="utf-8")
-    written += [directory / "summary.md", directory / "report.html"]
+    index = write_page(
+        directory / "index.html",
+        title=_TITLE,
+        subtitle=subtitle,
+        summary=summary,
+        sections=sections,
+    )
+    written += [directory / "summary.md", index]
     return written

@@ -32,10 +32,11 @@ writes into a directory
 from __future__ import annotations
 
 import functools
-import html
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -58,6 +59,9 @@ from genbacklash_core.scenarios import simulate_worn
 from genbacklash_ros.bags.bagio import align
 from genbacklash_ros.bags.replay import ReplayResult
 from genbacklash_ros.bags.simbags import BagTruth, read_truth
+from genbacklash_ros.reports.page import DASH, Section, Table, write_page
+from genbacklash_ros.reports.page import Figure as PageFigure
+from genbacklash_ros.reports.plots import parameter_unit
 
 __all__ = [
     "ReportData",
@@ -583,7 +587,7 @@ def plot_tracking_error(result: ReplayResult, data: ReportData | None = None) ->
     )
     top.set_xlabel("time [s]")
     top.set_ylabel("RMS of load - command [rad]")
-    top.legend(loc="upper right", fontsize="small")
+    top.legend(loc="upper left", fontsize="small", ncol=2, framealpha=0.9)
     lo, hi = d.window
     top.axvspan(lo, hi, color="C1", alpha=0.15, lw=0)
     _mark_phases(top, d.truth)
@@ -892,7 +896,9 @@ def plot_convergence(result: ReplayResult, data: ReportData | None = None) -> Fi
         truth = _truth_values(d.truth, names, t)
     cols = 4
     rows = max(1, -(-len(names) // cols))
-    fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols, 2.4 * rows), squeeze=False)
+    fig, axes = plt.subplots(
+        rows, cols, figsize=(3.2 * cols, 2.4 * rows + 0.6), squeeze=False, layout="constrained"
+    )
     for i, ax in enumerate(axes.flat):
         if i >= len(names):
             ax.set_visible(False)
@@ -912,13 +918,13 @@ def plot_convergence(result: ReplayResult, data: ReportData | None = None) -> Fi
                 lo, hi = np.percentile(final, [5, 100])
                 pad = 0.5 * (hi - lo) + 0.05 * max(abs(hi), 1e-3)
                 ax.set_ylim(lo - pad, hi + pad)
-        ax.set_title(names[i], fontsize="small")
+        unit = parameter_unit(names[i])
+        ax.set_title(f"{names[i]} [{unit}]" if unit else names[i], fontsize="small")
         ax.grid(True, alpha=0.3)
         ax.tick_params(labelsize="x-small")
     fig.supxlabel("data time [s]", fontsize="small")
     extra = "; dashed: truth" if truth is not None else ""
     fig.suptitle(f"Parameter convergence (band: +/-2 sigma{extra})", fontsize="medium")
-    fig.tight_layout()
     return fig
 
 
@@ -984,7 +990,7 @@ def plot_characteristic_report(result: ReplayResult, data: ReportData | None = N
     model = result.estimate.model
     backlash = _backlash(model)
     truth = d.truth_end
-    fig, (ax, bx) = plt.subplots(1, 2, figsize=(12, 4.8))
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(12, 5.2), layout="constrained")
     if d.u.size:
         step = max(1, d.u.size // 20000)
         su, sy = d.u[::step], d.y[::step]
@@ -1013,87 +1019,90 @@ def plot_characteristic_report(result: ReplayResult, data: ReportData | None = N
     bx.set_ylabel("load position - u [rad]")
     for a in (ax, bx):
         a.grid(True, alpha=0.3)
-        if a.get_legend_handles_labels()[0]:
-            a.legend(loc="best", fontsize="small")
-    fig.tight_layout()
+    handles, labels = ax.get_legend_handles_labels()
+    if handles:  # below both panels: over the axes it hid samples
+        fig.legend(handles, labels, loc="outside lower center", ncol=len(labels), fontsize="small")
     return fig
 
 
 # --------------------------------------------------------------------------- page
 
 
-def _table(result: ReplayResult, truth: BagTruth | None) -> str:
+def _parameter_table(result: ReplayResult, truth: BagTruth | None) -> Table:
     est = result.estimate
     true_end = (
         _truth_values(truth, est.names, truth.t_s[-1:])[0]
         if truth is not None
         else np.full(len(est.names), np.nan)
     )
-    head = "<th>truth at the end</th>" if truth is not None else ""
-    rows = "\n".join(
-        f"<tr><td>{html.escape(n)}</td><td>{v:.5f}</td><td>{2 * s:.5f}</td>"
-        + (f"<td>{tv:.5f}</td>" if truth is not None else "")
-        + "</tr>"
-        for n, v, s, tv in zip(est.names, est.parameters, est.std(), true_end, strict=True)
-    )
-    return (
-        "<table><thead><tr><th>parameter</th><th>estimate</th><th>&plusmn;2&sigma;</th>"
-        f"{head}</tr></thead><tbody>\n{rows}\n</tbody></table>"
-    )
+    head = ["parameter", "unit", "estimate", "\u00b12\u03c3"]
+    head += ["truth at the end"] if truth is not None else []
+    rows = []
+    for n, v, s, tv in zip(est.names, est.parameters, est.std(), true_end, strict=True):
+        row = [n, parameter_unit(n), f"{v:.5f}", f"{2 * s:.5f}"]
+        rows.append(row + ([f"{tv:.5f}"] if truth is not None else []))
+    return Table(head, rows, numeric_from=2)
 
 
 def _fmt(value: float, digits: int = 4) -> str:
-    return "&ndash;" if not math.isfinite(value) else f"{value:.{digits}g}"
+    return DASH if not math.isfinite(value) else f"{value:.{digits}g}"
 
 
 def _cut(before: float, after: float) -> str:
     if not (math.isfinite(before) and math.isfinite(after)) or before <= 0:
-        return "&ndash;"
-    return f"{100.0 * (1.0 - after / before):.0f}&nbsp;%"
+        return DASH
+    return f"{100.0 * (1.0 - after / before):.0f}\u00a0%"
 
 
-def tracking_summary(errors: TrackingErrors | None, end: float) -> str:
+def tracking_headline(errors: TrackingErrors | None) -> str:
+    """One sentence: the RMS tracking error without compensation, with the final estimate's
+    inverse and with what the node sent."""
+    if errors is None:
+        return plant_caption(None)
+    base_all = errors.rms(errors.none)
+    final = errors.rms(errors.final)
+    node = errors.rms(errors.node)
+    return (
+        f"RMS tracking error without compensation {_fmt(base_all)} rad, with the final "
+        f"estimate's inverse {_fmt(final)} rad ({_cut(base_all, final)} cut); with the "
+        f"compensation the node sent {_fmt(node)} rad ({_cut(base_all, node)} cut)."
+    )
+
+
+def tracking_section(errors: TrackingErrors | None, end: float) -> Section:
     """The tracking-error section of the page: RMS with and without compensation and the
     cut, over the whole record and over its second half."""
+    title = "Tracking error: what compensation buys"
     if errors is None:
-        return f"<p>{html.escape(plant_caption(None))}</p>"
+        return Section(title, paragraphs=[plant_caption(None)])
     half = 0.5 * end
     base_all, base_half = errors.rms(errors.none), errors.rms(errors.none, half)
     rows = []
     for _key, label, e in errors.variants():
         all_, second = errors.rms(e), errors.rms(e, half)
         peak = float(np.max(np.abs(e))) if e is not None and e.size else math.nan
-        rows.append(
-            f"<tr><td>{html.escape(label)}</td><td>{_fmt(all_)}</td><td>{_cut(base_all, all_)}"
-            f"</td><td>{_fmt(second)}</td><td>{_cut(base_half, second)}</td>"
-            f"<td>{_fmt(peak)}</td></tr>"
-        )
-    mt, me = errors.measured_t, errors.measured
+        cuts = [_cut(base_all, all_), _fmt(second), _cut(base_half, second)]
+        rows.append([label, _fmt(all_), *cuts, _fmt(peak)])
+    me = errors.measured
     measured = float(np.sqrt(np.mean(me**2))) if me.size else math.nan
-    final = errors.rms(errors.final)
-    headline = (
-        f"RMS tracking error without compensation {_fmt(base_all)} rad, with the final "
-        f"estimate's inverse {_fmt(final)} rad ({_cut(base_all, final)} cut); with the "
-        f"compensation the node sent {_fmt(errors.rms(errors.node))} rad "
-        f"({_cut(base_all, errors.rms(errors.node))} cut)."
-    )
-    return (
-        f'<p class="headline">{headline}</p>\n'
-        f"<p>{html.escape(plant_caption(errors))} RMS values are weighted by how long each "
-        "command is held.</p>\n"
-        "<table><thead><tr><th>command sequence</th><th>RMS [rad]</th><th>cut</th>"
-        f"<th>RMS after {half:.1f} s</th><th>cut</th><th>max |error| [rad]</th></tr></thead>"
-        f"<tbody>\n{''.join(rows)}\n</tbody></table>\n"
-        f"<p>Measured while recording (encoder &minus; command held, {mt.size} readings, no "
-        f"compensation applied): RMS {_fmt(measured)} rad.</p>"
+    head = ["command sequence", "RMS [rad]", "cut", f"RMS after {half:.1f} s [rad]", "cut"]
+    return Section(
+        title,
+        paragraphs=[
+            tracking_headline(errors),
+            plant_caption(errors) + " RMS values are weighted by how long each command is held.",
+            f"Measured while recording (encoder \u2212 command held, {me.size} readings, no "
+            f"compensation applied): RMS {_fmt(measured)} rad.",
+        ],
+        tables=[Table([*head, "max |error| [rad]"], rows)],
     )
 
 
-def coverage_summary(data: ReportData) -> str:
+def coverage_text(data: ReportData) -> str:
     """One paragraph: the command range each branch was engaged over."""
     cov = data.coverage
     if cov is None:
-        return "<p>Not enough samples to say which branches were engaged.</p>"
+        return "Not enough samples to say which branches were engaged."
     lo, hi = float(np.min(cov.u)), float(np.max(cov.u))
     span = max(hi - lo, 1e-12)
     parts = []
@@ -1106,74 +1115,101 @@ def coverage_summary(data: ReportData) -> str:
             share = 100.0 * (got[1] - got[0]) / span
             parts.append(
                 f"the {name} was engaged for {seconds:.1f} s over u in "
-                f"[{got[0]:.3f}, {got[1]:.3f}] rad ({share:.0f}&nbsp;% of the command range)"
+                f"[{got[0]:.3f}, {got[1]:.3f}] rad ({share:.0f}\u00a0% of the command range)"
             )
     rest = float(np.sum(cov.dt[cov.branch == 0]))
     return (
-        f"<p>Commands spanned [{lo:.3f}, {hi:.3f}] rad; {parts[0]}; {parts[1]}; the load "
-        f"rested inside the dead zone for {rest:.1f} s (classified by the "
-        f"{html.escape(cov.by)}).</p>"
+        f"Commands spanned [{lo:.3f}, {hi:.3f}] rad; {parts[0]}; {parts[1]}; the load "
+        f"rested inside the dead zone for {rest:.1f} s (classified by the {cov.by})."
     )
 
 
-def _page(
+def _play(result: ReplayResult) -> str:
+    """The final play c_L + c_R with its 2-sigma band, from the estimate's covariance."""
+    est = result.estimate
+    names = list(est.names)
+    if "c_left" not in names or "c_right" not in names:
+        return DASH
+    i, j = names.index("c_left"), names.index("c_right")
+    gap = float(est.parameters[i] + est.parameters[j])
+    cov = np.asarray(est.covariance, dtype=np.float64)
+    var = float(cov[i, i] + cov[j, j] + 2 * cov[i, j]) if cov.shape[0] > max(i, j) else math.nan
+    if not math.isfinite(gap):
+        return DASH
+    band = f" \u00b1 {2 * math.sqrt(var):.4f}" if math.isfinite(var) and var >= 0 else ""
+    return f"{gap:.4f}{band} rad (2\u03c3)"
+
+
+def _page_content(
     result: ReplayResult,
     data: ReportData,
     errors: TrackingErrors | None,
     images: list[tuple[str, str]],
-) -> str:
+) -> dict[str, Any]:
+    """The page's title, summary block, alerts and sections (rendered by base.html)."""
     est = result.estimate
     stats = result.stats
     dropped = ", ".join(f"{k}: {n}" for k, n in stats.dropped.items() if n) or "none"
-    error = f'<p class="err">Stopped early: {html.escape(result.error)}</p>' if result.error else ""
     truth = data.truth
     bag = (
-        f"<p>The bag holds its truth: {html.escape(truth.description)}.</p>"
+        f"The bag holds its truth: {truth.description}."
         if truth is not None
-        else "<p>The bag holds no truth (no <code>genbacklash.truth</code> in its metadata): "
-        "predictions use the final estimate as the plant.</p>"
+        else "The bag holds no truth (no genbacklash.truth in its metadata): predictions use "
+        "the final estimate as the plant."
     )
-    figures = "\n".join(
-        f'<figure><img src="{name}" alt="{html.escape(caption)}">'
-        f"<figcaption>{html.escape(caption)}</figcaption></figure>"
-        for name, caption in images
-    )
-    return f"""<!DOCTYPE html>
-<html lang="en"><head><meta charset="utf-8"><title>genbacklash replay report</title>
-<style>
-body {{ font-family: sans-serif; max-width: 1200px; margin: 2em auto; color: #222; }}
-table {{ border-collapse: collapse; margin: 0.5em 0; }}
-td, th {{ padding: 2px 12px; text-align: right; }}
-th {{ border-bottom: 1px solid #999; }} td:first-child {{ text-align: left; }}
-img {{ max-width: 100%; }} .err {{ color: #b00; }} .headline {{ font-size: 1.1em; }}
-figure {{ margin: 1.5em 0; }} figcaption {{ color: #444; max-width: 1100px; }}
-</style></head><body>
-<h1>Backlash replay report</h1>
-<p>Output bag <code>{html.escape(str(result.output))}</code>;
-model <b>{html.escape(result.params.model)}</b>, degree {result.params.degree},
-method {html.escape(result.params.method)}; {data.end:.1f} s of data.</p>
-{bag}
-{error}
-<h2>Tracking error: what compensation buys</h2>
-{tracking_summary(errors, data.end)}
-<h2>Final estimate</h2>
-<p>State <b>{html.escape(est.state.value)}</b>, confidence {est.confidence:.2f},
-{est.samples} samples. {html.escape(est.reason)}</p>
-{_table(result, truth)}
-<h2>What the data taught: branch coverage</h2>
-{coverage_summary(data)}
-<p>{result.messages_in} messages replayed, {stats.compensated} compensated commands,
-{result.messages_out} messages written; dropped: {html.escape(dropped)}.</p>
-<h2>Plots</h2>
-{figures}
-</body></html>
-"""
+    params = result.params
+    play = _play(result)
+    if truth is not None and truth.c_left.size:
+        play += f"; true at the end {float(truth.c_left[-1] + truth.c_right[-1]):.4f} rad"
+    summary = [
+        ("Output bag", str(result.output)),
+        ("Model", f"{params.model}, degree {params.degree}, method {params.method}"),
+        ("Data", f"{data.end:.1f} s"),
+        ("Final state", f"{est.state.value}, confidence {est.confidence:.2f}"),
+        ("Play c_L + c_R", play),
+        ("Tracking error", tracking_headline(errors)),
+    ]
+    sections = [
+        tracking_section(errors, data.end),
+        Section(
+            "Final estimate",
+            paragraphs=[
+                f"State {est.state.value}, confidence {est.confidence:.2f}, {est.samples} "
+                f"samples. {est.reason}"
+            ],
+            tables=[_parameter_table(result, truth)],
+        ),
+        Section("What the data taught: branch coverage", paragraphs=[coverage_text(data)]),
+        Section(
+            "Replay counters",
+            paragraphs=[
+                f"{result.messages_in} messages replayed, {stats.compensated} compensated "
+                f"commands, {result.messages_out} messages written; dropped: {dropped}."
+            ],
+        ),
+        Section("Plots", figures=[PageFigure(name, caption) for name, caption in images]),
+    ]
+    return {
+        "title": "Backlash replay report",
+        "subtitle": bag,
+        "summary": summary,
+        "alerts": [f"Stopped early: {result.error}"] if result.error else [],
+        "sections": sections,
+    }
 
 
-def write_report(result: ReplayResult, out_dir: str | Path) -> Path:
-    """Write the plots and ``index.html`` into ``out_dir``; return the page's path."""
+def write_report(
+    result: ReplayResult,
+    out_dir: str | Path,
+    *,
+    progress: Callable[[str], None] | None = None,
+) -> Path:
+    """Write the plots and ``index.html`` into ``out_dir``; return the page's path
+    (``progress``: called with each stage, for a progress line)."""
     directory = Path(out_dir)
     directory.mkdir(parents=True, exist_ok=True)
+    if progress is not None:
+        progress("simulating the tracking errors")
     data = report_data(result)
     errors = tracking_errors(result, data)
     truth_note = (
@@ -1228,11 +1264,11 @@ def write_report(result: ReplayResult, out_dir: str | Path) -> Path:
         ),
     ]
     images = []
-    for name, caption, make in plots:
+    for k, (name, caption, make) in enumerate(plots, 1):
+        if progress is not None:
+            progress(f"figure {k} of {len(plots)} ({name})")
         fig = make(result, data)
         fig.savefig(directory / name, dpi=_DPI)
         plt.close(fig)
         images.append((name, caption))
-    index = directory / "index.html"
-    index.write_text(_page(result, data, errors, images), encoding="utf-8")
-    return index
+    return write_page(directory / "index.html", **_page_content(result, data, errors, images))

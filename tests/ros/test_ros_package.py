@@ -47,6 +47,7 @@ def test_package_xml_format_3_ament_python() -> None:
         "python3-scipy",
         "python3-yaml",
         "python3-sqlalchemy",
+        "python3-jinja2",
     ):
         assert dep in exec_deps, dep
 

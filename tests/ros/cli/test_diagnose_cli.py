@@ -51,13 +51,16 @@ def test_text_output_and_report(tmp_path: Path, capsys: pytest.CaptureFixture[st
         "correlations.png",
         "step_error.png",
         "summary.md",
-        "report.html",
+        "index.html",
     ):
         assert (out_dir / name).stat().st_size > 0, name
         assert f"wrote {out_dir / name}" in captured.err
+    assert not (out_dir / "report.html").exists()  # the page is index.html, as every report
     summary = (out_dir / "summary.md").read_text(encoding="utf-8")
-    assert "`gap_drift`" in summary and "![gap_steps.png](gap_steps.png)" in summary
-    assert '<img src="fit_steps.png"' in (out_dir / "report.html").read_text(encoding="utf-8")
+    assert "| 1 | gap_drift |" in summary and "![gap_steps.png](gap_steps.png)" in summary
+    page = (out_dir / "index.html").read_text(encoding="utf-8")
+    assert '<img src="fit_steps.png"' in page
+    assert "<td>gap_drift</td>" in page and "|---|" not in page and "**" not in page
 
 
 def test_start_from_identify_json_and_from_a_structure(
@@ -161,8 +164,9 @@ def test_an_operation_bag_is_read_as_the_node_reads_it(
     captured = capsys.readouterr()
     assert "floor: quantisation and noise allow a gap of" in captured.out
     summary = (out_dir / "summary.md").read_text(encoding="utf-8")
-    assert "The floor: quantisation and noise allow" in summary
-    assert "| position range | start |" in summary and "| validation samples | start |" in summary
+    assert "**Floor**: quantisation and noise allow" in summary
+    assert "| position range [rad] | start |" in summary
+    assert "| validation samples | start |" in summary
     assert (out_dir / "gap_map.png").stat().st_size > 0
 
 

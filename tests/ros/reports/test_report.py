@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import html
 import re
 from pathlib import Path
 
@@ -46,7 +47,8 @@ def result(operation_bag: Path, tmp_path_factory: pytest.TempPathFactory) -> Rep
 
 
 def _text(page: str) -> str:
-    return " ".join(re.sub(r"<[^>]+>", " ", page).split())
+    """The page's text as a browser shows it: tags dropped, entities (&#39;) decoded."""
+    return " ".join(html.unescape(re.sub(r"<[^>]+>", " ", page)).split())
 
 
 def test_report_with_truth(result: ReplayResult, tmp_path: Path) -> None:
@@ -64,7 +66,7 @@ def test_report_with_truth(result: ReplayResult, tmp_path: Path) -> None:
     assert f"RMS tracking error without compensation {none:.4g} rad" in text
     assert f"with the final estimate's inverse {final:.4g} rad" in text
     cut = 100.0 * (1.0 - final / none)
-    assert f"({cut:.0f}&nbsp;% cut)" in page
+    assert f"({cut:.0f}\u00a0% cut)" in html.unescape(page)  # a no-break space
     assert "Plant: the true drivetrain stored in the bag" in text
     assert "The bag holds its truth: operation: 8 s" in text
     assert "truth at the end" in text  # the parameter table's truth column
