@@ -121,7 +121,7 @@ def test_replay_report_in_a_browser(tmp_path: Path) -> None:
     args = ["replay", str(bag), "--command", COMMAND_TOPIC, "--encoder", ENCODER_TOPIC]
     assert main([*args, "-o", str(tmp_path / "o"), "--report", str(report), "--no-progress"]) == 0
     shown = open_in_browser(report / "index.html", tmp_path)
-    _assert_readable(shown, images=8)
+    _assert_readable(shown, images=9)  # 9 figures: compensation_state.png too
     assert "RMS tracking error without compensation" in str(shown["text"])
 
 

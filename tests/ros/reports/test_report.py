@@ -126,3 +126,33 @@ def test_replay_cli_report(operation_bag: Path, tmp_path: Path) -> None:
     args = ["replay", str(operation_bag), *topics, "-o", str(tmp_path / "o"), "--report", str(rep)]
     assert main(args) == EXIT_OK
     assert "RMS tracking error" in (rep / "index.html").read_text()
+
+
+def test_the_report_says_when_compensation_was_on_faded_or_off_and_why() -> None:
+    """Issue 23: the replay report shows the compensation's state over the record with the
+    node's reasons (a stretch holds from its report to the next)."""
+    from types import SimpleNamespace
+
+    from genbacklash_ros.bags.replay import ReplayHistory
+    from genbacklash_ros.node.compensate import CompensationStatus
+    from genbacklash_ros.reports.replay import compensation_section, compensation_spans
+
+    history = ReplayHistory(
+        compensation_t=[0, 1_000_000_000, 2_000_000_000, 3_000_000_000],
+        compensation=[
+            CompensationStatus(0.0, "off", "no estimate yet"),
+            CompensationStatus(1.0, "on", "compensation on: the model leaves 4 %"),
+            CompensationStatus(0.4, "faded", "compensation faded to 40 %: the model leaves 87 %"),
+            CompensationStatus(0.4, "faded", "compensation faded to 41 %: the model leaves 86 %"),
+        ],
+    )
+    result = SimpleNamespace(history=history)
+    spans = compensation_spans(result)  # type: ignore[arg-type]
+    assert [(a, b, s) for a, b, s, _ in spans] == [
+        (0.0, 1.0, "off"),
+        (1.0, 2.0, "on"),
+        (2.0, 3.0, "faded"),
+    ]
+    section = compensation_section(result)  # type: ignore[arg-type]
+    assert "on 33 % of the time, faded 33 % and off 33 %" in section.paragraphs[0]
+    assert section.tables[0].rows[2][3].startswith("compensation faded to 40 %")
