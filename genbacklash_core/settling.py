@@ -20,7 +20,10 @@ than the encoder samples, at a median of :data:`MIN_READINGS_PER_COMMAND` readin
 per command value (the paper's input, a new value at every sample, keeps every sample). The
 median is of the last :data:`RUN_WINDOW` runs of equal commands. The settling time applied
 is at most half the median time a command holds, so a rule set for a slow servo never takes
-every sample out.
+every sample out; a step larger than the usual ones (a compensated command crossing the
+play at a reversal, which a torque-limited servo takes longer to follow) is given longer, in
+proportion to the square root of its size against the median step, at most
+:data:`MAX_STRETCH` times.
 
 Examples
 --------
@@ -36,6 +39,7 @@ Examples
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,6 +47,7 @@ import numpy as np
 from ._typing import ArrayLike, BoolArray
 
 __all__ = [
+    "MAX_STRETCH",
     "MIN_READINGS_PER_COMMAND",
     "RUN_WINDOW",
     "SettleState",
@@ -52,6 +57,7 @@ __all__ = [
 
 MIN_READINGS_PER_COMMAND = 3
 RUN_WINDOW = 63
+MAX_STRETCH = 4.0  # a large step's settling is at most this many times the usual one
 
 
 @dataclass(frozen=True)
@@ -70,6 +76,10 @@ class SettleState:
         Lengths of the last :data:`RUN_WINDOW` complete runs.
     spans : tuple of int
         Their durations, ns (from a run's first sample to the next run's).
+    steps : tuple of float
+        The sizes ``|u - u before|`` of the last :data:`RUN_WINDOW` command changes.
+    busy_ns : int or None
+        Until when the servo is still settling from the changes so far.
     """
 
     last_u: float | None = None
@@ -77,6 +87,8 @@ class SettleState:
     run: int = 0
     runs: tuple[int, ...] = ()
     spans: tuple[int, ...] = ()
+    steps: tuple[float, ...] = ()
+    busy_ns: int | None = None
 
     def limit(self, settle_ns: int) -> int:
         """The settling time applied: ``settle_ns``, at most half the median time a command
@@ -140,11 +152,25 @@ def settling_keep(
     start = np.where(last >= 0, t[np.maximum(last, 0)], -1)
     carried = before.change_ns
     change = np.where(last >= 0, start, np.int64(t[0] if carried is None else carried))
-    after = SettleState(float(u[-1]), int(change[-1]), run, runs, tuple(spans))
+    sizes = np.abs(u[where] - previous[where])
+    known = sizes[np.isfinite(sizes)]
+    steps = (*before.steps, *known.tolist())[-RUN_WINDOW:]
+    after = SettleState(float(u[-1]), int(change[-1]), run, runs, tuple(spans), steps)
     if settle_ns <= 0 or not after.applies:
         return np.ones(n, dtype=bool), after
-    keep: BoolArray = (t - change) >= after.limit(settle_ns)
-    return keep, after
+    base = after.limit(settle_ns)
+    # a step larger than the usual ones takes a torque-limited servo longer: the time to
+    # move grows with the square root of the distance (at most MAX_STRETCH times the base),
+    # and the servo stays busy until the latest such end, across the changes that follow
+    typical = float(np.median(steps)) if steps else 0.0
+    ratio = np.ones(where.size) if typical <= 0.0 else np.nan_to_num(sizes / typical, nan=1.0)
+    stretch = np.clip(np.sqrt(ratio), 1.0, MAX_STRETCH)
+    ends = t[where] + np.round(base * stretch).astype(np.int64)
+    carried_busy = before.busy_ns if before.busy_ns is not None else np.iinfo(np.int64).min
+    busy = np.maximum.accumulate(np.concatenate(([carried_busy], ends)))
+    until = busy[np.searchsorted(where, index, side="right")]
+    keep: BoolArray = t >= until
+    return keep, dataclasses.replace(after, busy_ns=int(busy[-1]))
 
 
 def carry_marks(marks: ArrayLike, keep: ArrayLike) -> BoolArray:
