@@ -42,15 +42,12 @@ def _run(args: list[str]) -> dict[str, object]:
 
 
 def _play(result: dict[str, object]) -> float:
-    if "backlash" in result:  # identify
-        bl = result["backlash"]
-        assert isinstance(bl, dict)
-        return float(bl["c_left"]) + float(bl["c_right"])
-    names = result.get("names") or []
-    values = result.get("parameters") or []
-    assert isinstance(names, list) and isinstance(values, list)
-    by_name = dict(zip(names, values, strict=True))
-    return float(by_name["c_left"]) + float(by_name["c_right"])
+    """c_L + c_R of identify's JSON or of replay's (its ``model`` holds the same shape)."""
+    shape = result.get("model") if "backlash" not in result else result
+    assert isinstance(shape, dict)
+    bl = shape["backlash"]
+    assert isinstance(bl, dict)
+    return float(bl["c_left"]) + float(bl["c_right"])
 
 
 def main() -> None:

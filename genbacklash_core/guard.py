@@ -52,7 +52,10 @@ from .cascade import Cascade
 from .errors import GenBacklashError
 from .simulate import simulate_backlash
 
-__all__ = ["HISTORY", "CompensationGuard", "GuardSettings", "GuardVerdict"]
+__all__ = ["HISTORY", "JUDGE_EVERY", "CompensationGuard", "GuardSettings", "GuardVerdict"]
+
+JUDGE_EVERY = 1024
+"""Samples the guard lets gather before it judges them (a new model is judged at once)."""
 
 HISTORY = 3
 """Windows of samples the guard remembers to judge a new model on (the exponential weight
@@ -157,6 +160,9 @@ class CompensationGuard:
         # the latest samples (up to HISTORY windows): a new model is judged on them at once
         self._history: list[tuple[FloatArray, FloatArray, np.ndarray]] = []
         self._held = 0
+        # samples not judged yet (judged JUDGE_EVERY at a time, with the model in use)
+        self._pending: list[tuple[FloatArray, FloatArray, np.ndarray]] = []
+        self._waiting = 0
         self._model: GeneralBacklash | Cascade | None = None
         self._x: float | None = None  # the model's free-run output after the last sample
         self._sum_model = 0.0  # exponentially weighted sums of the squared errors
@@ -190,11 +196,29 @@ class CompensationGuard:
         self._remember(u, y, brk)
         if model is None:
             self._x = None
+            self._pending.clear()
+            self._waiting = 0
             return self.verdict
         if model != self._model:
             return self.adopt(model)  # the batch is in the history it is judged on
-        self._judge_batch(u, y, brk, model)
-        self.verdict = self._judge()
+        self._pending.append((u, y, brk))
+        self._waiting += u.size
+        if self._waiting >= JUDGE_EVERY:
+            self.flush()
+        return self.verdict
+
+    def flush(self) -> GuardVerdict:
+        """Judge the samples waiting (batches are judged :data:`JUDGE_EVERY` samples at a
+        time) with the model in use now; returns the verdict."""
+        pending, model = self._pending, self._model
+        if pending and model is not None:
+            u = np.concatenate([p[0] for p in pending])
+            y = np.concatenate([p[1] for p in pending])
+            brk = np.concatenate([p[2] for p in pending])
+            self._judge_batch(u, y, brk, model)
+            self.verdict = self._judge()
+        pending.clear()
+        self._waiting = 0
         return self.verdict
 
     def adopt(self, model: GeneralBacklash | Cascade | None) -> GuardVerdict:
@@ -207,6 +231,8 @@ class CompensationGuard:
         self._x = None
         self._sum_model = self._sum_none = self._weight = 0.0
         self._samples = 0
+        self._pending.clear()  # they are in the history judged below
+        self._waiting = 0
         if self._history:
             u = np.concatenate([h[0] for h in self._history])
             y = np.concatenate([h[1] for h in self._history])

@@ -40,6 +40,7 @@ Examples
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -89,18 +90,22 @@ class SettleState:
     spans: tuple[int, ...] = ()
     steps: tuple[float, ...] = ()
     busy_ns: int | None = None
+    # the medians of runs, spans and steps (NaN: none yet), kept with them
+    median_run: float = math.nan
+    median_span: float = math.nan
+    median_step: float = math.nan
 
     def limit(self, settle_ns: int) -> int:
         """The settling time applied: ``settle_ns``, at most half the median time a command
         holds (so that a rule set for a slow servo never takes every sample out)."""
-        if not self.spans:
+        if math.isnan(self.median_span):
             return settle_ns
-        return min(settle_ns, int(np.median(self.spans)) // 2)
+        return min(settle_ns, int(self.median_span) // 2)
 
     @property
     def applies(self) -> bool:
         """Whether the commands change slowly enough for the rule to apply."""
-        return bool(self.runs) and float(np.median(self.runs)) >= MIN_READINGS_PER_COMMAND
+        return self.median_run >= MIN_READINGS_PER_COMMAND
 
 
 def settling_keep(
@@ -129,12 +134,17 @@ def settling_keep(
     n = u.size
     if n == 0:
         return np.ones(0, dtype=bool), before
+    if before.last_u is not None and bool((u == before.last_u).all()):
+        # the command held throughout (a dwell): only the run grows
+        after = dataclasses.replace(before, run=before.run + n)
+        if settle_ns <= 0 or not after.applies or before.busy_ns is None:
+            return np.ones(n, dtype=bool), after
+        held: BoolArray = t >= before.busy_ns
+        return held, after
     previous = np.empty_like(u)
     previous[1:] = u[:-1]
     previous[0] = np.nan if before.last_u is None else before.last_u
-    changed = u != previous
-    index = np.arange(n)
-    where = np.flatnonzero(changed)
+    where = np.flatnonzero(u != previous)
     # runs: the carried run ends at the first change; each change starts a new one
     ends = np.append(where, n)
     lengths = np.diff(ends).tolist()
@@ -147,30 +157,51 @@ def settling_keep(
     if before.change_ns is not None and before.last_u is not None:
         starts_ns.insert(0, before.change_ns)
     spans = (*before.spans, *np.diff(starts_ns).tolist())[-RUN_WINDOW:]
-    last = np.where(changed, index, -1)
-    np.maximum.accumulate(last, out=last)
-    start = np.where(last >= 0, t[np.maximum(last, 0)], -1)
     carried = before.change_ns
-    change = np.where(last >= 0, start, np.int64(t[0] if carried is None else carried))
+    last_change = int(t[where[-1]]) if where.size else int(t[0] if carried is None else carried)
     sizes = np.abs(u[where] - previous[where])
     known = sizes[np.isfinite(sizes)]
     steps = (*before.steps, *known.tolist())[-RUN_WINDOW:]
-    after = SettleState(float(u[-1]), int(change[-1]), run, runs, tuple(spans), steps)
+    after = SettleState(
+        float(u[-1]),
+        last_change,
+        run,
+        runs,
+        tuple(spans),
+        steps,
+        before.busy_ns,
+        _median(runs, before.median_run, bool(complete)),
+        _median(spans, before.median_span, len(spans) != len(before.spans) or bool(where.size)),
+        _median(steps, before.median_step, bool(known.size)),
+    )
     if settle_ns <= 0 or not after.applies:
         return np.ones(n, dtype=bool), after
     base = after.limit(settle_ns)
     # a step larger than the usual ones takes a torque-limited servo longer: the time to
     # move grows with the square root of the distance (at most MAX_STRETCH times the base),
     # and the servo stays busy until the latest such end, across the changes that follow
-    typical = float(np.median(steps)) if steps else 0.0
+    typical = 0.0 if math.isnan(after.median_step) else after.median_step
     ratio = np.ones(where.size) if typical <= 0.0 else np.nan_to_num(sizes / typical, nan=1.0)
     stretch = np.clip(np.sqrt(ratio), 1.0, MAX_STRETCH)
     ends = t[where] + np.round(base * stretch).astype(np.int64)
     carried_busy = before.busy_ns if before.busy_ns is not None else np.iinfo(np.int64).min
     busy = np.maximum.accumulate(np.concatenate(([carried_busy], ends)))
-    until = busy[np.searchsorted(where, index, side="right")]
+    until = busy[np.searchsorted(where, np.arange(n), side="right")]
     keep: BoolArray = t >= until
     return keep, dataclasses.replace(after, busy_ns=int(busy[-1]))
+
+
+def _median(values: tuple[float, ...], known: float, changed: bool) -> float:
+    """The median of ``values`` (NaN when empty), ``known`` when they did not change."""
+    if not changed:
+        return known
+    if not values:
+        return math.nan
+    ordered = sorted(values)  # a few dozen numbers: faster than numpy's median
+    half = len(ordered) // 2
+    if len(ordered) % 2:
+        return float(ordered[half])
+    return 0.5 * (float(ordered[half - 1]) + float(ordered[half]))
 
 
 def carry_marks(marks: ArrayLike, keep: ArrayLike) -> BoolArray:

@@ -993,6 +993,7 @@ class BacklashPipeline:
             result = worker.refit()
             if result is not None:
                 self._take_results([result])
+        self._guard.flush()  # the samples the guard has not judged yet
         now = self._clock.now
         if now is None:
             return outputs

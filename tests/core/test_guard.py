@@ -3,7 +3,6 @@ cuts, and it fades compensation out where it would not help (issue 23, deliverab
 
 from __future__ import annotations
 
-import itertools
 import math
 
 import numpy as np
@@ -101,12 +100,12 @@ def test_evidence_moves_trust_from_one_to_the_judgement() -> None:
     guard = CompensationGuard(GuardSettings(min_samples=1000))
     assert guard.verdict.state == "judging" and guard.verdict.trust == 1.0
     trusts = []
-    for start in range(0, 1200, 200):
-        part = slice(start, start + 200)
-        trusts.append(guard.update(u[part], y[part], np.zeros(200, dtype=bool), wrong).trust)
-    assert trusts[0] == pytest.approx(0.8)  # 200 of 1000 samples of evidence, fit 0
-    assert all(a >= b for a, b in itertools.pairwise(trusts))
-    assert trusts[-1] == 0.0
+    for start in range(0, 1536, 512):
+        part = slice(start, start + 512)
+        trusts.append(guard.update(u[part], y[part], np.zeros(512, dtype=bool), wrong).trust)
+    # a new model is judged at once (512 of 1000 samples of evidence, fit 0); then the next
+    # JUDGE_EVERY samples wait and are judged together
+    assert trusts == pytest.approx([1 - 0.512, 1 - 0.512, 0.0])
 
 
 def test_disabled_guard_keeps_compensation_but_still_judges() -> None:
@@ -128,7 +127,8 @@ def test_batches_equal_one_call_and_breaks_restart_the_chain() -> None:
     whole = CompensationGuard().update(u, y, brk, model)
     parts = CompensationGuard()
     for start in range(0, u.size, 128):
-        verdict = parts.update(u[start : start + 128], y[start : start + 128], brk[:128], model)
+        parts.update(u[start : start + 128], y[start : start + 128], brk[:128], model)
+    verdict = parts.flush()
     assert verdict.ratio == pytest.approx(whole.ratio, rel=1e-9)
     # a break re-anchors the model's output at the measured load: a jump of the load the
     # model cannot explain is not held against it after a break
