@@ -92,7 +92,7 @@ def cmd_fleet(args: argparse.Namespace) -> int:
     """Run ``genbacklash fleet``."""
     from genbacklash_ros.fleet.archive import discover
     from genbacklash_ros.fleet.database import ResultStore
-    from genbacklash_ros.fleet.job import FleetSettings, JointRequest
+    from genbacklash_ros.fleet.job import FleetSettings, JointRequest, check_archive
     from genbacklash_ros.fleet.runner import fleet_client, run_fleet
 
     used = [*BATCH_PARAMETERS, "joint", "command_index"]
@@ -110,7 +110,8 @@ def cmd_fleet(args: argparse.Namespace) -> int:
         replay=args.replay,
         max_nrmse=args.max_nrmse,
     )
-    discover(args.archive)  # a wrong ARCHIVE stops here, before a cluster starts
+    # a wrong ARCHIVE, one without bags or without the topics stops here, before a cluster
+    check_archive(args.archive, discover(args.archive), settings)
     store = ResultStore(args.db)
     try:
         with fleet_client(

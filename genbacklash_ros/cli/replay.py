@@ -70,7 +70,8 @@ the exit status is 2.
 
 _EPILOG = """\
 examples:
-  genbacklash replay bags/drivetrain --command /command --encoder /encoder -o out --report rep
+  genbacklash replay bags/drivetrain --command /command --encoder /encoder --joint drive_joint \\
+      -o out --report rep
   genbacklash replay run.mcap --command /cmd --encoder /joint_states --joint knee \\
       --model cascade --na 2 --nb 2 -o out --json
   genbacklash replay run --command /cmd --encoder /enc --params-file config/params.yaml -o out
@@ -104,7 +105,8 @@ def add_bag_input_options(parser: argparse.ArgumentParser, *, required: bool) ->
         "--joint",
         metavar="NAME",
         default=None,
-        help="bag input: joint name in JointState messages (default: the first joint)",
+        help="bag input: joint name in JointState messages (needed when they hold several "
+        "joints; a name the bag lacks stops with the names it has)",
     )
     parser.add_argument(
         "--command-index",

@@ -48,7 +48,13 @@ from genbacklash_core import (
 from genbacklash_core.cascade import model_to_dict
 from genbacklash_core.diagnose import DiagnoseSettings, StartStructure, diagnose
 from genbacklash_core.errors import NotEnoughExcitationError
-from genbacklash_ros.bags.bagio import BagError, BagReader, read_aligned
+from genbacklash_ros.bags.bagio import (
+    COMMAND_MSGTYPES,
+    ENCODER_MSGTYPES,
+    BagError,
+    BagReader,
+    read_aligned,
+)
 from genbacklash_ros.fleet.archive import (
     ArchiveBag,
     bag_start_ns,
@@ -66,6 +72,7 @@ __all__ = [
     "FleetSettings",
     "JointRequest",
     "analyse_bag",
+    "check_archive",
     "inspect_bag",
 ]
 
@@ -238,6 +245,71 @@ def _first_joint(path: Path, topic: str) -> str:
     except GenBacklashError:
         return ""
     return ""
+
+
+def _what_is_there(root: Path, limit: int = 5) -> str:
+    """A few of the entries under ``root`` (what an archive without bags holds)."""
+    found: list[str] = []
+    total = 0
+    try:
+        for path in sorted(root.rglob("*")):
+            if path.is_file() and not any(part.startswith(".") for part in path.parts):
+                total += 1
+                if len(found) < limit:
+                    found.append(path.relative_to(root).as_posix())
+    except OSError:
+        pass
+    if not total:
+        return "it holds no files"
+    more = f" and {total - limit} more" if total > limit else ""
+    return f"it holds {total} file{'' if total == 1 else 's'}: {', '.join(found)}{more}"
+
+
+def check_archive(archive: str | Path, bags: list[ArchiveBag], settings: FleetSettings) -> None:
+    """Stop before any work when the archive holds no bag, or no bag with both topics.
+
+    The bags are opened in order until one holds ``settings.command_topic`` and
+    ``settings.encoder_topic`` with supported types (the check of
+    :meth:`~genbacklash_ros.bags.bagio.BagReader.topic`; usually the first bag). When none
+    does, :class:`~genbacklash_core.GenBacklashError` names the topics (and types) the bags
+    hold, or why none could be read. A bag that lacks them among others that have them is
+    the row ``unreadable``, as before.
+    """
+    root = Path(archive)
+    if not bags:
+        raise GenBacklashError(
+            f"{archive} holds no bags (rosbag2 directories with metadata.yaml, or .mcap "
+            f"files); {_what_is_there(root)}"
+        )
+    held: dict[tuple[str, str], int] = {}
+    first_error = ""
+    readable = 0
+    for bag in bags:
+        try:
+            with BagReader(bag.path) as reader:
+                readable += 1
+                for info in reader.topics.values():
+                    held[info.name, info.msgtype] = held.get((info.name, info.msgtype), 0) + 1
+                reader.topic(settings.command_topic, COMMAND_MSGTYPES)
+                reader.topic(settings.encoder_topic, ENCODER_MSGTYPES)
+                return
+        except BagError as err:
+            first_error = first_error or str(err)
+    n = len(bags)
+    if not readable:
+        raise GenBacklashError(
+            f"none of the {n} bag{'' if n == 1 else 's'} of {archive} can be read "
+            f"(first: {first_error})"
+        )
+    topics = ", ".join(
+        f"{name} ({msgtype}, in {count} bag{'' if count == 1 else 's'})"
+        for (name, msgtype), count in sorted(held.items())
+    )
+    raise GenBacklashError(
+        f"no bag of {archive} holds both --command {settings.command_topic} and --encoder "
+        f"{settings.encoder_topic} of a supported type; the {readable} readable "
+        f"{'bag holds' if readable == 1 else 'bags hold'}: {topics or 'no topics'}"
+    )
 
 
 def inspect_bag(bag: ArchiveBag, settings: FleetSettings) -> BagPlan:
