@@ -38,7 +38,7 @@ import difflib
 import itertools
 import struct
 from collections import Counter
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Generator, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from operator import itemgetter
 from pathlib import Path
@@ -659,7 +659,8 @@ def _peek(reader: BagReader, topics: Sequence[str]) -> dict[str, list[Message]]:
     except BagError:
         pass
     finally:
-        stream.close()
+        if isinstance(stream, Generator):  # stop the reader where the look stopped
+            stream.close()
     return seen
 
 

@@ -31,6 +31,7 @@ from genbacklash_ros.cli.replay import (
     load_series,
     node_parameters,
 )
+from genbacklash_ros.node.parameters import NodeParameters
 
 __all__ = ["add_parser", "cmd_diagnose", "parse_start"]
 
@@ -111,6 +112,10 @@ def parse_start(text: str) -> StartStructure | AugmentedModel:
                 raise GenBacklashError(
                     f"--start: {key} must be a whole number, got {value!r}"
                 ) from err
+        try:  # the node parameters' ranges, as identify's and replay's options take them
+            NodeParameters().replace(**values)
+        except GenBacklashError as err:
+            raise GenBacklashError(f"--start {text}: {err}") from err
         return StartStructure(**values)
     path = Path(text)
     if not path.is_file():

@@ -19,7 +19,7 @@ from typing import Any, NamedTuple
 from genbacklash_core import GenBacklashError
 from genbacklash_core.scenarios import PHASE_KINDS
 from genbacklash_ros.bags.bagio import BagError, read_aligned
-from genbacklash_ros.bags.csvio import Series, read_series_csv
+from genbacklash_ros.bags.csvio import Series, dropped_note, read_series_csv
 from genbacklash_ros.bags.replay import OUTPUT_TOPICS, ReplayResult, replay
 from genbacklash_ros.bags.simbags import COMMAND_TOPIC, ENCODER_TOPIC, SimulatedBag
 from genbacklash_ros.node.parameters import (
@@ -167,14 +167,19 @@ def load_series(
     """The (u, y) data of ``args.data``: a CSV file, or a bag with the bag options.
 
     Shared by ``identify`` and ``diagnose``; ``params`` supply ``joint`` and
-    ``command_index`` where the options do not.
+    ``command_index`` where the options do not. A CSV row that is not all finite numbers
+    stops with its line number, or with ``--drop-nonfinite`` is dropped and named on stderr.
     """
     file = Path(args.data)
     if is_bag(file):
         return load_bag_series(args, params, bridge=bridge)
     if not file.exists():
         raise GenBacklashError(f"{file} does not exist")
-    return read_series_csv(file)
+    drop = bool(getattr(args, "drop_nonfinite", False))
+    series = read_series_csv(file, bad_rows="drop" if drop else "raise")
+    if series.dropped:  # --drop-nonfinite: say what went, never silently
+        print(f"genbacklash {args.command}: {dropped_note(file, series.dropped)}", file=sys.stderr)
+    return series
 
 
 # --------------------------------------------------------------------------- node parameters
@@ -262,6 +267,15 @@ def node_parameters(args: argparse.Namespace, used: Collection[str]) -> CommandP
     overrides = parse_param_overrides(args.param)
     options = {s.name: getattr(args, s.name, None) for s in PARAMETER_SPECS}
     params, given = command_line_parameters(args.params_file, overrides, options)
+    # the command's own options (--degree, --na, --nb, --joint, --command-index ...) take
+    # the node parameters' ranges: the same check for every command, before any work
+    for name, value in options.items():
+        if value is None:
+            continue
+        try:
+            params.replace(**{name: value})
+        except GenBacklashError as err:
+            raise GenBacklashError(f"--{name.replace('_', '-')} {value}: {err}") from err
     defaults = {s.name: s.default for s in PARAMETER_SPECS}
     unused = [
         name

@@ -89,8 +89,11 @@ def test_identify_reports_nonfinite_samples(
     write_series_csv(path, Series(u=u, y=ex.y))
     assert main(["identify", str(path)]) == EXIT_BAD_INPUT
     err = capsys.readouterr().err
-    assert "3 of 800 samples are NaN or infinite" in err and "10, 20, 30" in err
+    assert "line 12 of" in err and "column 'u': 'nan' is not finite" in err
+    assert "(3 rows are bad: lines 12, 22 and 32)" in err
     assert main(["identify", str(path), "--drop-nonfinite", "--json"]) == EXIT_OK
+    err = capsys.readouterr().err
+    assert "dropped 3 rows of" in err and "lines 12, 22 and 32" in err
 
 
 def test_identify_not_enough_excitation(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
