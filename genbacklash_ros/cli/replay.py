@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import shutil
 import sys
@@ -510,12 +511,30 @@ def simulate_bag(args: argparse.Namespace) -> int:
 # --------------------------------------------------------------------------- replay
 
 
+RAD_PARAMETERS = ("c_left", "c_right")
+"""The parameters in the units of u and y: rad on a drivetrain (the slopes have none)."""
+
+
+def play_line(play: float, std: float) -> str:
+    """The play ``c_L + c_R`` with its 2-sigma uncertainty, in rad (``std`` NaN: unknown).
+
+    >>> play_line(0.1034, 0.00025)
+    'play c_L + c_R = 0.10340 rad +/- 0.00050 rad (2 sigma)'
+    """
+    if not math.isfinite(play):
+        return "play c_L + c_R: no estimate yet"
+    band = f" +/- {2 * std:.5f} rad (2 sigma)" if math.isfinite(std) else ""
+    return f"play c_L + c_R = {play:.5f} rad{band}"
+
+
 def _summary(result: ReplayResult) -> str:
     est = result.estimate
     lines = [f"{'parameter':<12}{'estimate':>12}{'2 sigma':>12}", "-" * 36]
     std = est.std()
     for name, value, sigma in zip(est.names, est.parameters, std, strict=True):
-        lines.append(f"{name:<12}{value:>12.5f}{2 * sigma:>12.5f}")
+        unit = "  rad" if name in RAD_PARAMETERS else ""
+        lines.append(f"{name:<12}{value:>12.5f}{2 * sigma:>12.5f}{unit}")
+    lines.append(play_line(*est.play()))
     stats = result.stats
     dropped = {k: n for k, n in stats.dropped.items() if n}
     rate = result.messages_in / result.seconds if result.seconds > 0 else 0.0

@@ -48,6 +48,7 @@ from genbacklash_core import (
 from genbacklash_core.cascade import model_to_dict
 from genbacklash_core.diagnose import DiagnoseSettings, StartStructure, diagnose
 from genbacklash_core.errors import NotEnoughExcitationError
+from genbacklash_core.uncertainty import parameter_covariance, play_std
 from genbacklash_ros.bags.bagio import (
     COMMAND_MSGTYPES,
     ENCODER_MSGTYPES,
@@ -61,7 +62,6 @@ from genbacklash_ros.fleet.archive import (
     content_hash,
     metadata_identity,
 )
-from genbacklash_ros.fleet.uncertainty import gap_std, parameter_covariance
 from genbacklash_ros.node.messages import JointState
 from genbacklash_ros.node.parameters import NodeParameters
 
@@ -423,7 +423,7 @@ def _fit_fields(
         "c_right": float(backlash.c_right),
         "c_right_std": float(std[index["c_right"]]),
         "gap": float(backlash.c_left + backlash.c_right),
-        "gap_std": gap_std(model, cov),
+        "gap_std": play_std(model, cov),
         "parameters": dict(zip(names, map(float, model.parameters()), strict=True)),
         "parameter_std": dict(zip(names, map(float, std), strict=True)),
         "estimate": model_to_dict(model),
@@ -452,14 +452,10 @@ def _replay_fields(
     est = result.estimate
     summary = {k: v for k, v in result.to_dict().items() if k != "output"}
     fields: dict[str, Any] = {"replay": summary, "replay_state": est.state.value}
-    model = est.model
-    if model is not None:
-        backlash = model.backlash if isinstance(model, Cascade) else model
-        names = est.names
-        i, j = names.index("c_left"), names.index("c_right")
-        var = est.covariance[i, i] + est.covariance[j, j] + 2 * est.covariance[i, j]
-        fields["replay_gap"] = float(backlash.c_left + backlash.c_right)
-        fields["replay_gap_std"] = float(np.sqrt(max(var, 0.0)))
+    if est.model is not None:
+        play, play_std = est.play()
+        fields["replay_gap"] = play
+        fields["replay_gap_std"] = play_std
     if result.error:
         summary["error"] = result.error
     return fields
