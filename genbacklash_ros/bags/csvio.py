@@ -44,6 +44,27 @@ class Series:
     breaks: npt.NDArray[np.bool_] | None = None
     dropped: tuple[int, ...] = ()
 
+    def sample_period(self) -> float | None:
+        """The nominal sample period in seconds: the median step of ``t`` (None without
+        ``t`` or without two increasing stamps). ``t`` is read as seconds, or as integer
+        nanoseconds when its median step is 1000 or more (no drivetrain is sampled that
+        slowly in seconds).
+
+        >>> Series(u=np.zeros(3), y=np.zeros(3), t=np.array([0.0, 0.002, 0.004])).sample_period()
+        0.002
+        >>> Series(u=np.zeros(3), y=np.zeros(3), t=np.array([0, 1e6, 2e6])).sample_period()
+        0.001
+        """
+        if self.t is None:
+            return None
+        t = np.asarray(self.t, dtype=np.float64)
+        steps = np.diff(t[np.isfinite(t)])
+        steps = steps[steps > 0]
+        if not steps.size:
+            return None
+        step = float(np.median(steps))
+        return step / 1e9 if step >= 1000.0 else step
+
 
 BadRows = Literal["raise", "drop", "nan"]
 """What :func:`read_series_csv` does with a row it cannot use (see there)."""

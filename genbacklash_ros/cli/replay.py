@@ -150,7 +150,8 @@ def load_bag_series(
             f"skipped {series.skipped} encoder samples before the first command",
             file=sys.stderr,
         )
-    return Series(u=series.u, y=series.y, breaks=series.breaks)
+    t = (series.t - series.t[0]) / 1e9 if series.t.size else None  # seconds from the first
+    return Series(u=series.u, y=series.y, t=t, breaks=series.breaks)
 
 
 BAG_SUFFIXES = (".mcap", ".db3")
