@@ -94,3 +94,11 @@ def test_structure_options_take_the_node_parameter_ranges(
     assert main([values.get(a, a) for a in argv]) == EXIT_BAD_INPUT
     assert words in _one_error(capsys, argv[0])
     assert not (tmp_path / "out").exists()
+
+
+def test_fleet_report_takes_the_play_limit_under_both_names() -> None:
+    from genbacklash_ros.cli.main import build_parser
+
+    parser = build_parser("fleet-report")
+    for name in ("--play-limit", "--gap-limit"):
+        assert parser.parse_args(["fleet-report", "db", name, "0.15"]).gap_limit == 0.15
