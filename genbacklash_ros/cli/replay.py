@@ -93,7 +93,7 @@ def add_bag_input_options(parser: argparse.ArgumentParser, *, required: bool) ->
         dest="command_topic",
         required=required,
         help="bag input: command topic (std_msgs/Float64, std_msgs/Float64MultiArray or "
-        "sensor_msgs/JointState)",
+        "sensor_msgs/JointState); a topic the bag lacks stops with the bag's topics and types",
     )
     parser.add_argument(
         "--encoder",
@@ -114,7 +114,8 @@ def add_bag_input_options(parser: argparse.ArgumentParser, *, required: bool) ->
         metavar="I",
         type=int,
         default=None,
-        help="bag input: element of a Float64MultiArray command (default 0)",
+        help="bag input: element of a Float64MultiArray command (default 0; one beyond the "
+        "array stops with its length)",
     )
 
 
