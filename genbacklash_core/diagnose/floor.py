@@ -95,7 +95,7 @@ class NoiseFloor:
         """One sentence with the numbers.
 
         >>> NoiseFloor(0.0015, 0.0002, 900, 0.0005, 0.0008).describe()[:60]
-        'quantisation and noise allow a gap of 0.0008 (RMS 0.0005: en'
+        'quantisation and noise allow a misfit of 0.0008 (RMS 0.0005:'
         """
         step = f"encoder step {self.step:.3g}" if self.step > 0 else "no quantisation seen"
         if self.noise is None:
