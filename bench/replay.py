@@ -46,6 +46,7 @@ from genbacklash_ros.bags.replay import _replay_params, replay
 from genbacklash_ros.bags.simbags import (
     COMMAND_TOPIC,
     ENCODER_TOPIC,
+    JOINT,
     operation_settings,
     write_operation_bag,
 )
@@ -96,7 +97,7 @@ def timed(fn: Callable[[], object]) -> float:
 
 def run_cli(bag: Path, out: Path) -> float:
     shutil.rmtree(out, ignore_errors=True)
-    cmd = [*CLI, str(bag), "--command", COMMAND_TOPIC, "--encoder", ENCODER_TOPIC]
+    cmd = [*CLI, str(bag), "--command", COMMAND_TOPIC, "--encoder", ENCODER_TOPIC, "--joint", JOINT]
     started = time.perf_counter()
     subprocess.run(
         [*cmd, "-o", str(out), "--no-progress", "--json"], check=True, stdout=subprocess.DEVNULL
@@ -402,7 +403,9 @@ def profile_split(bag: Path, out: Path) -> tuple[float, list[tuple[str, float]]]
     shutil.rmtree(out, ignore_errors=True)
     profiler = cProfile.Profile()
     started = time.perf_counter()
-    profiler.runcall(replay, bag, out, command_topic=COMMAND_TOPIC, encoder_topic=ENCODER_TOPIC)
+    profiler.runcall(
+        replay, bag, out, command_topic=COMMAND_TOPIC, encoder_topic=ENCODER_TOPIC, joint=JOINT
+    )
     total = time.perf_counter() - started
     stats = pstats.Stats(profiler)
     cumulative: dict[tuple[str, str], float] = {}
@@ -451,7 +454,7 @@ def seed_ratio(seed: int, settings: object, root: Path) -> tuple[int, int, float
     bag = root / f"operation-{seed}"
     write_operation_bag(bag, settings, seed=seed)  # type: ignore[arg-type]
     out = root / f"first-{seed}"
-    first = replay(bag, out, command_topic=COMMAND_TOPIC, encoder_topic=ENCODER_TOPIC)
+    first = replay(bag, out, command_topic=COMMAND_TOPIC, encoder_topic=ENCODER_TOPIC, joint=JOINT)
     assert first.error == "", first.error
     with BagReader(bag) as reader:
         n_enc = reader.topics[ENCODER_TOPIC].count
@@ -483,7 +486,11 @@ def main() -> None:
         size_mb = sum(f.stat().st_size for f in bag.iterdir()) / 1e6
         # what the replay writes (for the floor to write as many)
         first = replay(
-            bag, root / "first", command_topic=COMMAND_TOPIC, encoder_topic=ENCODER_TOPIC
+            bag,
+            root / "first",
+            command_topic=COMMAND_TOPIC,
+            encoder_topic=ENCODER_TOPIC,
+            joint=JOINT,
         )
         assert first.error == "", first.error
         n_out = first.messages_out

@@ -244,6 +244,24 @@ class Estimate:
         with np.errstate(invalid="ignore"):
             return np.sqrt(np.maximum(np.diag(self.covariance), 0.0))
 
+    def play(self) -> tuple[float, float]:
+        """The play ``c_L + c_R`` (rad, the whole dead band) and its standard deviation, the
+        covariance propagated by the play's gradient; NaN while there is no estimate.
+
+        >>> from genbacklash_core import Structure
+        >>> est = Estimate(Structure(1), [1.0, 0.1, 1.0, 0.2], np.diag([0, 0.09, 0, 0.16]),
+        ...                0.0, 1.0, EstimatorState.CONVERGED, 1.0, 100)
+        >>> est.play()
+        (0.30000000000000004, 0.5)
+        """
+        names = self.names
+        i, j = names.index("c_left"), names.index("c_right")
+        cov = self.covariance
+        value = float(self.parameters[i] + self.parameters[j])
+        variance = float(cov[i, i] + cov[j, j] + 2.0 * cov[i, j])
+        std = math.nan if math.isnan(variance) else math.sqrt(max(variance, 0.0))
+        return value, std
+
     def confidence_interval(self, level: float = 0.95) -> tuple[FloatArray, FloatArray]:
         """Two-sided normal confidence interval ``(lower, upper)`` per parameter."""
         if not 0.0 < _number("level", level) < 1.0:
@@ -262,15 +280,17 @@ class Estimate:
         """A JSON-ready dict (NaN becomes None).
 
         Keys: ``state``, ``confidence``, ``samples``, ``residual``, ``excitation``, ``reason``,
-        ``parameters`` and ``std`` (name -> value mappings), and ``model``: the model in the
-        form of the CLI's identify output (``{"model": "backlash"|"cascade", "backlash":
-        {...}, "linear": {...}}``) or None while there is none.
+        ``parameters`` and ``std`` (name -> value mappings), ``play`` and ``play_std`` (the
+        play ``c_L + c_R`` and its standard deviation, rad: :meth:`play`), and ``model``: the
+        model in the form of the CLI's identify output (``{"model": "backlash"|"cascade",
+        "backlash": {...}, "linear": {...}}``) or None while there is none.
         """
 
         def clean(value: float) -> float | None:
             return value if math.isfinite(value) else None
 
         std = self.std()
+        play, play_std = self.play()
         return {
             "state": self.state.value,
             "confidence": self.confidence,
@@ -282,6 +302,8 @@ class Estimate:
                 n: clean(float(v)) for n, v in zip(self.names, self.parameters, strict=True)
             },
             "std": {n: clean(float(v)) for n, v in zip(self.names, std, strict=True)},
+            "play": clean(play),
+            "play_std": clean(play_std),
             "model": _model_dict(self.model),
         }
 

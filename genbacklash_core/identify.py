@@ -119,12 +119,16 @@ class IdentificationResult:
     refinement: RefinementResult | None
 
     def to_dict(self) -> dict[str, Any]:
-        """The JSON object of the CLI contract (GUIDE §4)."""
+        """The JSON object of the CLI contract (GUIDE §4), plus ``play`` (``c_L + c_R``, rad)
+        and ``fit.misfit`` (the free-run NRMSE, also under its old key ``fit.nrmse``)."""
         out = model_to_dict(self.model)
         out["iterations"] = self.iterations
         out["converged"] = self.converged
         out["reason"] = self.reason
-        out["fit"] = {"nrmse": self.fit.nrmse}
+        backlash = self.model.backlash if isinstance(self.model, Cascade) else self.model
+        out["play"] = float(backlash.c_left + backlash.c_right)  # rad, the whole dead band
+        # the misfit: the free-run NRMSE ("nrmse" kept for the contract)
+        out["fit"] = {"nrmse": self.fit.nrmse, "misfit": self.fit.nrmse}
         return out
 
 

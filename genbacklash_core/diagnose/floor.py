@@ -95,17 +95,18 @@ class NoiseFloor:
         """One sentence with the numbers.
 
         >>> NoiseFloor(0.0015, 0.0002, 900, 0.0005, 0.0008).describe()[:60]
-        'quantisation and noise allow a gap of 0.0008 (RMS 0.0005: en'
+        'quantisation and noise allow a misfit of 0.0008 (RMS 0.0005:'
         """
         step = f"encoder step {self.step:.3g}" if self.step > 0 else "no quantisation seen"
         if self.noise is None:
             return (
-                f"quantisation alone allows a gap of {self.gap:.4f} (RMS {self.rms:.3g}: {step}; "
+                f"quantisation alone allows a misfit of {self.gap:.4f} "
+                f"(RMS {self.rms:.3g}: {step}; "
                 "the record has too few dwells to measure the noise, so the floor is a lower "
                 "bound)"
             )
         return (
-            f"quantisation and noise allow a gap of {self.gap:.4f} (RMS {self.rms:.3g}: {step}, "
+            f"quantisation and noise allow a misfit of {self.gap:.4f} (RMS {self.rms:.3g}: {step}, "
             f"noise {self.noise:.3g} from {self.pairs} dwell samples)"
         )
 

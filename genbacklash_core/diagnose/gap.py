@@ -147,16 +147,18 @@ class GapReport:
         return tuple(sorted(hot, key=lambda g: -g.concentration)[:limit])
 
     def describe(self) -> str:
-        """Where the gap concentrates, in one sentence."""
+        """Where the misfit (the validation NRMSE) concentrates, in one sentence."""
         hot = self.hotspots()
         if not hot:
-            return f"gap {self.gap:.4f}, spread evenly over branches, directions, travel and time"
+            return (
+                f"misfit {self.gap:.4f}, spread evenly over branches, directions, travel and time"
+            )
         parts = [
             f"{g.aspect} {g.label} ({100 * g.error_share:.0f}% of the error on "
             f"{100 * g.sample_share:.0f}% of the samples)"
             for g in hot
         ]
-        return f"gap {self.gap:.4f}, concentrated at " + ", ".join(parts)
+        return f"misfit {self.gap:.4f}, concentrated at " + ", ".join(parts)
 
 
 def _groups(

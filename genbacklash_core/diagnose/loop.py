@@ -192,7 +192,7 @@ def _judge(
         excess = f" of the excess over the floor {floor:.4f}"
         least = settings.min_excess_drop
     numbers = (
-        f"BIC {bic_change:+.1f} on the estimation data, validation gap {report.gap:.4f} -> "
+        f"BIC {bic_change:+.1f} on the estimation data, validation misfit {report.gap:.4f} -> "
         f"{candidate.gap:.4f} ({-100 * drop:+.1f}%{excess}, one-sided test t = {t:.1f}, "
         f"p = {p:.2g})"
     )
@@ -200,10 +200,10 @@ def _judge(
         return False, f"rejected: the BIC does not drop by {settings.bic_margin:g} ({numbers})"
     if drop < least:
         return False, (
-            f"rejected: the validation gap drops less than {100 * least:g}%{excess} ({numbers})"
+            f"rejected: the validation misfit drops less than {100 * least:g}%{excess} ({numbers})"
         )
     if p >= settings.gap_alpha:
-        return False, f"rejected: the gap drop is not significant ({numbers})"
+        return False, f"rejected: the misfit drop is not significant ({numbers})"
     return True, f"accepted: {numbers}"
 
 
@@ -310,7 +310,7 @@ class _Run:
         bic_chosen, gap_chosen, next_chosen = self.follow_up(chosen)
         bic_rival, gap_rival, next_rival = self.follow_up(rival)
         if self.anchored:  # see `anchored`: the validation gaps decide
-            better = f"its validation gap {gap_rival:.4f} is lower than {gap_chosen:.4f}"
+            better = f"its validation misfit {gap_rival:.4f} is lower than {gap_chosen:.4f}"
             if not gap_rival < (1.0 - self.settings.min_gap_drop) * gap_chosen:
                 return None
         else:
@@ -460,7 +460,7 @@ def diagnose(
         if floor.known and report.gap <= settings.floor_margin * floor.gap:
             rounds.append(Round(report.gap, analysis, (), ()))
             reason = (
-                f"the gap {report.gap:.4f} is within {settings.floor_margin:g} times the floor: "
+                f"the misfit {report.gap:.4f} is within {settings.floor_margin:g} times the floor: "
                 f"{floor.describe()}; nothing is left for an effect to explain"
             )
             break

@@ -55,12 +55,16 @@ class DiagnosisStep:
         _check_gap("gap_after", self.gap_after)
 
     def to_dict(self) -> dict[str, Any]:
-        """``{"effect", "evidence", "gap_before", "gap_after"}`` (GUIDE §4)."""
+        """``{"effect", "evidence", "gap_before", "gap_after"}`` (GUIDE §4), and the same
+        numbers as ``misfit_before``, ``misfit_after``: the misfit is the validation NRMSE
+        (the old keys stay; "gap" elsewhere means the play c_L + c_R)."""
         return {
             "effect": self.effect,
             "evidence": self.evidence,
             "gap_before": self.gap_before,
             "gap_after": self.gap_after,
+            "misfit_before": self.gap_before,
+            "misfit_after": self.gap_after,
         }
 
 
@@ -153,32 +157,43 @@ class Diagnosis:
         out["iterations"] = self.fit.steps
         out["converged"] = self.fit.converged
         out["reason"] = self.fit.reason
-        out["fit"] = {"nrmse": self.fit.nrmse}
+        out["fit"] = {"nrmse": self.fit.nrmse, "misfit": self.fit.nrmse}
+        backlash = out["backlash"]
+        out["play"] = float(backlash["c_left"] + backlash["c_right"])  # rad
         out.update(shape)  # delay, offset, drift, saturation, input_lag, periodic_error
         return out
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON object of ``genbacklash diagnose --json`` (GUIDE §4), plus
-        ``gap_floor``: the gap quantisation and noise allow (null when not measured)."""
+        ``gap_floor``: the misfit quantisation and noise allow (null when not measured).
+
+        The misfit (the free-run NRMSE on the held-out data) is also under the keys
+        ``misfit_initial``, ``misfit_final``, ``misfit_floor`` (and per step
+        ``misfit_before``, ``misfit_after``): one word for it, the ``gap_*`` keys kept.
+        """
+        floor = None if self.floor is None else self.floor.gap
         return {
             "steps": [step.to_dict() for step in self.steps],
             "gap_initial": self.gap_initial,
             "gap_final": self.gap_final,
-            "gap_floor": None if self.floor is None else self.floor.gap,
+            "gap_floor": floor,
+            "misfit_initial": self.gap_initial,
+            "misfit_final": self.gap_final,
+            "misfit_floor": floor,
             "model": self.model_dict(),
         }
 
     def summary(self) -> str:
         """A few readable lines: the steps, the gaps and why the loop stopped."""
-        lines = [f"validation gap {self.gap_initial:.4f} with the starting model"]
+        lines = [f"validation misfit {self.gap_initial:.4f} with the starting model"]
         if self.floor is not None:
             lines.append(self.floor.describe())
         for i, step in enumerate(self.steps, 1):
             lines.append(
-                f"{i}. {step.effect}: gap {step.gap_before:.4f} -> {step.gap_after:.4f}. "
+                f"{i}. {step.effect}: misfit {step.gap_before:.4f} -> {step.gap_after:.4f}. "
                 f"{step.evidence}"
             )
         if not self.steps:
             lines.append("no missing effect named")
-        lines.append(f"final gap {self.gap_final:.4f}; {self.reason}")
+        lines.append(f"final misfit {self.gap_final:.4f}; {self.reason}")
         return "\n".join(lines)

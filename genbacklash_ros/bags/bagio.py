@@ -34,10 +34,11 @@ Examples
 
 from __future__ import annotations
 
+import difflib
 import itertools
 import struct
 from collections import Counter
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Generator, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from operator import itemgetter
 from pathlib import Path
@@ -75,6 +76,7 @@ __all__ = [
     "RawMessage",
     "TopicInfo",
     "align",
+    "check_selection",
     "read_aligned",
     "read_custom_data",
 ]
@@ -499,7 +501,8 @@ class BagReader:
         info = self._topics.get(name)
         if info is None:
             raise BagError(
-                f"topic {name!r} is not in {self.path}; the bag has: {self.topic_list()}"
+                f"topic {name!r} is not in {self.path}{_did_you_mean(name, self._topics)}; "
+                f"the bag has: {self.topic_list()}"
             )
         kinds = SUPPORTED_MSGTYPES if allowed is None else frozenset(allowed)
         if info.msgtype not in kinds:
@@ -621,6 +624,128 @@ class BagReader:
             f"{self.path} could not be read normally ({self._salvage_reason}); "
             f"a record-by-record scan recovered {seen} messages"
         )
+
+
+# --------------------------------------------------------------------------- selection
+
+_PEEK_MESSAGES = 2048  # messages looked at, at most, to learn what a selection can match
+_PEEK_EACH = 64  # per topic: enough to see every joint name and array length a topic uses
+
+
+def _did_you_mean(name: str, known: Iterable[str]) -> str:
+    """`` (did you mean 'x'?)`` for the close matches of ``name`` among ``known`` ('')."""
+    known = list(known)
+    folded = [k for k in known if k.casefold() == name.casefold() and k != name]
+    close = folded or difflib.get_close_matches(name, known, n=3, cutoff=0.6)
+    if not close:
+        return ""
+    return f" (did you mean {' or '.join(repr(c) for c in close)}?)"
+
+
+def _peek(reader: BagReader, topics: Sequence[str]) -> dict[str, list[Message]]:
+    """The first messages of ``topics`` that decode (up to ``_PEEK_EACH`` each); damage
+    stops the look (the full read reports it)."""
+    store = jazzy_typestore()
+    seen: dict[str, list[Message]] = {t: [] for t in topics}
+    stream = reader.raw_messages(topics)
+    try:
+        for k, item in enumerate(stream):
+            if k >= _PEEK_MESSAGES or all(len(v) >= _PEEK_EACH for v in seen.values()):
+                break
+            if len(seen[item.topic]) >= _PEEK_EACH:
+                continue
+            try:
+                seen[item.topic].append(from_rosbags(store.deserialize_cdr(item.raw, item.msgtype)))
+            except Exception:  # an undecodable message: the full read counts it
+                continue
+    except BagError:
+        pass
+    finally:
+        if isinstance(stream, Generator):  # stop the reader where the look stopped
+            stream.close()
+    return seen
+
+
+def _joint_names(messages: Iterable[Message]) -> list[str]:
+    names: dict[str, None] = {}
+    for message in messages:
+        if isinstance(message, JointState):
+            names.update(dict.fromkeys(message.name))
+    return list(names)
+
+
+def _check_joint(topic: str, role: str, joint: str, names: list[str], path: Path) -> None:
+    if not names:
+        return  # no names seen (no message decoded, or nameless JointStates): the adapters
+    listed = ", ".join(names)
+    if joint and joint not in names:
+        raise BagError(
+            f"joint {joint!r} is not in the {role} JointState on {topic} in {path}"
+            f"{_did_you_mean(joint, names)}; it holds: {listed}"
+        )
+    if not joint and len(names) > 1:
+        raise BagError(
+            f"the {role} JointState on {topic} in {path} holds {len(names)} joints ({listed}): "
+            "say which with --joint NAME (or the parameter joint)"
+        )
+
+
+def check_selection(
+    reader: BagReader,
+    command_topic: str,
+    encoder_topic: str,
+    *,
+    joint: str = "",
+    command_index: int = 0,
+) -> tuple[TopicInfo, TopicInfo]:
+    """Check, before any work, that a selection matches something in an open bag.
+
+    The one place ``replay``, ``identify``, ``diagnose`` and the fleet check what they read:
+    both topics exist (else the bag's topics with their types are named), have a supported
+    type and hold messages; the first messages of each (up to 64) show the joint names of a
+    JointState and the length of a Float64MultiArray command: ``joint`` must be one of those
+    names (the close matches are named), a JointState of several joints needs a ``joint``
+    (the adapters would take the first), and ``command_index`` must lie inside the array.
+
+    Returns the command's and the encoder's :class:`TopicInfo`; raises :class:`BagError`
+    with a one-line reason that says what the bag holds.
+    """
+    if command_topic == encoder_topic:
+        raise BagError(f"the command and encoder topics must differ, both are {command_topic!r}")
+    cmd = reader.topic(command_topic, COMMAND_MSGTYPES)
+    enc = reader.topic(encoder_topic, ENCODER_MSGTYPES)
+    for info, role in ((cmd, "command"), (enc, "encoder")):
+        if not info.count:
+            raise BagError(
+                f"the {role} topic {info.name} ({info.msgtype}) in {reader.path} holds no "
+                f"messages; the bag has: {reader.topic_list()}"
+            )
+    if command_index < 0:
+        raise BagError(f"the command index must be >= 0, got {command_index}")
+    seen = _peek(reader, [command_topic, encoder_topic])
+    if enc.msgtype == JointState.ros_type:
+        _check_joint(
+            encoder_topic, "encoder", joint, _joint_names(seen[encoder_topic]), reader.path
+        )
+    if cmd.msgtype == JointState.ros_type:
+        _check_joint(
+            command_topic, "command", joint, _joint_names(seen[command_topic]), reader.path
+        )
+    if cmd.msgtype == Float64MultiArray.ros_type:
+        lengths = sorted(
+            {len(m.data) for m in seen[command_topic] if isinstance(m, Float64MultiArray)}
+        )
+        if lengths and command_index >= lengths[-1]:
+            held = " to ".join(str(n) for n in dict.fromkeys((lengths[0], lengths[-1])))
+            last = lengths[-1] - 1
+            indices = f"indices 0 to {last}" if last > 0 else "index 0" if last == 0 else "none"
+            raise BagError(
+                f"command index {command_index} is beyond the Float64MultiArray on "
+                f"{command_topic} in {reader.path}: it holds {held} value"
+                f"{'' if lengths[-1] == 1 else 's'} ({indices}); choose with --command-index I "
+                "(or the parameter command_index)"
+            )
+    return cmd, enc
 
 
 # --------------------------------------------------------------------------- custom data
@@ -1020,8 +1145,10 @@ def read_aligned(
     the pipeline (``breaks``, see :func:`align`).
     """
     with BagReader(path) as reader:
-        cmd_type = reader.topic(command_topic, COMMAND_MSGTYPES).msgtype
-        enc_type = reader.topic(encoder_topic, ENCODER_MSGTYPES).msgtype
+        cmd_info, enc_info = check_selection(
+            reader, command_topic, encoder_topic, joint=joint, command_index=command_index
+        )
+        cmd_type, enc_type = cmd_info.msgtype, enc_info.msgtype
         # values straight from the CDR bytes, in numpy steps per block; a message the fast
         # path cannot vouch for is read (or rejected) by the adapters, one by one
         readers = {

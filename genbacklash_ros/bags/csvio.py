@@ -11,9 +11,12 @@ count. Without ``t`` every row follows the one before it.
 from __future__ import annotations
 
 import csv
+import math
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -21,7 +24,7 @@ import numpy.typing as npt
 from genbacklash_core import GenBacklashError
 from genbacklash_ros.node.sample_rule import time_breaks
 
-__all__ = ["Series", "read_series_csv", "write_series_csv"]
+__all__ = ["BadRows", "Series", "dropped_note", "read_series_csv", "write_series_csv"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -32,21 +35,162 @@ class Series:
 
     ``breaks`` (optional, bool): the sample rule, True where a sample does not follow the
     one before it on the encoder's clock (None: all do); for the identifiers' ``breaks``.
+    ``dropped``: the line numbers of the file's rows :func:`read_series_csv` left out.
     """
 
     u: FloatArray
     y: FloatArray
     t: FloatArray | None = None
     breaks: npt.NDArray[np.bool_] | None = None
+    dropped: tuple[int, ...] = ()
+
+    def sample_period(self) -> float | None:
+        """The nominal sample period in seconds: the median step of ``t`` (None without
+        ``t`` or without two increasing stamps). ``t`` is read as seconds, or as integer
+        nanoseconds when its median step is 1000 or more (no drivetrain is sampled that
+        slowly in seconds).
+
+        >>> Series(u=np.zeros(3), y=np.zeros(3), t=np.array([0.0, 0.002, 0.004])).sample_period()
+        0.002
+        >>> Series(u=np.zeros(3), y=np.zeros(3), t=np.array([0, 1e6, 2e6])).sample_period()
+        0.001
+        """
+        if self.t is None:
+            return None
+        t = np.asarray(self.t, dtype=np.float64)
+        steps = np.diff(t[np.isfinite(t)])
+        steps = steps[steps > 0]
+        if not steps.size:
+            return None
+        step = float(np.median(steps))
+        return step / 1e9 if step >= 1000.0 else step
 
 
-def read_series_csv(path: str | Path) -> Series:
-    """Read a CSV whose header names the columns ``u`` and ``y`` (and optionally ``t``).
+BadRows = Literal["raise", "drop", "nan"]
+"""What :func:`read_series_csv` does with a row it cannot use (see there)."""
+
+_MAX_LISTED = 8  # line numbers named in a message, at most
+
+
+def _lines(numbers: Sequence[int]) -> str:
+    """``'5, 9 and 12'`` / ``'5, 9, ... (20 in all)'``: line numbers for a message."""
+    shown = [str(n) for n in numbers[:_MAX_LISTED]]
+    if len(numbers) > _MAX_LISTED:
+        return f"{', '.join(shown)}, ... ({len(numbers)} in all)"
+    if len(shown) > 1:
+        return f"{', '.join(shown[:-1])} and {shown[-1]}"
+    return shown[0]
+
+
+def _number(cell: str) -> tuple[float, str]:
+    """The value of a cell and what is wrong with it (``""``: nothing)."""
+    text = cell.strip()
+    if not text:
+        return math.nan, "is empty"
+    try:
+        value = float(text)
+    except ValueError:
+        return math.nan, f"{text[:40]!r} is not a number"
+    if not math.isfinite(value):
+        return value, f"{text[:40]!r} is not finite"
+    return value, ""
+
+
+def _read_rows(
+    file: Path, wanted: list[int], names: list[str], bad_rows: BadRows
+) -> tuple[np.ndarray, tuple[int, ...], list[int]]:
+    """Every data row's ``wanted`` cells, checked one by one (the slow path: a file whose
+    fast read failed or held a value that is not finite). Returns the table, the line
+    numbers of the rows dropped, and the line number of each row kept."""
+    rows: list[list[float]] = []
+    kept: list[int] = []
+    dropped: list[int] = []
+    first_problem = ""
+    need = max(wanted) + 1
+    with file.open(newline="") as handle:
+        reader = csv.reader(handle)
+        next(reader, None)  # the header
+        for cells in reader:
+            line = reader.line_num
+            if not cells or cells[0].lstrip().startswith("#"):
+                continue  # a blank line or a comment, as numpy's reader skips them
+            problem = ""
+            if len(cells) < need:
+                values = [math.nan] * len(wanted)
+                problem = (
+                    f"line {line} of {file} has {len(cells)} cell"
+                    f"{'' if len(cells) == 1 else 's'}, too few for the columns "
+                    f"{', '.join(names[k] for k in wanted)}"
+                )
+            else:
+                values = []
+                for k in wanted:
+                    value, wrong = _number(cells[k])
+                    values.append(value)
+                    if wrong and not problem:
+                        problem = f"line {line} of {file}, column {names[k]!r}: {wrong}"
+            if problem:
+                first_problem = first_problem or problem
+                if bad_rows != "nan":
+                    dropped.append(line)
+                    continue
+            rows.append(values)
+            kept.append(line)
+    if dropped and bad_rows == "raise":
+        more = ""
+        if len(dropped) > 1:
+            more = f" ({len(dropped)} rows are bad: lines {_lines(dropped)})"
+        raise GenBacklashError(
+            f"{first_problem}{more}; fix the file or pass --drop-nonfinite to drop such rows"
+        )
+    table = np.array(rows, dtype=np.float64).reshape(len(rows), len(wanted))
+    return table, tuple(dropped), kept
+
+
+def dropped_note(path: str | Path, dropped: Sequence[int]) -> str:
+    """One line saying which rows of ``path`` :func:`read_series_csv` dropped ("": none).
+
+    >>> dropped_note("d.csv", [3, 7])
+    'dropped 2 rows of d.csv that do not hold a finite number in every column used: lines 3 and 7'
+    """
+    if not dropped:
+        return ""
+    n = len(dropped)
+    return (
+        f"dropped {n} row{'' if n == 1 else 's'} of {path} that do"
+        f"{'es' if n == 1 else ''} not hold a finite number in every column used: "
+        f"line{'' if n == 1 else 's'} {_lines(dropped)}"
+    )
+
+
+def read_series_csv(path: str | Path, *, bad_rows: BadRows = "raise") -> Series:
+    r"""Read a CSV whose header names the columns ``u`` and ``y`` (and optionally ``t``).
 
     With ``t`` the series carries its ``breaks`` (see the module notes). Other columns are
-    ignored. Empty or non-numeric cells become NaN, so the identifiers can
-    report where they are (or drop them on request) instead of failing here.
+    ignored, and so are blank lines and lines starting with ``#``.
+
+    A row that cannot be used -- a cell that is empty, not a number, NaN or infinite, or a
+    row with too few cells -- is, by ``bad_rows``:
+
+    * ``"raise"``: a :class:`~genbacklash_core.GenBacklashError` naming the file's line
+      number (the header is line 1), the column and what is wrong;
+    * ``"drop"``: left out; :attr:`Series.dropped` holds the line numbers of the rows left
+      out, and the row after each gap breaks the chain of consecutive samples (``breaks``);
+    * ``"nan"``: kept with NaN in its cells, for the caller to deal with.
+
+    >>> import tempfile
+    >>> file = Path(tempfile.mkdtemp()) / "d.csv"
+    >>> _ = file.write_text("u,y\n1,2\nabc,3\n4,5\n")
+    >>> read_series_csv(file)
+    Traceback (most recent call last):
+    ...
+    genbacklash_core.errors.GenBacklashError: line 3 of ... column 'u': 'abc' is not a number; ...
+    >>> s = read_series_csv(file, bad_rows="drop")
+    >>> s.u.tolist(), s.dropped, s.breaks.tolist()
+    ([1.0, 4.0], (3,), [False, True])
     """
+    if bad_rows not in ("raise", "drop", "nan"):
+        raise GenBacklashError(f"bad_rows must be 'raise', 'drop' or 'nan', got {bad_rows!r}")
     file = Path(path)
     try:
         with file.open(newline="") as handle:
@@ -55,6 +199,8 @@ def read_series_csv(path: str | Path) -> Series:
         raise GenBacklashError(f"cannot read {file}: {err.strerror or err}") from err
     except UnicodeDecodeError as err:
         raise GenBacklashError(f"{file} is not a text CSV file: {err}") from err
+    except csv.Error as err:
+        raise GenBacklashError(f"{file} is not a CSV file: {err}") from err
     if not header:
         raise GenBacklashError(f"{file} is empty; expected a header line with columns u,y")
     names = [name.strip().lower() for name in header]
@@ -64,26 +210,39 @@ def read_series_csv(path: str | Path) -> Series:
             f"{file} has columns {header}; the header must name 'u' and 'y' (missing: {missing})"
         )
     wanted = [names.index("u"), names.index("y")] + ([names.index("t")] if "t" in names else [])
+    dropped: tuple[int, ...] = ()
+    kept: list[int] | None = None
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)  # "no data": reported below instead
             table = np.loadtxt(file, delimiter=",", skiprows=1, usecols=wanted, ndmin=2)
-    except ValueError:
-        # Empty or malformed cells: parse tolerantly, marking them NaN for the caller to report.
-        table = np.genfromtxt(
-            file,
-            delimiter=",",
-            skip_header=1,
-            usecols=wanted,
-            dtype=np.float64,
-            ndmin=2,
-            invalid_raise=False,
-        )
+        fast = bool(np.isfinite(table).all())
+    except (ValueError, IndexError):
+        fast = False  # a cell that is not a number, a short row: read row by row below
+    except UnicodeDecodeError as err:
+        raise GenBacklashError(f"{file} is not a text CSV file: {err}") from err
+    if not fast:
+        try:
+            table, dropped, kept = _read_rows(file, wanted, names, bad_rows)
+        except UnicodeDecodeError as err:
+            raise GenBacklashError(f"{file} is not a text CSV file: {err}") from err
+        except csv.Error as err:
+            raise GenBacklashError(f"{file} is not a CSV file: {err}") from err
     if table.shape[0] == 0:
+        if dropped:
+            raise GenBacklashError(
+                f"{file}: every data row was dropped (lines {_lines(dropped)}): none holds "
+                f"numbers in all of {', '.join(names[k] for k in wanted)}"
+            )
         raise GenBacklashError(f"{file} has a header but no data rows")
     t = table[:, 2].copy() if table.shape[1] == 3 else None
     breaks = None if t is None else time_breaks(t)
-    return Series(u=table[:, 0].copy(), y=table[:, 1].copy(), t=t, breaks=breaks)
+    if dropped and kept is not None:
+        # a row after dropped ones does not follow the row before it
+        after_gap = np.diff(np.asarray(kept), prepend=1) > 1
+        after_gap[0] = after_gap[0] or kept[0] > 2
+        breaks = after_gap if breaks is None else breaks | after_gap
+    return Series(u=table[:, 0].copy(), y=table[:, 1].copy(), t=t, breaks=breaks, dropped=dropped)
 
 
 def write_series_csv(path: str | Path, series: Series) -> None:

@@ -42,6 +42,7 @@ from genbacklash_ros.bags.bagio import (
     BagReader,
     BagWriter,
     RawMessage,
+    check_selection,
 )
 from genbacklash_ros.bags.raw_values import RawValueReader, UndecodableMessage
 from genbacklash_ros.node.compensate import CompensationStatus
@@ -469,8 +470,10 @@ def replay(
     Raises
     ------
     BagError
-        The input cannot be opened, a topic is missing or of an unsupported type, or the
-        output cannot be created. Damage found part-way does not raise: see
+        The input cannot be opened, a topic is missing or of an unsupported type, the
+        joint or command index matches nothing in the bag
+        (:func:`~genbacklash_ros.bags.bagio.check_selection`), or the output cannot be
+        created. Damage found part-way does not raise: see
         :attr:`ReplayResult.error`.
     """
     if command_topic == encoder_topic:
@@ -490,6 +493,14 @@ def replay(
             "method": method,
         }
         run_params = _replay_params(params, cmd_info.msgtype, enc_info.msgtype, overrides)
+        # a joint, an index or a topic that matches nothing stops here, before any output
+        check_selection(
+            reader,
+            command_topic,
+            encoder_topic,
+            joint=run_params.joint,
+            command_index=run_params.command_index,
+        )
         pipeline = BacklashPipeline(run_params)
         history = ReplayHistory(names=run_params.structure().names())
         index, joint_name = run_params.command_index, run_params.joint

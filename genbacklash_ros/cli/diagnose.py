@@ -13,11 +13,12 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from genbacklash_core import GenBacklashError
+from genbacklash_core import Cascade, GenBacklashError
 from genbacklash_core.diagnose import (
     AugmentedModel,
     DiagnoseSettings,
     Diagnosis,
+    Drift,
     StartStructure,
     diagnose,
     effect_names,
@@ -32,6 +33,7 @@ from genbacklash_ros.cli.replay import (
     load_series,
     node_parameters,
 )
+from genbacklash_ros.node.parameters import NodeParameters
 
 __all__ = ["add_parser", "cmd_diagnose", "parse_start"]
 
@@ -39,19 +41,21 @@ EXIT_OK = 0
 
 _DESCRIPTION = """\
 Find where a backlash model and the measurements disagree, name the missing effect, add it,
-and show the gap shrink.
+and show the misfit shrink.
 
 DATA is a CSV with header columns u (command) and y (measured position), optional t. The
 first part of the record (1 - --validation) is the estimation segment: the starting model -
 the ideal backlash of the paper's eq. (1), or --start, or the structure the node parameters
 (--params-file, --param) set with model/degree/na/nb - is fitted there. The rest is held out:
-the model is simulated free-run over it and the *gap* is the NRMSE there. The *floor* is the
-gap that quantisation (the readings' grid) and noise (read off the dwells, where the command
-stands still) allow; a gap within 1.3 times it leaves nothing to explain.
+the model is simulated free-run over it and the *misfit* is the NRMSE there (unitless; the
+*play* is c_L + c_R, in rad). The *floor* is the misfit that quantisation (the readings' grid)
+and noise (read off the dwells, where the command stands still) allow; a misfit within 1.3
+times it leaves nothing to explain.
 
 For a bag, the samples are the node's: each encoder reading that arrived, with the latest
 command at its stamp; a reading whose stamp is not one encoder period after the one before (a
-lost reading, a gap) breaks the chain, as in the node, and no fit pairs samples across it.
+lost reading, a hole in the record) breaks the chain, as in the node, and no fit pairs
+samples across it.
 
 Then, in a loop: the estimation residual is tested (Ljung-Box whiteness, prewhitened input
 cross-correlation, Billings-Voon higher-order correlations, mean and trend, an FIR
@@ -60,7 +64,7 @@ model-error model) and each effect of the catalog looks for its signature:
   {effects}
 
 Nominated effects are added to the model and refitted; the one that lowers the BIC most is
-accepted only if it also lowers the validation gap significantly. The loop stops when no
+accepted only if it also lowers the validation misfit significantly. The loop stops when no
 signature is found or nothing helps; nothing is named when nothing is missing.
 """
 
@@ -74,9 +78,11 @@ examples:
   genbacklash diagnose run.csv --param degree=3 --param model=cascade
   genbacklash diagnose run.mcap --command /cmd --encoder /enc --params-file config/params.yaml
 
---json prints {"steps": [{"effect", "evidence", "gap_before", "gap_after"}, ...],
-"gap_initial", "gap_final", "gap_floor", "model"}; model is the identify JSON plus delay,
-offset, drift, saturation, input_lag and periodic_error; gap_floor is the gap quantisation and
+--json prints {"steps": [{"effect", "evidence", "misfit_before", "misfit_after"}, ...],
+"misfit_initial", "misfit_final", "misfit_floor", "model"} (and, for older tools, the same
+numbers as gap_before, gap_after, gap_initial, gap_final, gap_floor); model is the identify
+JSON plus delay, offset, drift (rate per sample, rate_per_s when the samples are stamped),
+saturation, input_lag and periodic_error; misfit_floor is the misfit quantisation and
 noise allow (null when not measured). Exit status 0 when the diagnosis ran, 2 for bad input.
 """
 
@@ -112,6 +118,10 @@ def parse_start(text: str) -> StartStructure | AugmentedModel:
                 raise GenBacklashError(
                     f"--start: {key} must be a whole number, got {value!r}"
                 ) from err
+        try:  # the node parameters' ranges, as identify's and replay's options take them
+            NodeParameters().replace(**values)
+        except GenBacklashError as err:
+            raise GenBacklashError(f"--start {text}: {err}") from err
         return StartStructure(**values)
     path = Path(text)
     if not path.is_file():
@@ -127,7 +137,33 @@ def parse_start(text: str) -> StartStructure | AugmentedModel:
     return AugmentedModel.from_dict(data)
 
 
-def _model_lines(result: Diagnosis) -> list[str]:
+def _drift_text(drift: Drift, period: float | None) -> str:
+    """The drift rate of each dead zone with its unit: per second where the samples' period
+    is known (a bag's stamps, a CSV's t column), else per sample; or per rad of travel.
+
+    >>> _drift_text(Drift(2e-7, "time"), 0.001).strip()
+    '0.0002 rad/s (2e-07 rad per sample of 1 ms)'
+    """
+    if drift.basis == "travel":
+        return f"{drift.rate:>12.4g}  rad per rad of command travel"
+    if period is None:
+        return f"{drift.rate:>12.4g}  rad per sample (no time stamps: a t column gives rad/s)"
+    return (
+        f"{drift.rate / period:>12.4g} rad/s ({drift.rate:.3g} rad per sample of "
+        f"{period * 1e3:.3g} ms)"
+    )
+
+
+def drift_per_second(model: dict[str, Any], period: float | None) -> None:
+    """Add ``rate_per_s`` (null when the period is unknown or the basis is travel) to the
+    ``drift`` of a diagnose JSON ``model`` (``rate`` stays: per sample or per unit travel)."""
+    drift = model.get("drift")
+    if isinstance(drift, dict):
+        per_s = drift["rate"] / period if period and drift.get("basis") == "time" else None
+        drift["rate_per_s"] = per_s
+
+
+def _model_lines(result: Diagnosis, period: float | None = None) -> list[str]:
     model = result.model
     names = model.base.parameter_names
     values = model.base.parameters()
@@ -137,7 +173,7 @@ def _model_lines(result: Diagnosis) -> list[str]:
     if model.offset:
         lines.append(f"  {'offset':<14}{model.offset:>12.5f}")
     if model.drift is not None:
-        lines.append(f"  {'drift rate':<14}{model.drift.rate:>12.4g}  per {model.drift.basis}")
+        lines.append(f"  {'drift rate':<14}{_drift_text(model.drift, period)}")
     if model.saturation is not None:
         for side in ("low", "high"):
             value = getattr(model.saturation, side)
@@ -154,7 +190,7 @@ def _model_lines(result: Diagnosis) -> list[str]:
     return lines
 
 
-def _text(result: Diagnosis) -> str:
+def _text(result: Diagnosis, period: float | None = None) -> str:
     split = result.split
     lines = [
         f"estimation samples 0..{split.n_estimation - 1}, validation "
@@ -165,15 +201,18 @@ def _text(result: Diagnosis) -> str:
         lines.append(f"floor: {result.floor.describe()}")
     for i, step in enumerate(result.steps, 1):
         lines.append(
-            f"step {i}: {step.effect} - gap {step.gap_before:.4f} -> {step.gap_after:.4f}\n"
+            f"step {i}: {step.effect} - misfit {step.gap_before:.4f} -> {step.gap_after:.4f}\n"
             f"  {step.evidence}"
         )
     if not result.steps:
         lines.append("no missing effect named")
-    lines.append(f"final gap {result.gap_final:.4f} ({result.reports[-1].describe()})")
+    lines.append(f"final misfit {result.gap_final:.4f} ({result.reports[-1].describe()})")
     lines.append(f"stopped: {result.reason}")
     lines.append(f"final model ({', '.join(result.model.effects) or 'ideal backlash'}):")
-    lines += _model_lines(result)
+    lines += _model_lines(result, period)
+    base = result.model.base
+    backlash = base.backlash if isinstance(base, Cascade) else base
+    lines.append(f"  {'play':<14}{backlash.c_left + backlash.c_right:>12.5f}  rad (c_L + c_R)")
     return "\n".join(lines)
 
 
@@ -231,10 +270,13 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
                 unit="rad" if is_bag(args.data) else "units of y",
                 progress=progress.set_stage,
             )
+    period = series.sample_period()
     if args.json:
-        print(json.dumps(result.to_dict()))
+        out = result.to_dict()
+        drift_per_second(out["model"], period)
+        print(json.dumps(out))
     else:
-        print(_text(result))
+        print(_text(result, period))
     for path in written:
         print(f"wrote {path}", file=sys.stderr)
     return EXIT_OK
@@ -244,7 +286,7 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     """Register ``diagnose`` on the ``genbacklash`` subcommand parsers."""
     parser: argparse.ArgumentParser = subparsers.add_parser(
         "diagnose",
-        help="find the effect the backlash model misses, add it, show the gap shrink",
+        help="find the effect the backlash model misses, add it, show the misfit shrink",
         description=_DESCRIPTION.format(effects="\n  ".join(effect_names())),
         epilog=_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -264,8 +306,8 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     parser.add_argument(
         "--report",
         metavar="DIR",
-        help="write plots (measured vs simulated per step, correlations with bounds, the gap "
-        "per step, where the gap sits), index.html (the page) and summary.md into DIR",
+        help="write plots (measured vs simulated per step, correlations with bounds, the misfit "
+        "per step, where the misfit sits), index.html (the page) and summary.md into DIR",
     )
     parser.add_argument(
         "--start",
@@ -279,7 +321,7 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
         type=_fraction,
         default=0.3,
         metavar="FRACTION",
-        help="fraction of the record held out at its end for the gap (default 0.3)",
+        help="fraction of the record held out at its end for the misfit (default 0.3)",
     )
     parser.add_argument(
         "--drop-nonfinite",

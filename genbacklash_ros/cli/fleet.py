@@ -52,14 +52,14 @@ examples:
   genbacklash fleet /data/bags --db fleet.db
   genbacklash fleet /data/bags --workers 2 --joint elbow=1 --joint wrist=2 --param degree=2
   genbacklash fleet /data/bags --scheduler tcp://10.0.0.5:8786 --db postgresql+psycopg://me@db/fleet
-  genbacklash fleet-report fleet.db --gap-limit 0.15 -o fleet_report
+  genbacklash fleet-report fleet.db --play-limit 0.15 -o fleet_report
 """
 
 _REPORT_DESCRIPTION = """\
-Wear trends from a fleet database: per drivetrain (robot, joint), the gap c_L + c_R of its
+Wear trends from a fleet database: per drivetrain (robot, joint), the play c_L + c_R of its
 'ok' bags against time with 2-sigma bars, a weighted straight-line trend (its uncertainty
 scaled up by the scatter when the bags scatter more than their standard deviations say), and
-the date the trend crosses --gap-limit with Fieller's interval. Writes index.html (the
+the date the trend crosses --play-limit with Fieller's interval. Writes index.html (the
 ranking by days to service and the plots), fleet.png, one PNG per drivetrain and
 summary.json into -o DIR, and prints the ranking (or the JSON with --json).
 """
@@ -92,7 +92,7 @@ def cmd_fleet(args: argparse.Namespace) -> int:
     """Run ``genbacklash fleet``."""
     from genbacklash_ros.fleet.archive import discover
     from genbacklash_ros.fleet.database import ResultStore
-    from genbacklash_ros.fleet.job import FleetSettings, JointRequest
+    from genbacklash_ros.fleet.job import FleetSettings, JointRequest, check_archive
     from genbacklash_ros.fleet.runner import fleet_client, run_fleet
 
     used = [*BATCH_PARAMETERS, "joint", "command_index"]
@@ -110,7 +110,8 @@ def cmd_fleet(args: argparse.Namespace) -> int:
         replay=args.replay,
         max_nrmse=args.max_nrmse,
     )
-    discover(args.archive)  # a wrong ARCHIVE stops here, before a cluster starts
+    # a wrong ARCHIVE, one without bags or without the topics stops here, before a cluster
+    check_archive(args.archive, discover(args.archive), settings)
     store = ResultStore(args.db)
     try:
         with fleet_client(
@@ -279,11 +280,14 @@ def add_parsers(subparsers: Any) -> None:
     )
     report.add_argument("db", metavar="DB", help="the database 'genbacklash fleet' wrote")
     report.add_argument(
-        "--gap-limit",
+        "--play-limit",
+        "--gap-limit",  # its former name (the play was called the gap)
+        dest="gap_limit",
         type=_positive,
         required=True,
         metavar="RAD",
-        help="gap c_L + c_R (radians) at which a drivetrain needs service",
+        help="play c_L + c_R in rad (not mrad) at which a drivetrain needs service; "
+        "--gap-limit is the same option",
     )
     report.add_argument(
         "-o",

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+import math
 import os
 import sys
 from collections.abc import Sequence
@@ -27,6 +28,7 @@ from genbacklash_core import (
     paper_example,
 )
 from genbacklash_core.data import NonFinitePolicy
+from genbacklash_core.uncertainty import parameter_covariance, play_std
 from genbacklash_ros.bags.csvio import Series, write_series_csv
 from genbacklash_ros.cli import replay as replay_cli
 from genbacklash_ros.cli.paths import check_paths
@@ -115,12 +117,49 @@ def _identify(
         progress.close()
 
 
+class _Uncertainty:
+    """The batch estimate's standard deviations: the output-error fit's Gauss-Newton
+    covariance ``s^2 (J^T J)^-1`` (:mod:`genbacklash_core.uncertainty`), propagated to the
+    play ``c_L + c_R`` by its gradient. NaN where the data do not tell."""
+
+    def __init__(self, result: IdentificationResult, series: Series) -> None:
+        model = result.model
+        size = len(model.parameter_names)
+        try:
+            cov = parameter_covariance(model, series.u, series.y, series.breaks)
+            self.std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+            self.play_std = play_std(model, cov)
+        except (GenBacklashError, ValueError, FloatingPointError, np.linalg.LinAlgError):
+            self.std = np.full(size, np.nan)
+            self.play_std = math.nan
+        backlash = model.backlash if isinstance(model, Cascade) else model
+        self.play = float(backlash.c_left + backlash.c_right)
+
+    def to_dict(self, names: Sequence[str]) -> dict[str, object]:
+        """``play_std`` and ``parameter_std`` (name -> std) for the JSON; None where unknown."""
+
+        def clean(value: float) -> float | None:
+            return float(value) if math.isfinite(value) else None
+
+        return {
+            "play_std": clean(self.play_std),
+            "parameter_std": {n: clean(v) for n, v in zip(names, self.std.tolist(), strict=True)},
+        }
+
+
+_RAD = replay_cli.RAD_PARAMETERS
+
+
 def _parameter_table(
-    result: IdentificationResult, truth: GeneralBacklash | Cascade | None = None
+    result: IdentificationResult,
+    truth: GeneralBacklash | Cascade | None = None,
+    std: np.ndarray | None = None,
 ) -> str:
     names = result.model.parameter_names
     estimate = result.model.parameters()
     header = f"{'parameter':<12}{'estimate':>12}"
+    if std is not None:
+        header += f"{'2 sigma':>12}"
     true_values = None
     if truth is not None:
         true_values = truth.parameters()
@@ -128,8 +167,12 @@ def _parameter_table(
     lines = [header, "-" * len(header)]
     for i, name in enumerate(names):
         row = f"{name:<12}{estimate[i]:>12.5f}"
+        if std is not None:
+            row += f"{2 * std[i]:>12.5f}"
         if true_values is not None:
             row += f"{true_values[i]:>12.5f}{estimate[i] - true_values[i]:>+12.5f}"
+        if name in _RAD:
+            row += "  rad"
         lines.append(row)
     return "\n".join(lines)
 
@@ -137,7 +180,7 @@ def _parameter_table(
 def _summary(result: IdentificationResult) -> str:
     status = "converged" if result.converged else "NOT converged"
     return (
-        f"{status} after {result.iterations} iterations; free-run NRMSE "
+        f"{status} after {result.iterations} iterations; free-run misfit (NRMSE) "
         f"{result.fit.nrmse:.4f}\n{result.reason}"
     )
 
@@ -159,10 +202,14 @@ def _cmd_identify(args: argparse.Namespace) -> int:
         nonfinite="drop" if args.drop_nonfinite else "raise",
         show_progress=not args.json,
     )
+    spread = _Uncertainty(result, series)
     if args.json:
-        print(json.dumps(result.to_dict()))
+        out = result.to_dict()
+        out.update(spread.to_dict(result.model.parameter_names))
+        print(json.dumps(out))
     else:
-        print(_parameter_table(result))
+        print(_parameter_table(result, std=spread.std))
+        print(replay_cli.play_line(spread.play, spread.play_std))
         print(_summary(result))
     if args.plot:
         from genbacklash_ros.reports.plots import save_identification_plots

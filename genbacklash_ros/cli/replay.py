@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 from collections.abc import Collection, Sequence
@@ -18,7 +19,7 @@ from typing import Any, NamedTuple
 from genbacklash_core import GenBacklashError
 from genbacklash_core.scenarios import PHASE_KINDS
 from genbacklash_ros.bags.bagio import BagError, read_aligned
-from genbacklash_ros.bags.csvio import Series, read_series_csv
+from genbacklash_ros.bags.csvio import Series, dropped_note, read_series_csv
 from genbacklash_ros.bags.replay import OUTPUT_TOPICS, ReplayResult, replay
 from genbacklash_ros.bags.simbags import COMMAND_TOPIC, ENCODER_TOPIC, MOTOR_TOPIC, SimulatedBag
 from genbacklash_ros.node.parameters import (
@@ -70,7 +71,8 @@ the exit status is 2.
 
 _EPILOG = """\
 examples:
-  genbacklash replay bags/drivetrain --command /command --encoder /encoder -o out --report rep
+  genbacklash replay bags/drivetrain --command /command --encoder /encoder --joint drive_joint \\
+      -o out --report rep
   genbacklash replay run.mcap --command /cmd --encoder /joint_states --joint knee \\
       --model cascade --na 2 --nb 2 -o out --json
   genbacklash replay run --command /cmd --encoder /enc --params-file config/params.yaml -o out
@@ -91,7 +93,7 @@ def add_bag_input_options(parser: argparse.ArgumentParser, *, required: bool) ->
         dest="command_topic",
         required=required,
         help="bag input: command topic (std_msgs/Float64, std_msgs/Float64MultiArray or "
-        "sensor_msgs/JointState)",
+        "sensor_msgs/JointState); a topic the bag lacks stops with the bag's topics and types",
     )
     parser.add_argument(
         "--encoder",
@@ -104,14 +106,16 @@ def add_bag_input_options(parser: argparse.ArgumentParser, *, required: bool) ->
         "--joint",
         metavar="NAME",
         default=None,
-        help="bag input: joint name in JointState messages (default: the first joint)",
+        help="bag input: joint name in JointState messages (needed when they hold several "
+        "joints; a name the bag lacks stops with the names it has)",
     )
     parser.add_argument(
         "--command-index",
         metavar="I",
         type=int,
         default=None,
-        help="bag input: element of a Float64MultiArray command (default 0)",
+        help="bag input: element of a Float64MultiArray command (default 0; one beyond the "
+        "array stops with its length)",
     )
 
 
@@ -148,9 +152,8 @@ def load_bag_series(
             f"skipped {series.skipped} encoder samples before the first command",
             file=sys.stderr,
         )
-    # t in seconds from the first sample (the report's time axes); stamps are ns
-    seconds = (series.t - series.t[0]) * 1e-9 if series.t.size else None
-    return Series(u=series.u, y=series.y, t=seconds, breaks=series.breaks)
+    t = (series.t - series.t[0]) / 1e9 if series.t.size else None  # seconds from the first
+    return Series(u=series.u, y=series.y, t=t, breaks=series.breaks)
 
 
 BAG_SUFFIXES = (".mcap", ".db3")
@@ -168,14 +171,19 @@ def load_series(
     """The (u, y) data of ``args.data``: a CSV file, or a bag with the bag options.
 
     Shared by ``identify`` and ``diagnose``; ``params`` supply ``joint`` and
-    ``command_index`` where the options do not.
+    ``command_index`` where the options do not. A CSV row that is not all finite numbers
+    stops with its line number, or with ``--drop-nonfinite`` is dropped and named on stderr.
     """
     file = Path(args.data)
     if is_bag(file):
         return load_bag_series(args, params, bridge=bridge)
     if not file.exists():
         raise GenBacklashError(f"{file} does not exist")
-    return read_series_csv(file)
+    drop = bool(getattr(args, "drop_nonfinite", False))
+    series = read_series_csv(file, bad_rows="drop" if drop else "raise")
+    if series.dropped:  # --drop-nonfinite: say what went, never silently
+        print(f"genbacklash {args.command}: {dropped_note(file, series.dropped)}", file=sys.stderr)
+    return series
 
 
 # --------------------------------------------------------------------------- node parameters
@@ -265,6 +273,15 @@ def node_parameters(args: argparse.Namespace, used: Collection[str]) -> CommandP
     overrides = parse_param_overrides(args.param)
     options = {s.name: getattr(args, s.name, None) for s in PARAMETER_SPECS}
     params, given = command_line_parameters(args.params_file, overrides, options)
+    # the command's own options (--degree, --na, --nb, --joint, --command-index ...) take
+    # the node parameters' ranges: the same check for every command, before any work
+    for name, value in options.items():
+        if value is None:
+            continue
+        try:
+            params.replace(**{name: value})
+        except GenBacklashError as err:
+            raise GenBacklashError(f"--{name.replace('_', '-')} {value}: {err}") from err
     defaults = {s.name: s.default for s in PARAMETER_SPECS}
     unused = [
         name
@@ -601,12 +618,30 @@ def simulate_bag(args: argparse.Namespace) -> int:
 # --------------------------------------------------------------------------- replay
 
 
+RAD_PARAMETERS = ("c_left", "c_right")
+"""The parameters in the units of u and y: rad on a drivetrain (the slopes have none)."""
+
+
+def play_line(play: float, std: float) -> str:
+    """The play ``c_L + c_R`` with its 2-sigma uncertainty, in rad (``std`` NaN: unknown).
+
+    >>> play_line(0.1034, 0.00025)
+    'play c_L + c_R = 0.10340 rad +/- 0.00050 rad (2 sigma)'
+    """
+    if not math.isfinite(play):
+        return "play c_L + c_R: no estimate yet"
+    band = f" +/- {2 * std:.5f} rad (2 sigma)" if math.isfinite(std) else ""
+    return f"play c_L + c_R = {play:.5f} rad{band}"
+
+
 def _summary(result: ReplayResult) -> str:
     est = result.estimate
     lines = [f"{'parameter':<12}{'estimate':>12}{'2 sigma':>12}", "-" * 36]
     std = est.std()
     for name, value, sigma in zip(est.names, est.parameters, std, strict=True):
-        lines.append(f"{name:<12}{value:>12.5f}{2 * sigma:>12.5f}")
+        unit = "  rad" if name in RAD_PARAMETERS else ""
+        lines.append(f"{name:<12}{value:>12.5f}{2 * sigma:>12.5f}{unit}")
+    lines.append(play_line(*est.play()))
     stats = result.stats
     dropped = {k: n for k, n in stats.dropped.items() if n}
     rate = result.messages_in / result.seconds if result.seconds > 0 else 0.0

@@ -48,14 +48,20 @@ from genbacklash_core import (
 from genbacklash_core.cascade import model_to_dict
 from genbacklash_core.diagnose import DiagnoseSettings, StartStructure, diagnose
 from genbacklash_core.errors import NotEnoughExcitationError
-from genbacklash_ros.bags.bagio import BagError, BagReader, read_aligned
+from genbacklash_core.uncertainty import parameter_covariance, play_std
+from genbacklash_ros.bags.bagio import (
+    COMMAND_MSGTYPES,
+    ENCODER_MSGTYPES,
+    BagError,
+    BagReader,
+    read_aligned,
+)
 from genbacklash_ros.fleet.archive import (
     ArchiveBag,
     bag_start_ns,
     content_hash,
     metadata_identity,
 )
-from genbacklash_ros.fleet.uncertainty import gap_std, parameter_covariance
 from genbacklash_ros.node.messages import JointState
 from genbacklash_ros.node.parameters import NodeParameters
 
@@ -66,6 +72,7 @@ __all__ = [
     "FleetSettings",
     "JointRequest",
     "analyse_bag",
+    "check_archive",
     "inspect_bag",
 ]
 
@@ -240,6 +247,71 @@ def _first_joint(path: Path, topic: str) -> str:
     return ""
 
 
+def _what_is_there(root: Path, limit: int = 5) -> str:
+    """A few of the entries under ``root`` (what an archive without bags holds)."""
+    found: list[str] = []
+    total = 0
+    try:
+        for path in sorted(root.rglob("*")):
+            if path.is_file() and not any(part.startswith(".") for part in path.parts):
+                total += 1
+                if len(found) < limit:
+                    found.append(path.relative_to(root).as_posix())
+    except OSError:
+        pass
+    if not total:
+        return "it holds no files"
+    more = f" and {total - limit} more" if total > limit else ""
+    return f"it holds {total} file{'' if total == 1 else 's'}: {', '.join(found)}{more}"
+
+
+def check_archive(archive: str | Path, bags: list[ArchiveBag], settings: FleetSettings) -> None:
+    """Stop before any work when the archive holds no bag, or no bag with both topics.
+
+    The bags are opened in order until one holds ``settings.command_topic`` and
+    ``settings.encoder_topic`` with supported types (the check of
+    :meth:`~genbacklash_ros.bags.bagio.BagReader.topic`; usually the first bag). When none
+    does, :class:`~genbacklash_core.GenBacklashError` names the topics (and types) the bags
+    hold, or why none could be read. A bag that lacks them among others that have them is
+    the row ``unreadable``, as before.
+    """
+    root = Path(archive)
+    if not bags:
+        raise GenBacklashError(
+            f"{archive} holds no bags (rosbag2 directories with metadata.yaml, or .mcap "
+            f"files); {_what_is_there(root)}"
+        )
+    held: dict[tuple[str, str], int] = {}
+    first_error = ""
+    readable = 0
+    for bag in bags:
+        try:
+            with BagReader(bag.path) as reader:
+                readable += 1
+                for info in reader.topics.values():
+                    held[info.name, info.msgtype] = held.get((info.name, info.msgtype), 0) + 1
+                reader.topic(settings.command_topic, COMMAND_MSGTYPES)
+                reader.topic(settings.encoder_topic, ENCODER_MSGTYPES)
+                return
+        except BagError as err:
+            first_error = first_error or str(err)
+    n = len(bags)
+    if not readable:
+        raise GenBacklashError(
+            f"none of the {n} bag{'' if n == 1 else 's'} of {archive} can be read "
+            f"(first: {first_error})"
+        )
+    topics = ", ".join(
+        f"{name} ({msgtype}, in {count} bag{'' if count == 1 else 's'})"
+        for (name, msgtype), count in sorted(held.items())
+    )
+    raise GenBacklashError(
+        f"no bag of {archive} holds both --command {settings.command_topic} and --encoder "
+        f"{settings.encoder_topic} of a supported type; the {readable} readable "
+        f"{'bag holds' if readable == 1 else 'bags hold'}: {topics or 'no topics'}"
+    )
+
+
 def inspect_bag(bag: ArchiveBag, settings: FleetSettings) -> BagPlan:
     """The hash, drivetrain and time of ``bag`` (see :mod:`genbacklash_ros.fleet.archive`)."""
     try:
@@ -351,7 +423,7 @@ def _fit_fields(
         "c_right": float(backlash.c_right),
         "c_right_std": float(std[index["c_right"]]),
         "gap": float(backlash.c_left + backlash.c_right),
-        "gap_std": gap_std(model, cov),
+        "gap_std": play_std(model, cov),
         "parameters": dict(zip(names, map(float, model.parameters()), strict=True)),
         "parameter_std": dict(zip(names, map(float, std), strict=True)),
         "estimate": model_to_dict(model),
@@ -380,14 +452,10 @@ def _replay_fields(
     est = result.estimate
     summary = {k: v for k, v in result.to_dict().items() if k != "output"}
     fields: dict[str, Any] = {"replay": summary, "replay_state": est.state.value}
-    model = est.model
-    if model is not None:
-        backlash = model.backlash if isinstance(model, Cascade) else model
-        names = est.names
-        i, j = names.index("c_left"), names.index("c_right")
-        var = est.covariance[i, i] + est.covariance[j, j] + 2 * est.covariance[i, j]
-        fields["replay_gap"] = float(backlash.c_left + backlash.c_right)
-        fields["replay_gap_std"] = float(np.sqrt(max(var, 0.0)))
+    if est.model is not None:
+        play, play_std = est.play()
+        fields["replay_gap"] = play
+        fields["replay_gap_std"] = play_std
     if result.error:
         summary["error"] = result.error
     return fields

@@ -43,11 +43,22 @@ SINGLE = [
 
 def _check_contract(result: Diagnosis) -> None:
     data = json.loads(json.dumps(result.to_dict()))
-    assert set(data) == {"steps", "gap_initial", "gap_final", "gap_floor", "model"}
+    old = {"steps", "gap_initial", "gap_final", "gap_floor", "model"}
+    # issue 22: the misfit (validation NRMSE) under its own word; the gap_* keys stay
+    assert set(data) == old | {"misfit_initial", "misfit_final", "misfit_floor"}
+    assert [data[f"misfit_{k}"] for k in ("initial", "final", "floor")] == [
+        data[f"gap_{k}"] for k in ("initial", "final", "floor")
+    ]
     for step in data["steps"]:
-        assert set(step) == {"effect", "evidence", "gap_before", "gap_after"}
+        assert set(step) == {
+            "effect", "evidence", "gap_before", "gap_after", "misfit_before", "misfit_after"
+        }  # fmt: skip
         assert step["effect"] in effect_names()
         assert step["gap_after"] < step["gap_before"]
+        assert (step["misfit_before"], step["misfit_after"]) == (
+            step["gap_before"],
+            step["gap_after"],
+        )
     model = data["model"]
     assert {"model", "backlash", "iterations", "converged", "fit"} <= set(model)
     assert {"delay", "offset", "drift", "saturation", "input_lag", "periodic_error"} <= set(model)

@@ -215,12 +215,14 @@ def test_to_dict_backlash_contract() -> None:
     data = paper_example(1).generate(0)
     result = identify_backlash(data.u, data.y, 3)
     out = result.to_dict()
-    assert set(out) == {"model", "backlash", "iterations", "converged", "reason", "fit"}
+    assert set(out) == {"model", "backlash", "iterations", "converged", "reason", "fit", "play"}
     assert out["model"] == "backlash"
     assert set(out["backlash"]) == {"m_left", "c_left", "m_right", "c_right"}
-    assert set(out["fit"]) == {"nrmse"}
+    assert set(out["fit"]) == {"nrmse", "misfit"}
+    assert out["fit"]["misfit"] == out["fit"]["nrmse"]  # one word for the misfit, old key kept
     model = result.model
     assert isinstance(model, GeneralBacklash)
+    assert out["play"] == model.c_left + model.c_right  # the play, rad (issue 22)
     assert out["backlash"]["m_left"] == list(model.m_left)
     assert out["backlash"]["c_left"] == model.c_left
     assert out["backlash"]["m_right"] == list(model.m_right)
@@ -236,11 +238,12 @@ def test_to_dict_cascade_contract() -> None:
     data = paper_example(3).generate(0)
     result = identify_cascade(data.u, data.y, 3, 2, 2)
     out = result.to_dict()
-    assert set(out) == {"model", "backlash", "linear", "iterations", "converged", "reason", "fit"}
+    expected = {"model", "backlash", "linear", "iterations", "converged", "reason", "fit", "play"}
+    assert set(out) == expected
     assert out["model"] == "cascade"
     assert set(out["backlash"]) == {"m_left", "c_left", "m_right", "c_right"}
     assert set(out["linear"]) == {"a", "b"}
-    assert set(out["fit"]) == {"nrmse"}
+    assert set(out["fit"]) == {"nrmse", "misfit"}
     model = result.model
     assert isinstance(model, Cascade)
     assert out["linear"]["a"] == list(model.linear.a)

@@ -49,7 +49,8 @@ class GapDrift:
         bl = context.fit.model.backlash
         fires = screened(test, context)
         evidence = (
-            f"a gap changing along {basis} explains {100 * test.share:.1f}% of the residual "
+            f"a play (c_L + c_R) changing along {basis} explains {100 * test.share:.1f}% of "
+            "the residual "
             f"(score test F = {test.test.statistic:.1f}, {format_p(test.test.p_value)}); one "
             f"Gauss-Newton step puts the change of each dead zone over the estimation record at "
             f"{rate * span:+.3g} (fitted c_L = {bl.c_left:.3g}, c_R = {bl.c_right:.3g})"

@@ -15,11 +15,11 @@ import pytest
 
 from genbacklash_ros.bags.bagio import BagReader, BagWriter
 from genbacklash_ros.bags.replay import OUTPUT_TOPICS
-from genbacklash_ros.bags.simbags import COMMAND_TOPIC, ENCODER_TOPIC, write_example_bag
+from genbacklash_ros.bags.simbags import COMMAND_TOPIC, ENCODER_TOPIC, JOINT, write_example_bag
 from genbacklash_ros.cli.main import EXIT_BAD_INPUT, main
 from genbacklash_ros.node.messages import Float64MultiArray
 
-TOPICS = ["--command", COMMAND_TOPIC, "--encoder", ENCODER_TOPIC]
+TOPICS = ["--command", COMMAND_TOPIC, "--encoder", ENCODER_TOPIC, "--joint", JOINT]
 
 
 @pytest.fixture(scope="module")

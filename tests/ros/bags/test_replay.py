@@ -15,13 +15,14 @@ from genbacklash_ros.bags.replay import _GC_YOUNG, OUTPUT_TOPICS, _few_collectio
 from genbacklash_ros.bags.simbags import (
     COMMAND_TOPIC,
     ENCODER_TOPIC,
+    JOINT,
     read_truth,
     write_drivetrain_bag,
     write_example_bag,
 )
 from genbacklash_ros.cli.main import EXIT_BAD_INPUT, EXIT_OK, main
 
-TOPICS = ["--command", COMMAND_TOPIC, "--encoder", ENCODER_TOPIC]
+TOPICS = ["--command", COMMAND_TOPIC, "--encoder", ENCODER_TOPIC, "--joint", JOINT]
 
 
 @pytest.fixture(scope="module")
@@ -43,7 +44,11 @@ def replayed(example_bag: Path, tmp_path_factory: pytest.TempPathFactory) -> tup
 
 def test_replay_reaches_the_known_parameters(example_bag: Path, tmp_path: Path) -> None:
     result = replay(
-        example_bag, tmp_path / "out", command_topic=COMMAND_TOPIC, encoder_topic=ENCODER_TOPIC
+        example_bag,
+        tmp_path / "out",
+        command_topic=COMMAND_TOPIC,
+        encoder_topic=ENCODER_TOPIC,
+        joint=JOINT,
     )
     truth = paper_example(1).model.parameters()
     assert result.error == ""
@@ -98,7 +103,11 @@ def test_report_files(replayed: tuple[Path, Path]) -> None:
 
 def test_replay_keeps_the_bags_custom_data(example_bag: Path, tmp_path: Path) -> None:
     result = replay(
-        example_bag, tmp_path / "out", command_topic=COMMAND_TOPIC, encoder_topic=ENCODER_TOPIC
+        example_bag,
+        tmp_path / "out",
+        command_topic=COMMAND_TOPIC,
+        encoder_topic=ENCODER_TOPIC,
+        joint=JOINT,
     )
     truth = read_truth(result.custom_data)
     assert truth is not None and truth.model == paper_example(1).model
@@ -207,6 +216,7 @@ def test_replay_gives_the_same_outputs_on_every_run(example_bag: Path, tmp_path:
             tmp_path / f"out{k}",
             command_topic=COMMAND_TOPIC,
             encoder_topic=ENCODER_TOPIC,
+            joint=JOINT,
         )
         for k in range(2)
     ]

@@ -10,7 +10,7 @@ import pytest
 
 from genbacklash_ros.bags.bagio import BagReader
 from genbacklash_ros.bags.replay import OUTPUT_TOPICS, ReplayResult, replay
-from genbacklash_ros.bags.simbags import COMMAND_TOPIC, ENCODER_TOPIC
+from genbacklash_ros.bags.simbags import COMMAND_TOPIC, ENCODER_TOPIC, JOINT
 
 BAGS = Path(__file__).resolve().parents[3] / "bags"
 BUNDLED = {  # bag -> model to replay it with (bags/README.md)
@@ -27,6 +27,7 @@ def _replay(bag: str, out: Path, batched: bool) -> ReplayResult:
         out,
         command_topic=COMMAND_TOPIC,
         encoder_topic=ENCODER_TOPIC,
+        joint=JOINT,
         model=BUNDLED[bag],
         batched=batched,
     )

@@ -45,6 +45,19 @@ def test_simulate_options(tmp_path: Path) -> None:
     assert read_series_csv(out).u.size == 300
 
 
+def _names(result: dict[str, object]) -> list[str]:
+    backlash = result["backlash"]
+    assert isinstance(backlash, dict)
+    n = len(backlash["m_left"])
+    names = [f"m_left_{k}" for k in range(1, n + 1)] + ["c_left"]
+    names += [f"m_right_{k}" for k in range(1, n + 1)] + ["c_right"]
+    linear = result.get("linear")
+    if isinstance(linear, dict):
+        names += [f"a_{k}" for k in range(2, len(linear["a"]) + 1)]
+        names += [f"b_{k}" for k in range(1, len(linear["b"]) + 1)]
+    return names
+
+
 @pytest.mark.parametrize("example", [1, 3])
 def test_identify_json_contract(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], example: int
@@ -54,6 +67,8 @@ def test_identify_json_contract(
     assert main(["identify", str(data), "--model", model, "--json"]) == EXIT_OK
     result = json.loads(capsys.readouterr().out)
     expected_keys = {"model", "backlash", "iterations", "converged", "fit", "reason"}
+    # issue 22: the play c_L + c_R with its standard deviation, the parameters' ones
+    expected_keys |= {"play", "play_std", "parameter_std"}
     if model == "cascade":
         expected_keys.add("linear")
         assert result["linear"]["a"][0] == 1.0
@@ -67,6 +82,13 @@ def test_identify_json_contract(
     assert result["converged"] is True
     assert isinstance(result["iterations"], int)
     assert 0.0 < result["fit"]["nrmse"] < 0.1
+    assert result["fit"]["misfit"] == result["fit"]["nrmse"]
+    play = result["backlash"]["c_left"] + result["backlash"]["c_right"]
+    assert result["play"] == pytest.approx(play)
+    assert 0.0 < result["play_std"] < 0.05
+    assert abs(result["play"] - (truth.c_left + truth.c_right)) < 4 * result["play_std"]
+    assert set(result["parameter_std"]) == set(_names(result))
+    assert all(0.0 < s < 0.1 for s in result["parameter_std"].values())
 
 
 def test_identify_table_and_plots(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -89,8 +111,11 @@ def test_identify_reports_nonfinite_samples(
     write_series_csv(path, Series(u=u, y=ex.y))
     assert main(["identify", str(path)]) == EXIT_BAD_INPUT
     err = capsys.readouterr().err
-    assert "3 of 800 samples are NaN or infinite" in err and "10, 20, 30" in err
+    assert "line 12 of" in err and "column 'u': 'nan' is not finite" in err
+    assert "(3 rows are bad: lines 12, 22 and 32)" in err
     assert main(["identify", str(path), "--drop-nonfinite", "--json"]) == EXIT_OK
+    err = capsys.readouterr().err
+    assert "dropped 3 rows of" in err and "lines 12, 22 and 32" in err
 
 
 def test_identify_not_enough_excitation(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -177,9 +177,9 @@ def test_identify_uses_the_bag_parameters(capsys: pytest.CaptureFixture[str]) ->
     """joint and command_index from --param reach the bag reader."""
     argv = ["identify", str(EXAMPLE1_BAG), *TOPICS, "--json", "--max-iterations", "5"]
     assert main([*argv, "--param", "command_index=3"]) == EXIT_BAD_INPUT
-    assert "no readable command" in _error(capsys, "identify")
+    assert "command index 3 is beyond the Float64MultiArray" in _error(capsys, "identify")
     assert main([*argv, "--param", "joint=elbow"]) == EXIT_BAD_INPUT
-    assert "no readable encoder reading" in _error(capsys, "identify")  # no such joint
+    assert "joint 'elbow' is not in the encoder JointState" in _error(capsys, "identify")
     assert main([*argv, "--param", "joint=drive_joint"]) in (EXIT_OK, EXIT_NOT_CONVERGED)
     assert capsys.readouterr().err == ""
 

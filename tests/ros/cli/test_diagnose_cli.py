@@ -25,11 +25,21 @@ def test_json_contract(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> No
     data = _csv(tmp_path, ["time_delay"], 41)
     assert main(["diagnose", str(data), "--json"]) == EXIT_OK
     result = json.loads(capsys.readouterr().out)
-    assert set(result) == {"steps", "gap_initial", "gap_final", "gap_floor", "model"}
+    old = {"steps", "gap_initial", "gap_final", "gap_floor", "model"}
+    # issue 22: one word for the validation NRMSE, "misfit"; the old keys stay (GUIDE §4)
+    assert set(result) == old | {"misfit_initial", "misfit_final", "misfit_floor"}
+    for name in ("initial", "final", "floor"):
+        assert result[f"misfit_{name}"] == result[f"gap_{name}"]
     assert [step["effect"] for step in result["steps"]] == ["time_delay"]
     step = result["steps"][0]
-    assert set(step) == {"effect", "evidence", "gap_before", "gap_after"}
+    assert set(step) == {
+        "effect", "evidence", "gap_before", "gap_after", "misfit_before", "misfit_after"
+    }  # fmt: skip
+    assert (step["misfit_before"], step["misfit_after"]) == (step["gap_before"], step["gap_after"])
     assert step["gap_before"] == result["gap_initial"] > step["gap_after"] == result["gap_final"]
+    backlash = result["model"]["backlash"]
+    assert result["model"]["play"] == backlash["c_left"] + backlash["c_right"]
+    assert result["model"]["fit"]["misfit"] == result["model"]["fit"]["nrmse"]
     assert "dead time" in step["evidence"]
     model = result["model"]
     assert model["model"] == "backlash" and model["delay"] >= 2
@@ -42,7 +52,11 @@ def test_text_output_and_report(tmp_path: Path, capsys: pytest.CaptureFixture[st
     out_dir = tmp_path / "report"
     assert main(["diagnose", str(data), "--report", str(out_dir)]) == EXIT_OK
     captured = capsys.readouterr()
-    assert "step 1: gap_drift" in captured.out and "final model" in captured.out
+    assert "step 1: gap_drift - misfit " in captured.out and "final model" in captured.out
+    assert "final misfit " in captured.out and " gap " not in captured.out
+    # a CSV without t: the drift per sample, saying how to get it per second
+    assert "rad per sample (no time stamps: a t column gives rad/s)" in captured.out
+    assert "per time" not in captured.out
     for name in (
         "fit_steps.png",
         "gap_steps.png",
@@ -162,7 +176,7 @@ def test_an_operation_bag_is_read_as_the_node_reads_it(
     out_dir = tmp_path / "report"
     assert main([*args, "--report", str(out_dir)]) == EXIT_OK
     captured = capsys.readouterr()
-    assert "floor: quantisation and noise allow a gap of" in captured.out
+    assert "floor: quantisation and noise allow a misfit of" in captured.out
     summary = (out_dir / "summary.md").read_text(encoding="utf-8")
     assert "**Floor**: quantisation and noise allow" in summary
     assert "| position range [rad] | start |" in summary
@@ -183,3 +197,19 @@ def test_help_explains(capsys: pytest.CaptureFixture[str]) -> None:
     text = capsys.readouterr().out
     for word in ("curved_branches", "saturation", "--validation", "--start", "--report", "gap"):
         assert word in text
+
+
+def test_drift_rate_per_second(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A record with stamps (a t column, 2 ms apart) gives the drift rate in rad/s; the JSON
+    keeps the rate per sample and adds rate_per_s (issue 22: not "per time")."""
+    case = synthetic_case(["gap_drift"], 42, 1500)
+    path = tmp_path / "stamped.csv"
+    write_series_csv(path, Series(case.u, case.y, t=np.arange(case.u.size) * 0.002))
+    assert main(["diagnose", str(path), "--json"]) == EXIT_OK
+    drift = json.loads(capsys.readouterr().out)["model"]["drift"]
+    assert drift["basis"] == "time"
+    assert drift["rate_per_s"] == pytest.approx(drift["rate"] / 0.002)
+    assert main(["diagnose", str(path)]) == EXIT_OK
+    text = capsys.readouterr().out
+    line = next(row for row in text.splitlines() if "drift rate" in row)
+    assert f"{drift['rate_per_s']:.4g} rad/s" in line and "rad per sample of 2 ms" in line

@@ -12,7 +12,12 @@ import pytest
 
 from genbacklash_core.scenarios import OperationSettings
 from genbacklash_ros.bags.replay import ReplayResult, replay
-from genbacklash_ros.bags.simbags import COMMAND_TOPIC, ENCODER_TOPIC, write_operation_bag
+from genbacklash_ros.bags.simbags import (
+    COMMAND_TOPIC,
+    ENCODER_TOPIC,
+    JOINT,
+    write_operation_bag,
+)
 from genbacklash_ros.cli.main import EXIT_OK, main
 from genbacklash_ros.reports.replay import (
     branch_coverage,
@@ -43,7 +48,9 @@ def operation_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture(scope="module")
 def result(operation_bag: Path, tmp_path_factory: pytest.TempPathFactory) -> ReplayResult:
     out = tmp_path_factory.mktemp("replay") / "out"
-    return replay(operation_bag, out, command_topic=COMMAND_TOPIC, encoder_topic=ENCODER_TOPIC)
+    return replay(
+        operation_bag, out, command_topic=COMMAND_TOPIC, encoder_topic=ENCODER_TOPIC, joint=JOINT
+    )
 
 
 def _text(page: str) -> str:
@@ -111,7 +118,9 @@ def test_coverage_and_window(result: ReplayResult) -> None:
 def test_one_way_coverage_shows_one_branch(tmp_path: Path) -> None:
     bag = tmp_path / "ow"
     write_operation_bag(bag, OperationSettings(phases=(("one_way", 4.0),)), seed=0)
-    res = replay(bag, tmp_path / "o", command_topic=COMMAND_TOPIC, encoder_topic=ENCODER_TOPIC)
+    res = replay(
+        bag, tmp_path / "o", command_topic=COMMAND_TOPIC, encoder_topic=ENCODER_TOPIC, joint=JOINT
+    )
     truth = report_data(res).truth
     assert truth is not None
     cov = branch_coverage(dataclasses.replace(report_data(res), model=None), None)
@@ -122,7 +131,7 @@ def test_one_way_coverage_shows_one_branch(tmp_path: Path) -> None:
 
 def test_replay_cli_report(operation_bag: Path, tmp_path: Path) -> None:
     rep = tmp_path / "rep"
-    topics = ["--command", COMMAND_TOPIC, "--encoder", ENCODER_TOPIC]
+    topics = ["--command", COMMAND_TOPIC, "--encoder", ENCODER_TOPIC, "--joint", JOINT]
     args = ["replay", str(operation_bag), *topics, "-o", str(tmp_path / "o"), "--report", str(rep)]
     assert main(args) == EXIT_OK
     assert "RMS tracking error" in (rep / "index.html").read_text()

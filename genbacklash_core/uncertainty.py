@@ -1,0 +1,100 @@
+"""Standard deviations of a batch estimate: the output-error fit's Gauss-Newton covariance.
+
+Used by ``genbacklash identify`` (the parameters' and the play's standard deviations) and by
+the fleet (:mod:`genbacklash_ros.fleet.job`). The *play* is ``c_L + c_R`` (rad): the whole
+dead band between the branches.
+
+The batch identifier (:func:`genbacklash_core.identify_backlash`, its output-error refinement)
+returns a point estimate. Around it the free-run simulation error is locally linear in the
+parameters, so ``cov(p) = s^2 (J^T J)^-1`` with ``J = d y_sim / d p`` at the estimate and
+``s^2 = ||y - y_sim||^2 / (N - P)`` (the classical nonlinear least-squares covariance). ``J`` is
+the refinement's own analytic Jacobian of the same simulation
+(:func:`genbacklash_core.refine.simulation_jacobian`, restarted at the sample rule's breaks):
+one simulation, where central differences took ``2P + 1`` (they agree to ~1e-9 relative).
+
+It assumes white residuals. Encoder quantisation is not white on a slowly moving load, so
+these standard deviations are a lower bound; the fleet's wear trend
+(``genbacklash_ros.fleet.trends``) scales them up by the scatter the bags show when that is
+larger.
+
+Examples
+--------
+>>> from genbacklash_core import identify_backlash, paper_example
+>>> example = paper_example(1)  # c_L = 0.7
+>>> data = example.generate(seed=0)
+>>> result = identify_backlash(data.u, data.y, 3)
+>>> names, values, std = parameter_std(result.model, data.u, data.y)
+>>> names[3], bool(abs(values[3] - 0.7) < 3 * std[3]), bool(0 < std[3] < 0.01)
+('c_left', True, True)
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .backlash import GeneralBacklash
+from .cascade import Cascade
+from .refine import simulation_jacobian
+from .structure import Structure
+
+__all__ = ["gap_std", "parameter_covariance", "parameter_std", "play_std"]
+
+
+def parameter_covariance(
+    model: GeneralBacklash | Cascade,
+    u: np.ndarray,
+    y: np.ndarray,
+    breaks: np.ndarray | None = None,
+) -> np.ndarray:
+    """``s^2 (J^T J)^+`` of ``model``'s parameter vector on ``(u, y)`` (see the module notes).
+
+    A parameter the data do not inform (a zero column of ``J``) gets an infinite variance
+    rather than a misleading zero.
+    """
+    structure = Structure.of(model)
+    p = model.parameters()
+    uu = np.asarray(u, dtype=np.float64)
+    yy = np.asarray(y, dtype=np.float64)
+    x0 = 0.0 if structure.cascade else float(yy[0])
+    y_sim, jac = simulation_jacobian(structure, p, uu, yy, x0, breaks)
+    residual = yy - y_sim
+    dof = max(uu.size - p.size, 1)
+    s2 = float(residual @ residual) / dof
+    informed = np.any(jac != 0.0, axis=0)
+    cov = np.full((p.size, p.size), np.nan)
+    sub = jac[:, informed]
+    cov[np.ix_(informed, informed)] = s2 * np.linalg.pinv(sub.T @ sub)
+    cov[~informed, :] = cov[:, ~informed] = 0.0
+    cov[~informed, ~informed] = np.inf
+    return cov
+
+
+def parameter_std(
+    model: GeneralBacklash | Cascade,
+    u: np.ndarray,
+    y: np.ndarray,
+    breaks: np.ndarray | None = None,
+) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
+    """``(names, values, standard deviations)`` of ``model``'s parameters on ``(u, y)``."""
+    cov = parameter_covariance(model, u, y, breaks)
+    std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    return model.parameter_names, model.parameters(), std
+
+
+def play_std(model: GeneralBacklash | Cascade, covariance: np.ndarray) -> float:
+    """Standard deviation of the play ``c_L + c_R`` (rad) from the parameter covariance: the
+    covariance propagated by the play's gradient (1 at ``c_L`` and ``c_R``, 0 elsewhere).
+
+    >>> m = GeneralBacklash((1.0,), 0.1, (1.0,), 0.1)
+    >>> play_std(m, np.diag([0.0, 0.09, 0.0, 0.16]))
+    0.5
+    """
+    structure = Structure.of(model)
+    i = structure.degree  # c_left follows m_left_1..n
+    j = 2 * structure.degree + 1  # c_right ends the backlash part
+    var = covariance[i, i] + covariance[j, j] + 2.0 * covariance[i, j]
+    return float(np.sqrt(max(var, 0.0)))
+
+
+gap_std = play_std
+"""The former name of :func:`play_std` (the fleet's ``gap`` column is the play)."""
