@@ -82,13 +82,18 @@ def _opts(*items: tuple[str, str, str]) -> CommandPaths:
 
 
 _PARAMS = ("params_file", "--params-file", "input")
+_CHECKPOINT = ("checkpoint", "--checkpoint", "file")
 
 #: Each command's path options (commands not listed read and write no paths).
 COMMAND_PATHS: dict[str, CommandPaths] = {
     "replay": _opts(
-        ("bag", "BAG", "input"), _PARAMS, ("output", "-o", "bag"), ("report", "--report", "dir")
+        ("bag", "BAG", "input"),
+        _PARAMS,
+        ("output", "-o", "bag"),
+        ("report", "--report", "dir"),
+        _CHECKPOINT,
     ),
-    "identify": _opts(("data", "DATA", "input"), _PARAMS, ("plot", "--plot", "dir")),
+    "identify": _opts(("data", "DATA", "input"), _PARAMS, ("plot", "--plot", "dir"), _CHECKPOINT),
     "diagnose": _opts(
         ("data", "DATA", "input"),
         _PARAMS,
