@@ -47,6 +47,7 @@ _COMMAND_MODULES: dict[str, tuple[str, str]] = {
     "replay": ("genbacklash_ros.cli.replay", "add_parser"),
     "node": ("genbacklash_ros.cli.node", "add_parser"),
     "excite": ("genbacklash_ros.cli.excite", "add_parser"),
+    "export": ("genbacklash_ros.cli.export", "add_parser"),
     "fleet": ("genbacklash_ros.cli.fleet", "add_parsers"),
     "fleet-report": ("genbacklash_ros.cli.fleet", "add_parsers"),
 }

@@ -94,6 +94,7 @@ COMMAND_PATHS: dict[str, CommandPaths] = {
         _CHECKPOINT,
     ),
     "identify": _opts(("data", "DATA", "input"), _PARAMS, ("plot", "--plot", "dir"), _CHECKPOINT),
+    "export": _opts(("model", "MODEL", "input"), ("output", "-o", "file")),
     "diagnose": _opts(
         ("data", "DATA", "input"),
         _PARAMS,
@@ -146,6 +147,12 @@ def _values(args: argparse.Namespace, option: PathOption) -> Iterator[str]:
             return
     if option.attribute == "start" and not Path(str(value)).exists():
         return  # diagnose --start degree=3: a structure, not a file
+    if getattr(args, "command", None) == "export" and option.attribute == "output":
+        from genbacklash_ros.cli.export import export_paths
+
+        # -o OUT stands for OUT.csv and/or OUT.h: check the files that are written
+        yield from (str(path) for path in export_paths(str(value), args.format))
+        return
     yield str(value)
 
 
