@@ -100,8 +100,10 @@ def read_model(path: str | Path) -> tuple[Model, str]:
                 f"({checkpoint.estimate.state.value}: {checkpoint.estimate.reason})"
             )
         return model, "checkpoint"
+    kind = "identify output"
     if isinstance(data, dict) and "backlash" not in data and isinstance(data.get("model"), dict):
         data = data["model"]  # replay --json: the estimate's model in identify's form
+        kind = "replay output"
     if not isinstance(data, dict) or "backlash" not in data:
         raise GenBacklashError(
             f"MODEL {file} holds no model: expected a node checkpoint or the output of "
@@ -112,7 +114,7 @@ def read_model(path: str | Path) -> tuple[Model, str]:
     except (GenBacklashError, ValueError, KeyError, TypeError) as err:
         what = f"missing {err}" if isinstance(err, KeyError) else str(err)
         raise GenBacklashError(f"MODEL {file}: not a valid model ({what})") from err
-    return model, "identify output"
+    return model, kind
 
 
 # --------------------------------------------------------------------------- valid range
@@ -365,6 +367,10 @@ def c_header(table: InverseTable, name: str = "genbacklash_inverse", source: str
 def export_paths(output: str | Path, fmt: str) -> list[Path]:
     """The files ``-o OUTPUT`` stands for: OUTPUT with its suffix set to ``.csv``, ``.h``."""
     base = Path(output)
+    if base.name in ("", ".", "..") or base.is_dir():
+        raise GenBacklashError(
+            f"-o {output} is a directory; give a file name (OUT.csv and OUT.h are written)"
+        )
     return [base.with_suffix(suffix) for suffix in _SUFFIXES[fmt]]
 
 
@@ -396,10 +402,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     """Run ``genbacklash export``."""
     if not _C_NAME.fullmatch(args.name):
         raise GenBacklashError(f"--name must be a C identifier, got {args.name!r}")
-    if Path(args.output).is_dir():
-        raise GenBacklashError(
-            f"-o {args.output} is a directory; give a file name (OUT.csv and OUT.h are written)"
-        )
+    paths = export_paths(args.output, args.format)
     points = _points(args.points)
     x_range = _range(args.range)
     model, kind = read_model(args.model)
@@ -407,7 +410,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     source = Path(args.model).name
     texts = {".csv": csv_text(table), ".h": c_header(table, args.name, source)}
     written = []
-    for path in export_paths(args.output, args.format):
+    for path in paths:
         try:
             write_atomic(path, texts[path.suffix])
         except OSError as err:

@@ -27,7 +27,7 @@ from genbacklash_core import (
 )
 from genbacklash_core.cascade import model_to_dict
 from genbacklash_core.inverse import CompensatorState
-from genbacklash_ros.cli.export import inverse_table, valid_range
+from genbacklash_ros.cli.export import inverse_table, read_model, valid_range
 from genbacklash_ros.cli.main import EXIT_BAD_INPUT, EXIT_OK, main
 from genbacklash_ros.node.checkpoint import save_checkpoint
 
@@ -227,6 +227,7 @@ def _bad_inputs(tmp_path: Path) -> dict[str, tuple[list[str], str]]:
         "a corrupt checkpoint": (["export", str(corrupt), "-o", out, *rng], "not a usable"),
         "a directory": (["export", str(folder), "-o", out, *rng], "is a directory"),
         "-o a directory": (["export", str(good), "-o", str(folder), *rng], "is a directory"),
+        "-o .": (["export", str(good), "-o", ".", *rng], "is a directory"),
         "--points 1": (["export", str(good), "-o", out, "--points", "1", *rng], "--points"),
         "--points x": (["export", str(good), "-o", out, "--points", "x", *rng], "--points"),
         "range outside": (
@@ -248,6 +249,7 @@ CASES = [
     "a corrupt checkpoint",
     "a directory",
     "-o a directory",
+    "-o .",
     "--points 1",
     "--points x",
     "range outside",
@@ -291,3 +293,16 @@ def test_help_explains(capsys: pytest.CaptureFixture[str]) -> None:
     text = capsys.readouterr().out
     for words in ("valid range", "checkpoint", "identify --json", "u_up", "interpolate", "--range"):
         assert words in text, words
+
+
+def test_read_model_takes_every_offline_result(tmp_path: Path) -> None:
+    """A checkpoint, identify's --json, and replay's --json (its "model" entry)."""
+    replayed = tmp_path / "replay.json"
+    replayed.write_text(json.dumps({"state": "converged", "model": model_to_dict(CURVED)}))
+    sources = {
+        "checkpoint": _checkpoint(tmp_path / "cp.json", CURVED),
+        "identify output": _identify_json(tmp_path / "id.json", CURVED),
+        "replay output": replayed,
+    }
+    for kind, path in sources.items():
+        assert read_model(path) == (CURVED, kind)
