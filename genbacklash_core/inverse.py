@@ -63,6 +63,7 @@ __all__ = [
     "compensate",
     "compensate_step",
     "hold_interval",
+    "invertible_range",
 ]
 
 _EPS = sys.float_info.epsilon
@@ -768,6 +769,39 @@ def branch_inverse(
     branch = plan.up if push > 0 else plan.down
     flat = target.reshape(-1)
     return branch.invert_many(flat).reshape(target.shape)
+
+
+def invertible_range(
+    model: GeneralBacklash | Cascade, options: CompensatorOptions | None = None
+) -> tuple[float, float]:
+    """The inputs on which both branches are inverted: their monotone pieces' overlap.
+
+    Each branch is inverted on its monotone piece (slope of the model's sense) inside the
+    options' inversion range, the one nearest its zero crossing: the pieces
+    :func:`branch_inverse`, :func:`hold_interval` and :class:`InverseBacklash` use. This is
+    where both are; an end is infinite where a branch is monotone without bound. Whether the
+    branches stay apart there is a separate question
+    (:meth:`GeneralBacklash.crossings <genbacklash_core.GeneralBacklash.crossings>`).
+    Raises :class:`GenBacklashError` when the pieces do not overlap.
+
+    Examples
+    --------
+    >>> invertible_range(GeneralBacklash.ideal(1.0, 0.3, 0.5))
+    (-inf, inf)
+    >>> low, high = invertible_range(GeneralBacklash((1.0, 0.0, -1.0), 0.1, (1.0, 0.0, -1.0), 0.1))
+    >>> round(low, 6), round(high, 6)  # the slopes 1 - 3 (u +/- 0.1)^2 vanish at +/-(1/3^0.5 - 0.1)
+    (-0.47735, 0.47735)
+    """
+    opts = _DEFAULT_OPTIONS if options is None else _as_options(options)
+    plan = _plan_for(model, opts)
+    low, high = max(plan.left.a, plan.right.a), min(plan.left.b, plan.right.b)
+    if not low < high:
+        raise GenBacklashError(
+            f"the branches' monotone parts do not overlap (left on [{plan.left.a:.6g}, "
+            f"{plan.left.b:.6g}], right on [{plan.right.a:.6g}, {plan.right.b:.6g}]): no input "
+            "inverts both"
+        )
+    return low, high
 
 
 # --------------------------------------------------------------------------- the step

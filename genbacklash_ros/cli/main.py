@@ -32,6 +32,7 @@ from genbacklash_core.uncertainty import parameter_covariance, play_std
 from genbacklash_ros.bags.csvio import Series, write_series_csv
 from genbacklash_ros.cli import replay as replay_cli
 from genbacklash_ros.cli.paths import check_paths
+from genbacklash_ros.cli.start import add_checkpoint_option
 
 __all__ = ["main"]
 
@@ -48,6 +49,7 @@ _COMMAND_MODULES: dict[str, tuple[str, str]] = {
     "replay": ("genbacklash_ros.cli.replay", "add_parser"),
     "node": ("genbacklash_ros.cli.node", "add_parser"),
     "excite": ("genbacklash_ros.cli.excite", "add_parser"),
+    "export": ("genbacklash_ros.cli.export", "add_parser"),
     "fleet": ("genbacklash_ros.cli.fleet", "add_parsers"),
     "fleet-report": ("genbacklash_ros.cli.fleet", "add_parsers"),
 }
@@ -211,6 +213,12 @@ def _cmd_identify(args: argparse.Namespace) -> int:
         print(_parameter_table(result, std=spread.std))
         print(replay_cli.play_line(spread.play, spread.play_std))
         print(_summary(result))
+    if args.checkpoint:
+        from genbacklash_ros.cli.start import identify_estimate, write_start
+
+        stamps = series.t
+        time_ns = round(float(stamps[-1]) * 1e9) if stamps is not None and stamps.size else 0
+        write_start(args.checkpoint, identify_estimate(result, series), time_ns, "identify")
     if args.plot:
         from genbacklash_ros.reports.plots import save_identification_plots
 
@@ -313,7 +321,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
             "Identify a general backlash from a CSV with header columns u (command) and y "
             "(measured position), optional t. The paper's iteration (Voeroes, §3-4) runs from "
             "m_1 = +/-1, c = 0.001, then an output-error refinement brings it to maximum-"
-            "likelihood accuracy. Exit status 3 when it did not converge."
+            "likelihood accuracy. Exit status 3 when it did not converge. The node's start "
+            "comes from a checkpoint file (its checkpoint_file parameter): --checkpoint FILE "
+            "writes one; the --json output is a report, not that file."
         ),
     )
     ident.add_argument(
@@ -370,8 +380,10 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     ident.add_argument(
         "--json",
         action="store_true",
-        help="print one JSON object (the documented contract) instead of a table",
+        help="print one JSON object (the documented contract) instead of a table; it is not "
+        "the node's start: for that, write --checkpoint FILE",
     )
+    add_checkpoint_option(ident)
     ident.add_argument(
         "--plot", metavar="DIR", help="also write characteristic.png and history.png into DIR"
     )

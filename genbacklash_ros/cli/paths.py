@@ -82,13 +82,19 @@ def _opts(*items: tuple[str, str, str]) -> CommandPaths:
 
 
 _PARAMS = ("params_file", "--params-file", "input")
+_CHECKPOINT = ("checkpoint", "--checkpoint", "file")
 
 #: Each command's path options (commands not listed read and write no paths).
 COMMAND_PATHS: dict[str, CommandPaths] = {
     "replay": _opts(
-        ("bag", "BAG", "input"), _PARAMS, ("output", "-o", "bag"), ("report", "--report", "dir")
+        ("bag", "BAG", "input"),
+        _PARAMS,
+        ("output", "-o", "bag"),
+        ("report", "--report", "dir"),
+        _CHECKPOINT,
     ),
-    "identify": _opts(("data", "DATA", "input"), _PARAMS, ("plot", "--plot", "dir")),
+    "identify": _opts(("data", "DATA", "input"), _PARAMS, ("plot", "--plot", "dir"), _CHECKPOINT),
+    "export": _opts(("model", "MODEL", "input"), ("output", "-o", "file")),
     "diagnose": _opts(
         ("data", "DATA", "input"),
         _PARAMS,
@@ -141,6 +147,12 @@ def _values(args: argparse.Namespace, option: PathOption) -> Iterator[str]:
             return
     if option.attribute == "start" and not Path(str(value)).exists():
         return  # diagnose --start degree=3: a structure, not a file
+    if getattr(args, "command", None) == "export" and option.attribute == "output":
+        from genbacklash_ros.cli.export import export_paths
+
+        # -o OUT stands for OUT.csv and/or OUT.h: check the files that are written
+        yield from (str(path) for path in export_paths(str(value), args.format))
+        return
     yield str(value)
 
 

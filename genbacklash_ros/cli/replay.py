@@ -22,6 +22,7 @@ from genbacklash_ros.bags.bagio import BagError, read_aligned
 from genbacklash_ros.bags.csvio import Series, dropped_note, read_series_csv
 from genbacklash_ros.bags.replay import OUTPUT_TOPICS, ReplayResult, replay
 from genbacklash_ros.bags.simbags import COMMAND_TOPIC, ENCODER_TOPIC, MOTOR_TOPIC, SimulatedBag
+from genbacklash_ros.cli.start import add_checkpoint_option, write_start
 from genbacklash_ros.node.parameters import (
     PARAMETER_SPECS,
     NodeParameters,
@@ -57,9 +58,11 @@ BAG is a rosbag2 directory (metadata.yaml + .mcap) or a bare .mcap file. The mes
 (the log time is the receive time), with the node's parameters: the defaults, then
 --params-file, then --param NAME=VALUE and the options --model --degree --na --nb --method
 --joint --command-index (an option and a --param for the same parameter must agree). The
-message types come from the bag; a replay identifies from the recorded command and writes no
-checkpoint. --list-params prints every parameter with its range. OUT is a new rosbag2 MCAP
-directory with the two input topics plus what the node publishes:
+message types come from the bag; a replay identifies from the recorded command and neither
+reads nor writes the node's checkpoint_file: --checkpoint FILE writes the final estimate
+there, in the checkpoint format the node starts from (give the node checkpoint_file=FILE and
+the same model, degree, na, nb). --list-params prints every parameter with its range. OUT
+is a new rosbag2 MCAP directory with the two input topics plus what the node publishes:
 {OUTPUT_TOPICS["estimate"]}, {OUTPUT_TOPICS["compensated_command"]} (one per command) and
 {OUTPUT_TOPICS["diagnostics"]}; rosbags, mcap-ros2-support and Foxglove read it.
 
@@ -679,6 +682,10 @@ def cmd_replay(args: argparse.Namespace) -> int:
         print(json.dumps(result.to_dict()))
     else:
         print(_summary(result))
+    if args.checkpoint:
+        history = result.history
+        times = history.estimate_t or history.encoder_t
+        write_start(args.checkpoint, result.estimate, times[-1] if times else 0, "replay")
     if args.report:
         from genbacklash_ros.progress import Progress
         from genbacklash_ros.reports.replay import write_report
@@ -717,6 +724,7 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
         "genbacklash-output.json and nothing but the bag); anything else is never removed",
     )
     parser.add_argument("--report", metavar="DIR", help="write PNG plots and index.html into DIR")
+    add_checkpoint_option(parser)
     parser.add_argument(
         "--params-file",
         metavar="FILE",

@@ -222,12 +222,14 @@ def test_a_command_imports_only_its_own_module() -> None:
         "except SystemExit:\n"
         "    pass\n"
         "names = ('genbacklash_ros.cli.diagnose', 'genbacklash_ros.cli.fleet',\n"
-        "         'genbacklash_ros.cli.excite', 'genbacklash_core.diagnose')\n"
+        "         'genbacklash_ros.cli.excite', 'genbacklash_ros.cli.export',\n"
+        "         'genbacklash_core.diagnose')\n"
         "print(sorted(m for m in names if m in sys.modules), file=sys.stderr)\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert "usage: genbacklash replay" in out.stdout
     assert out.stderr.strip() == "[]"
     listed = build_parser().format_help()
-    for command in ("identify", "diagnose", "replay", "node", "excite", "fleet", "fleet-report"):
+    commands = ("identify", "diagnose", "replay", "node", "excite", "fleet", "fleet-report")
+    for command in (*commands, "export"):
         assert command in listed

@@ -220,6 +220,8 @@ def test_unwritable_outputs_stop_before_the_work(
         ["simulate", "--example", "1", "--bag", "{file}"],
         ["excite", "--range", "0", "1", "--v-max", "1", "--a-max", "5", "-o", "{file}/x.csv"],
         ["fleet-report", "{db}", "--gap-limit", "0.1", "-o", "{file}"],
+        ["export", "{csv}", "-o", "{file}/table", "--range", "-1", "1"],
+        ["identify", "{csv}", "--checkpoint", "{file}/start.json"],
     ],
 )
 def test_every_writing_command_checks_its_outputs_first(
