@@ -68,6 +68,10 @@ class DiagnosisStep:
         }
 
 
+UNEXPLAINED_TIMES_FLOOR = 3.0
+"""A final misfit above this many times the floor is reported as unexplained."""
+
+
 @dataclass(frozen=True)
 class Trial:
     """One augmentation tried in a round, and the verdict."""
@@ -172,7 +176,11 @@ class Diagnosis:
         ``misfit_before``, ``misfit_after``): one word for it, the ``gap_*`` keys kept.
         """
         floor = None if self.floor is None else self.floor.gap
+        unexplained = self.unexplained
         return {
+            "unexplained": None
+            if unexplained is None
+            else {"misfit": self.gap_final, "floor": floor, "times_floor": unexplained},
             "steps": [step.to_dict() for step in self.steps],
             "gap_initial": self.gap_initial,
             "gap_final": self.gap_final,
@@ -196,4 +204,28 @@ class Diagnosis:
         if not self.steps:
             lines.append("no missing effect named")
         lines.append(f"final misfit {self.gap_final:.4f}; {self.reason}")
+        if self.unexplained is not None:
+            lines.append(self.unexplained_text())
         return "\n".join(lines)
+
+    @property
+    def unexplained(self) -> float | None:
+        """How many times the floor the final misfit is, when no effect of the catalog
+        brought it within :data:`UNEXPLAINED_TIMES_FLOOR` of the floor (None: explained, or
+        no floor measured)."""
+        if self.floor is None or not self.floor.gap > 0.0:
+            return None
+        times = self.gap_final / self.floor.gap
+        return times if times > UNEXPLAINED_TIMES_FLOOR else None
+
+    def unexplained_text(self) -> str:
+        """The sentence for a misfit no named effect explains ("" when explained)."""
+        times = self.unexplained
+        if times is None or self.floor is None:
+            return ""
+        named = ", ".join(self.effects) or "none"
+        return (
+            f"unexplained: the final misfit {self.gap_final:.4f} is {times:.0f} times the floor "
+            f"{self.floor.gap:.4f}, and no effect of the catalog explains the rest (named: "
+            f"{named}); the drivetrain has an effect the model lacks"
+        )

@@ -208,6 +208,8 @@ def _text(result: Diagnosis, period: float | None = None) -> str:
         lines.append("no missing effect named")
     lines.append(f"final misfit {result.gap_final:.4f} ({result.reports[-1].describe()})")
     lines.append(f"stopped: {result.reason}")
+    if result.unexplained is not None:
+        lines.append(result.unexplained_text())
     lines.append(f"final model ({', '.join(result.model.effects) or 'ideal backlash'}):")
     lines += _model_lines(result, period)
     base = result.model.base

@@ -84,7 +84,7 @@ def plot_fit_steps(
         ax.plot(x, y[start:stop], color="0.6", lw=1.0, label="measured")
         ax.plot(x, report.y_sim[start:stop], color="C0", lw=1.2, label="simulated (free run)")
         ax.plot(x, y[start:stop] - report.y_sim[start:stop], color="C3", lw=0.8, label="error")
-        ax.set_title(f"{label}: validation gap {report.gap:.4f} (NRMSE)", fontsize=10)
+        ax.set_title(f"{label}: validation misfit {report.gap:.4f} (NRMSE)", fontsize=10)
         ax.grid(True, alpha=0.3)
         ax.set_ylabel(f"position [{unit}]")
     handles, names = axes[0, 0].get_legend_handles_labels()
@@ -109,8 +109,8 @@ def plot_gap_steps(result: Diagnosis) -> Figure:
         ax.axhline(floor.gap, color="C3", ls="--", lw=1.0, label=name)
         ax.legend(loc="upper right", fontsize="small", framealpha=0.9)
     ax.set_ylim(0.0, 1.15 * max(max(gaps), result.floor.gap if result.floor else 0.0))
-    ax.set_ylabel("validation gap (NRMSE, unitless)")
-    ax.set_title("Gap per step\n(dashed: the floor quantisation and noise allow)", fontsize=10)
+    ax.set_ylabel("validation misfit (NRMSE, unitless)")
+    ax.set_title("Misfit per step\n(dashed: the floor quantisation and noise allow)", fontsize=10)
     ax.grid(True, axis="y", alpha=0.3)
     return fig
 
@@ -134,20 +134,20 @@ def plot_gap_breakdown(result: Diagnosis) -> Figure:
         [g.error_share for g in first.groups],
         0.27,
         color="C3",
-        label=f"share of squared error, start (gap {first.gap:.3f})",
+        label=f"share of squared error, start (misfit {first.gap:.3f})",
     )
     ax.barh(
         y_pos + 0.27,
         [g.error_share for g in last.groups],
         0.27,
         color="C0",
-        label=f"share of squared error, final (gap {last.gap:.3f})",
+        label=f"share of squared error, final (misfit {last.gap:.3f})",
     )
     ax.set_yticks(y_pos, names, fontsize=8)
     ax.invert_yaxis()
     ax.set_xlim(0.0, 1.0)
     ax.set_xlabel("share of the validation segment (fraction, 0..1)")
-    ax.set_title("Where the validation gap concentrates")
+    ax.set_title("Where the validation misfit concentrates")
     fig.legend(loc="outside lower center", ncol=3, fontsize="small")
     ax.grid(True, axis="x", alpha=0.3)
     return fig
@@ -224,9 +224,9 @@ def plot_gap_map(result: Diagnosis, y: np.ndarray, unit: str = "rad") -> Figure:
             )
         ax.set_xticks(x, [name for name, _ in groups], rotation=35, ha="right", fontsize=7)
         ax.set_xlabel(xlabel)
-        ax.set_ylabel("contribution to the gap (NRMSE)")
+        ax.set_ylabel("contribution to the misfit (NRMSE)")
         ax.set_yscale("log")
-        ax.set_title(f"Where the gap sits: {aspect}", fontsize=10)
+        ax.set_title(f"Where the misfit sits: {aspect}", fontsize=10)
         ax.grid(True, axis="y", alpha=0.3)
     handles, names = axes[0].get_legend_handles_labels()
     fig.legend(handles, names, loc="outside lower center", ncol=len(names), fontsize="small")
@@ -315,15 +315,15 @@ def _map_tables(result: Diagnosis, y: np.ndarray, unit: str) -> list[Table]:
 
 
 _CAPTIONS = {
-    "gap_steps.png": "The validation gap (free-run NRMSE on held-out data) after each step, "
+    "gap_steps.png": "The validation misfit (free-run NRMSE on held-out data) after each step, "
     "with the floor that quantisation and noise allow.",
     "fit_steps.png": "Measured and simulated (free-run) position on the validation segment, "
     "and their difference, for the starting model and after each step.",
     "gap_breakdown.png": "Each group's share of the squared validation error against its "
     "share of the samples, for the starting and the final model: a group whose error share "
     "exceeds its sample share is where the model misses.",
-    "gap_map.png": "Contribution to the gap per range of travel and per slice of time "
-    "(log scale; the contributions add up in squares to the gap).",
+    "gap_map.png": "Contribution to the misfit per range of travel and per slice of time "
+    "(log scale; the contributions add up in squares to the misfit).",
     "correlations.png": "Residual autocorrelation, input cross-correlation and higher-order "
     "correlations of the starting and the final model, with 95% bounds of white noise.",
     "step_error.png": "The error's response to an input step (FIR taps) for the starting "
@@ -339,21 +339,23 @@ def report_sections(
     split = result.split
     subtitle = (
         f"Estimation samples 0..{split.n_estimation - 1}; validation (held out) "
-        f"{split.n_estimation}..{split.n_samples - 1}. Gap = free-run NRMSE on the validation "
+        f"{split.n_estimation}..{split.n_samples - 1}. Misfit = free-run NRMSE on the validation "
         "segment (unitless: the RMS error over the spread of the measured position)."
     )
     floor = result.floor
     floor_text = (
-        floor.describe() + f"; the final gap is {result.gap_final / floor.gap:.1f} times it"
+        floor.describe() + f"; the final misfit is {result.gap_final / floor.gap:.1f} times it"
         if floor is not None and floor.gap > 0
         else "not measured (no dwells to measure the noise on)"
     )
     summary = [
-        ("Gap (NRMSE)", f"{result.gap_initial:.4f} \u2192 {result.gap_final:.4f}"),
+        ("Misfit (NRMSE)", f"{result.gap_initial:.4f} \u2192 {result.gap_final:.4f}"),
         ("Effects added", ", ".join(result.effects) or "none named"),
         ("Floor", floor_text),
         ("Stopped", result.reason),
     ]
+    if result.unexplained is not None:
+        summary.append(("Unexplained", result.unexplained_text()))
     if result.steps:
         rows = [
             [
@@ -365,7 +367,7 @@ def report_sections(
             ]
             for i, step in enumerate(result.steps, 1)
         ]
-        head = ["#", "effect", "gap before", "gap after", "BIC change"]
+        head = ["#", "effect", "misfit before", "misfit after", "BIC change"]
         steps = Section(
             "Steps",
             tables=[Table(head, rows, numeric_from=2)],
@@ -374,14 +376,14 @@ def report_sections(
     else:
         steps = Section("Steps", paragraphs=["No missing effect named."])
     where = Section(
-        "Where the gap sits",
+        "Where the misfit sits",
         items=[
             f"start: {result.reports[0].describe()}",
             f"final: {result.reports[-1].describe()}",
         ],
         paragraphs=(
             [
-                "Contribution to the gap (they add up in squares to it) per range of the "
+                "Contribution to the misfit (they add up in squares to it) per range of the "
                 "measured position and per slice of the validation segment, for the start and "
                 "after each step."
             ]
@@ -405,7 +407,7 @@ def report_sections(
             items.append(f"{found.effect} ({mark}): {found.evidence}")
         for trial in rnd.trials:
             items.append(f"tried {trial.effect}: {trial.verdict}")
-        rounds.append(Section(f"Round {i} (gap {rnd.gap:.4f})", items=items))
+        rounds.append(Section(f"Round {i} (misfit {rnd.gap:.4f})", items=items))
     detectors = Section("Detectors per round", subsections=rounds)
     model = Section("Final model", code=json.dumps(result.model_dict(), indent=2))
     plots = Section(

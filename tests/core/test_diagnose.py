@@ -45,7 +45,10 @@ def _check_contract(result: Diagnosis) -> None:
     data = json.loads(json.dumps(result.to_dict()))
     old = {"steps", "gap_initial", "gap_final", "gap_floor", "model"}
     # issue 22: the misfit (validation NRMSE) under its own word; the gap_* keys stay
-    assert set(data) == old | {"misfit_initial", "misfit_final", "misfit_floor"}
+    assert set(data) == old | {"misfit_initial", "misfit_final", "misfit_floor", "unexplained"}
+    if data["unexplained"] is not None:  # issue 23: a misfit no named effect explains
+        assert data["unexplained"]["misfit"] == data["misfit_final"]
+        assert data["unexplained"]["times_floor"] > 3.0
     assert [data[f"misfit_{k}"] for k in ("initial", "final", "floor")] == [
         data[f"gap_{k}"] for k in ("initial", "final", "floor")
     ]
@@ -145,6 +148,30 @@ def test_the_catalog_is_open_and_the_names_are_the_contract() -> None:
     assert only_delay.effects == ("time_delay",)
     nothing = diagnose(u, y, catalog=())
     assert nothing.steps == () and "no detector" in nothing.reason
+
+
+def test_a_misfit_no_effect_explains_is_said_with_its_number() -> None:
+    """Issue 23: when the named effects leave the misfit far above the floor, the output says
+    so with the numbers instead of naming nothing."""
+    import dataclasses
+
+    from genbacklash_core.scenarios import HiddenEffects, OperationSettings, operation_record
+
+    # a drivetrain in operation (dwells: the floor is measured) with a dead time the model
+    # lacks, diagnosed with no detector for it
+    record = operation_record(OperationSettings(duration=20.0), 4, hidden=HiddenEffects(delay=0.01))
+    u, y, breaks = record.series()
+    nothing = diagnose(u, y, catalog=(), breaks=breaks)
+    assert nothing.floor is not None and nothing.unexplained is not None
+    times = nothing.gap_final / nothing.floor.gap
+    assert nothing.unexplained == pytest.approx(times) and times > 3.0
+    text = nothing.unexplained_text()
+    assert f"{times:.0f} times the floor" in text and "named: none" in text
+    assert text in nothing.summary()
+    assert nothing.to_dict()["unexplained"]["times_floor"] == pytest.approx(times)
+    explained = dataclasses.replace(nothing, gap_final=2.0 * nothing.floor.gap)
+    assert explained.unexplained is None and explained.unexplained_text() == ""
+    assert explained.to_dict()["unexplained"] is None
 
 
 def test_a_start_model_or_structure_is_used() -> None:
