@@ -4,7 +4,7 @@ An SQLite file by default (``sqlite:///fleet.db``; a plain path is taken as one)
 database SQLAlchemy supports by its URL (``postgresql+psycopg://user@host/fleet``, with that
 database's driver installed). :class:`ResultStore` creates the table when it is missing.
 
-Table ``bag_results`` (the README lists the columns with example queries):
+Table ``bag_results`` (docs/fleet.md lists the columns with example queries):
 
 * identity: ``id``; ``bag_hash`` (SHA-256 of the bag's content), ``joint``,
   ``settings_key`` (SHA-256 of the analysis settings) -- unique together, so a re-run with

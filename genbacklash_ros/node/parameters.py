@@ -3,7 +3,7 @@
 :data:`PARAMETER_SPECS` lists every parameter of the ``backlash_identifier`` node with its
 type, default, description, unit and allowed range or choices: the rclpy node turns it into
 ``ParameterDescriptor`` s, the DDS transport and replay read the same values from a standard
-ROS 2 parameters YAML (:func:`load_params_file`), and the README renders it as the reference
+ROS 2 parameters YAML (:func:`load_params_file`), and docs/node.md renders it as the reference
 (:func:`parameter_table`). :class:`NodeParameters` holds one validated set;
 :meth:`NodeParameters.replace` is what a set-parameters callback calls (the new set, or a
 :class:`~genbacklash_core.GenBacklashError` whose message is the reason to reject).
@@ -75,7 +75,7 @@ _COMPENSATOR = CompensatorOptions()
 
 @dataclass(frozen=True)
 class ParameterSpec:
-    """One node parameter: what the descriptor, the validation and the README say.
+    """One node parameter: what the descriptor, the validation and docs/node.md say.
 
     Attributes
     ----------
@@ -137,7 +137,7 @@ class ParameterSpec:
 
     @property
     def range_text(self) -> str:
-        """The allowed values as text (for the README and descriptors)."""
+        """The allowed values as text (for docs/node.md and descriptors)."""
         if self.choices:
             return ", ".join(self.choices)
         if self.type == "bool":
@@ -920,7 +920,7 @@ def command_line_parameters(
 
 
 def parameter_table() -> str:
-    """The parameter reference as a Markdown table (for the README).
+    """The parameter reference as a Markdown table (for docs/node.md).
 
     >>> print(parameter_table().splitlines()[0])
     | name | type | default | range | unit | description |

@@ -138,7 +138,7 @@ def test_command_line_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str])
 def test_readme_queries_run(fleet_db: Path) -> None:
     import sqlite3
 
-    readme = (Path(__file__).parents[3] / "README.md").read_text(encoding="utf-8")
+    readme = (Path(__file__).parents[3] / "docs" / "fleet.md").read_text(encoding="utf-8")
     block = readme.split("```sql", 1)[1].split("```", 1)[0]
     queries = [q for q in block.split(";") if q.strip()]
     assert len(queries) == 4
