@@ -27,7 +27,7 @@ def test_json_contract(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> No
     result = json.loads(capsys.readouterr().out)
     old = {"steps", "gap_initial", "gap_final", "gap_floor", "model"}
     # issue 22: one word for the validation NRMSE, "misfit"; the old keys stay (GUIDE §4)
-    assert set(result) == old | {"misfit_initial", "misfit_final", "misfit_floor"}
+    assert set(result) == old | {"misfit_initial", "misfit_final", "misfit_floor", "unexplained"}
     for name in ("initial", "final", "floor"):
         assert result[f"misfit_{name}"] == result[f"gap_{name}"]
     assert [step["effect"] for step in result["steps"]] == ["time_delay"]

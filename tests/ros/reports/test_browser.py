@@ -119,6 +119,7 @@ def test_replay_report_in_a_browser(tmp_path: Path) -> None:
     write_operation_bag(bag, OperationSettings(duration=6.0, wear=0.3), seed=1)
     report = tmp_path / "replay"
     args = ["replay", str(bag), "--command", COMMAND_TOPIC, "--encoder", ENCODER_TOPIC]
+    args += ["--joint", "drive_joint"]  # the bag's JointState carries two joints
     assert main([*args, "-o", str(tmp_path / "o"), "--report", str(report), "--no-progress"]) == 0
     shown = open_in_browser(report / "index.html", tmp_path)
     _assert_readable(shown, images=9)  # 9 figures: compensation_state.png too
