@@ -428,6 +428,22 @@ _PHASES_FORM = "expected KIND:SECONDS[,KIND:SECONDS...] with KIND one of " + ", 
 )
 
 
+def _record_phases(
+    args: argparse.Namespace, kind: str, *, default: float, longest: float = math.inf
+) -> tuple[tuple[str, float], ...]:
+    """The motion of a simulated record: ``--phases``, or ``--duration`` seconds of ``kind``
+    (``default`` when not given, at most ``longest``)."""
+    if args.phases:
+        if args.duration is not None:
+            raise GenBacklashError("--phases sets the length of the record: drop --duration")
+        return parse_phases(args.phases)
+    duration = default if args.duration is None else args.duration
+    if not (math.isfinite(duration) and 0 < duration <= longest):
+        limit = "be > 0" if math.isinf(longest) else f"lie in (0, {longest:g}]"
+        raise GenBacklashError(f"--duration must {limit} seconds, got {duration:g}")
+    return ((kind, float(duration)),)
+
+
 def parse_phases(text: str) -> tuple[tuple[str, float], ...]:
     """``"operation:30,one_way:120"`` -> ``(("operation", 30.0), ("one_way", 120.0))``.
 
@@ -469,15 +485,7 @@ def _write_operation_bag(args: argparse.Namespace) -> SimulatedBag:
             "--snr and --samples apply to --example and --scenario drivetrain; the operation "
             "scenarios take --duration and --noise"
         )
-    if args.phases:
-        if args.duration is not None:
-            raise GenBacklashError("--phases sets the length of the record: drop --duration")
-        phases = parse_phases(args.phases)
-    else:
-        duration = 60.0 if args.duration is None else args.duration
-        if not (math.isfinite(duration) and duration > 0):
-            raise GenBacklashError(f"--duration must be > 0 seconds, got {duration:g}")
-        phases = ((args.scenario, float(duration)),)
+    phases = _record_phases(args, args.scenario, default=60.0)
     wear = 0.2 if args.wear is None else args.wear
     loss = 0.02 if args.loss is None else args.loss
     noise = 0.0 if args.noise is None else args.noise
@@ -517,15 +525,7 @@ def _write_physics_bag(args: argparse.Namespace) -> SimulatedBag:
             f"--physics does not take {', '.join(clashing)} (it takes --duration or --phases, "
             "--loss, --noise, --bandwidth, --motor-encoder, --seed)"
         )
-    if args.phases:
-        if args.duration is not None:
-            raise GenBacklashError("--phases sets the length of the record: drop --duration")
-        phases = parse_phases(args.phases)
-    else:
-        duration = 40.0 if args.duration is None else args.duration
-        if not (math.isfinite(duration) and 0 < duration <= 3600):
-            raise GenBacklashError(f"--duration must lie in (0, 3600] seconds, got {duration:g}")
-        phases = (("operation", float(duration)),)
+    phases = _record_phases(args, "operation", default=40.0, longest=3600.0)
     loss = 0.02 if args.loss is None else args.loss
     noise = 0.0 if args.noise is None else args.noise
     if not 0.0 <= loss <= 0.95:

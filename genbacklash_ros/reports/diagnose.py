@@ -423,7 +423,11 @@ def summary_markdown(
     result: Diagnosis, figures: list[str], y: np.ndarray | None = None, unit: str = "rad"
 ) -> str:
     """The readable summary as Markdown: the same sections as the page ``index.html``."""
-    subtitle, summary, sections = report_sections(result, figures, y, unit)
+    return _markdown(*report_sections(result, figures, y, unit))
+
+
+def _markdown(subtitle: str, summary: list[tuple[str, str]], sections: list[Section]) -> str:
+    """summary.md from the page's parts."""
     return render(
         "summary.md",
         title=_TITLE,
@@ -474,14 +478,7 @@ def write_report(
         plt.close(fig)
         written.append(path)
     subtitle, summary, sections = report_sections(result, list(makers), yy, unit)
-    markdown = render(
-        "summary.md",
-        title=_TITLE,
-        subtitle=subtitle,
-        summary=summary,
-        alerts=[],
-        sections=sections,
-    )
+    markdown = _markdown(subtitle, summary, sections)
     (directory / "summary.md").write_text(markdown, encoding="utf-8")
     index = write_page(
         directory / "index.html",
