@@ -442,13 +442,15 @@ def _error(text: str) -> int:
 def main(args: list[str] | None = None) -> int:
     """Entry point (``ros2 run genbacklash_ros backlash_identifier``), in the ros2/examples
     style: Ctrl-C, SIGTERM and an external shutdown end the node quietly, after the final
-    checkpoint; invalid parameters end it with one line on stderr and exit status 2.
+    checkpoint; invalid parameters (a bad value, an unknown ``-p`` name) end it with one line
+    on stderr and exit status 2.
     """
     argv = list(sys.argv if args is None else args)
     ros = parse_ros_arguments(argv)
-    try:  # the params files as the DDS transport reads them, before rcl does
+    try:  # the params files as the DDS transport reads them, before rcl does; then `-p` names
         for path in ros.params_files:
             load_params_file(path, ros.node_name, namespace=ros.namespace)
+        ros.check_parameter_names()
     except GenBacklashError as err:
         return _error(str(err))
     interrupts = _Interrupts()
