@@ -139,7 +139,7 @@ def _run_dds(args: argparse.Namespace, params: NodeParameters, stop: StopSignals
     )
 
     def on_stop() -> None:
-        _LOG.info("SIGINT/SIGTERM: shutting down")
+        _LOG.info("%s: shutting down", stop.first.name if stop.first else "stop requested")
         node.stop()
 
     stop.on_stop(on_stop)  # (at once when a signal came while the node started)

@@ -41,13 +41,14 @@ class StopSignals:
     --------
     >>> import os
     >>> stop = StopSignals().install()
-    >>> os.kill(os.getpid(), signal.SIGTERM); stop.requested, stop.count
-    (True, 1)
+    >>> os.kill(os.getpid(), signal.SIGTERM); stop.requested, stop.count, stop.first.name
+    (True, 1, 'SIGTERM')
     >>> stop.release(exiting=False)
     """
 
     def __init__(self, on_stop: Callable[[], None] | None = None) -> None:
         self.count = 0
+        self.first: signal.Signals | None = None  # the signal that asked for the stop
         self._event = threading.Event()
         self._on_stop = on_stop
         self._previous: dict[int, Any] = {}
@@ -82,6 +83,8 @@ class StopSignals:
 
     def _handle(self, signum: int, frame: FrameType | None) -> None:
         self.count += 1
+        if self.first is None and not self.requested:
+            self.first = signal.Signals(signum)
         self.request()
 
     @staticmethod
