@@ -32,6 +32,8 @@ BENCHMARKS = (
     "soak",
     "faults",
     "restart",
+    "shutdown",
+    "shutdown_dds",
     "fleet",
     "fleet_kill",
 )
@@ -39,6 +41,7 @@ BENCHMARKS = (
 # a sourced ROS 2 installation: not on PyPI; without it they write a section that says so)
 RUNS = {
     "ros_latency_load": ("ros_latency", ["--load", "--rate", "500", "--warmup", "4"]),
+    "shutdown_dds": ("shutdown", ["--transport", "dds"]),
     "ros_latency_operation": ("ros_latency", ["--scenario", "operation", "--seeds", "0", "1", "2"]),
     "ros_latency_operation_load": (
         "ros_latency",

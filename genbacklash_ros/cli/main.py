@@ -457,6 +457,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     words = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(words[0] if words else None)
     args = parser.parse_args(words)
+    args.entry_point = argv is None  # the console script's own call (see `node`)
     try:
         check_paths(args)  # before any work: no output may destroy an input
         code: int = args.func(args)

@@ -14,14 +14,13 @@ import importlib
 import importlib.util
 import logging
 import os
-import signal
 import sys
 from collections.abc import Sequence
-from types import FrameType
 from typing import Any
 
 from genbacklash_core import GenBacklashError
 from genbacklash_ros.node.parameters import NODE_NAME, NodeParameters, load_params_file
+from genbacklash_ros.transports.stop_signals import StopSignals
 
 __all__ = ["add_parser", "choose_transport", "main", "ros2_main", "run_node"]
 
@@ -123,11 +122,13 @@ def _domain_id(value: str) -> int:
     return number
 
 
-def _run_dds(args: argparse.Namespace, params: NodeParameters) -> int:
+def _run_dds(args: argparse.Namespace, params: NodeParameters, stop: StopSignals) -> int:
     try:
         from genbacklash_ros.transports.dds_node import DdsNode, Topics
     except ImportError as err:
         raise GenBacklashError(f"{_DDS_MISSING} ({err})") from err
+    if stop.requested:
+        return 0
     topics = Topics().remapped(_remaps(args.remap))
     node = DdsNode(
         params,
@@ -137,20 +138,16 @@ def _run_dds(args: argparse.Namespace, params: NodeParameters) -> int:
         receive_time=args.receive_time,
     )
 
-    def on_signal(signum: int, frame: FrameType | None) -> None:
-        _LOG.info("%s: shutting down", signal.Signals(signum).name)
+    def on_stop() -> None:
+        _LOG.info("%s: shutting down", stop.first.name if stop.first else "stop requested")
         node.stop()
 
-    previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        node.spin(args.duration)
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+    stop.on_stop(on_stop)  # (at once when a signal came while the node started)
+    node.spin(args.duration)
     return 0
 
 
-def _run_rclpy(args: argparse.Namespace) -> int:
+def _run_rclpy(args: argparse.Namespace, stop: StopSignals | None = None) -> int:
     if args.domain_id is not None:
         os.environ["ROS_DOMAIN_ID"] = str(args.domain_id)  # read by rclpy.init
     ros_args = ["--ros-args"]
@@ -165,24 +162,39 @@ def _run_rclpy(args: argparse.Namespace) -> int:
         ros_args += ["-r", f"{source}:={target}"]
     # rclpy is imported by this module only, and only now
     rclpy_node = importlib.import_module("genbacklash_ros.transports.rclpy_node")
-    return int(rclpy_node.main([sys.argv[0], *ros_args]))
+    return int(rclpy_node.main([sys.argv[0], *ros_args], stop=stop))
 
 
 def run_node(args: argparse.Namespace) -> int:
-    """Run the node as ``args`` (from :func:`add_parser`'s parser) say; the exit status."""
-    level = getattr(logging, str(args.log_level).upper())
-    logging.basicConfig(level=level, format="[%(levelname)s] [backlash_identifier]: %(message)s")
-    transport = choose_transport(args.transport)
-    # validate the params file before any middleware starts: a bad value is a clear error
-    # (with the namespace: the sections that apply are the ones rcl applies to the rclpy node)
-    params = (
-        load_params_file(args.params_file, NODE_NAME, namespace=args.namespace)
-        if args.params_file
-        else None
-    )
-    if transport == "rclpy":
-        return _run_rclpy(args)
-    return _run_dds(args, params or NodeParameters())
+    """Run the node as ``args`` (from :func:`add_parser`'s parser) say; the exit status.
+
+    SIGINT and SIGTERM only ask the node to stop from here on (before any middleware is
+    imported; :class:`~genbacklash_ros.transports.stop_signals.StopSignals`): the node
+    finishes and the status is 0 however many come. With ``args.entry_point`` (the process's
+    own entry point: the ``genbacklash`` script) they stay ignored after the node returns, so
+    that the interpreter's shutdown is not interrupted either; else the previous handlers
+    are restored.
+    """
+    stop = StopSignals().install()
+    try:
+        level = getattr(logging, str(args.log_level).upper())
+        logging.basicConfig(
+            level=level, format="[%(levelname)s] [backlash_identifier]: %(message)s"
+        )
+        transport = choose_transport(args.transport)
+        # validate the params file before any middleware starts: a bad value is a clear error
+        # (with the namespace: the sections that apply are the ones rcl applies to the rclpy
+        # node)
+        params = (
+            load_params_file(args.params_file, NODE_NAME, namespace=args.namespace)
+            if args.params_file
+            else None
+        )
+        if transport == "rclpy":
+            return _run_rclpy(args, stop)
+        return _run_dds(args, params or NodeParameters(), stop)
+    finally:
+        stop.release(exiting=bool(getattr(args, "entry_point", False)))
 
 
 def _configure(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
@@ -265,6 +277,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
     )
     args = parser.parse_args(argv)
+    args.entry_point = argv is None  # the process's own: signals stay ignored at its end
     try:
         return run_node(args)
     except GenBacklashError as err:
@@ -286,7 +299,7 @@ def ros2_main() -> int:
         )
         return 2
     rclpy_node = importlib.import_module("genbacklash_ros.transports.rclpy_node")
-    return int(rclpy_node.main())
+    return int(rclpy_node.main(exiting=True))
 
 
 if __name__ == "__main__":

@@ -428,14 +428,22 @@ class NodeParameters:
     def from_mapping(cls, values: Mapping[str, object]) -> NodeParameters:
         """Parameters from a name -> value mapping; unset ones keep their defaults.
 
-        Unknown names are an error that lists them (a typo must not pass silently).
+        Unknown names are an error that lists them with their close matches (a typo must
+        not pass silently; all the names are in ``genbacklash replay --list-params``).
+
+        >>> NodeParameters.from_mapping({"degre": 2})  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        genbacklash_core.errors.GenBacklashError: unknown parameter(s) 'degre' (close matches: ...)
         """
         unknown = sorted(str(k) for k in values if k not in _SPECS)
         if unknown:
-            raise GenBacklashError(
-                f"unknown parameter(s) {', '.join(repr(k) for k in unknown)}; known: "
-                f"{', '.join(_SPECS)}"
-            )
+            names = ", ".join(repr(k) for k in unknown)
+            if len(unknown) == 1:
+                hints = f" ({_close_matches(unknown[0])})"
+            else:
+                hints = ": " + "; ".join(f"{k!r}: {_close_matches(k)}" for k in unknown)
+            raise GenBacklashError(f"unknown parameter(s) {names}{hints}")
         return cls(**values)  # type: ignore[arg-type]
 
     def replace(self, **changes: object) -> NodeParameters:
@@ -596,6 +604,10 @@ class RosArguments:
     Attributes
     ----------
     params_files : tuple of str
+    parameters : tuple of (str, str, str)
+        The ``-p``/``--param`` rules in order as ``(node, name, value)``: ``node`` is the
+        node-name prefix of ``-p node:name:=value`` (``""`` without one: every node), ``value``
+        the YAML text.
     namespace : str
         From ``-r __ns:=/arm`` (``""``: the root namespace).
     node_name : str
@@ -605,6 +617,36 @@ class RosArguments:
     params_files: tuple[str, ...] = ()
     namespace: str = ""
     node_name: str = NODE_NAME
+    parameters: tuple[tuple[str, str, str], ...] = ()
+
+    def node_parameters(self) -> dict[str, str]:
+        """Name -> value text of the ``-p`` rules that apply to this node (rules without a
+        node prefix, and those whose prefix matches the node as a params-file section key
+        would), later rules winning."""
+        chosen: dict[str, str] = {}
+        for node, name, value in self.parameters:
+            if node:
+                try:
+                    applies, _ = _matches(node, self.node_name, self.namespace, Path("-p"))
+                except GenBacklashError:  # not a node name rcl accepts: rcl says so itself
+                    continue
+                if not applies:
+                    continue
+            chosen[name] = value
+        return chosen
+
+    def check_parameter_names(self) -> None:
+        """Refuse a ``-p`` name the node does not have, naming the close matches (a typo must
+        not pass silently: rcl takes any name, and the node would ignore it).
+
+        >>> parse_ros_arguments(["n", "--ros-args", "-p", "degre:=2"]).check_parameter_names()
+        Traceback (most recent call last):
+        ...
+        genbacklash_core.errors.GenBacklashError: -p: unknown parameter 'degre' (close matches: ...)
+        """
+        for name in self.node_parameters():
+            if name not in _SPECS and not _is_standard(name):
+                raise GenBacklashError(_unknown_name(name, "-p"))
 
 
 _ROS_OPTIONS_WITH_VALUE = frozenset(
@@ -623,6 +665,7 @@ def parse_ros_arguments(argv: Sequence[str]) -> RosArguments:
     (('a.yaml', 'b.yaml'), '/arm', 'backlash_identifier')
     """
     files: list[str] = []
+    rules: list[tuple[str, str, str]] = []
     namespace = ""
     node_name = NODE_NAME
     inside = False
@@ -641,6 +684,11 @@ def parse_ros_arguments(argv: Sequence[str]) -> RosArguments:
         value = next(items, "")
         if item == "--params-file":
             files.append(value)
+        elif item in ("-p", "--param"):
+            target, sep, text = value.partition(":=")
+            if sep:  # (rcl refuses a rule without ':=' itself)
+                node, _, name = target.rpartition(":")
+                rules.append((node, name, text))
         elif item in ("-r", "--remap"):
             source, _, target = value.partition(":=")
             source = source.rsplit(":", 1)[-1]  # node-specific remaps: `name:__ns:=...`
@@ -648,7 +696,7 @@ def parse_ros_arguments(argv: Sequence[str]) -> RosArguments:
                 namespace = target
             elif source in ("__node", "__name"):
                 node_name = target
-    return RosArguments(tuple(files), namespace, node_name)
+    return RosArguments(tuple(files), namespace, node_name, tuple(rules))
 
 
 # --------------------------------------------------------------------------- params YAML
@@ -804,10 +852,14 @@ def _is_standard(name: str) -> bool:
     return name in _STANDARD or name.startswith(_STANDARD_PREFIXES)
 
 
-def _unknown_name(name: str) -> str:
+def _close_matches(name: str) -> str:
     close = difflib.get_close_matches(name, list(_SPECS), n=3, cutoff=0.6)
-    hint = f"close matches: {', '.join(close)}" if close else "no close match"
-    return f"--param: unknown parameter {name!r} ({hint}); --list-params prints all names"
+    return f"close matches: {', '.join(close)}" if close else "no close match"
+
+
+def _unknown_name(name: str, option: str = "--param") -> str:
+    text = f"{option}: unknown parameter {name!r} ({_close_matches(name)})"
+    return text + ("; --list-params prints all names" if option == "--param" else "")
 
 
 def _yaml_value(item: str, text: str) -> object:

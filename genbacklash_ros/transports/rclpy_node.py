@@ -26,11 +26,14 @@ what it returns. All logic is in the pipeline.
 * wiring: once a second the node asks discovery which types are published on its
   ``command`` and ``encoder`` topics; a publisher of another type is named in
   ``/diagnostics`` (WARN, key ``wiring``) with the parameter that selects the type;
-* shutdown: the first SIGINT (or SIGTERM) ends the spin; any further ones (a terminal's
-  Ctrl-C reaches ``ros2 launch`` and the node, and launch forwards another) are ignored
-  while the node feeds what is pending, refits and writes its final checkpoint;
+* shutdown: SIGINT and SIGTERM only set a flag (:mod:`~genbacklash_ros.transports.stop_signals`;
+  rclpy's own handlers are not installed, so nothing is raised inside rclpy); the spin loop
+  leaves at its next wake-up, and any further signals (a terminal's Ctrl-C reaches ``ros2
+  launch`` and the node, and launch forwards another) are ignored while the node feeds what
+  is pending, refits, writes its final checkpoint and shuts rclpy down, and, when run as a
+  program, until the process has exited;
 * checkpoints are written on a background thread (atomic file writes);
-* everything runs on the executor's one thread (``rclpy.spin``).
+* everything runs on one thread (a ``SingleThreadedExecutor`` spun once at a time).
 
 rclpy is imported here only, and this module only when the rclpy transport is chosen.
 Run it with ``ros2 run genbacklash_ros backlash_identifier --ros-args --params-file
@@ -41,10 +44,8 @@ config/params.yaml``, ``ros2 launch genbacklash_ros backlash_identifier.launch.p
 from __future__ import annotations
 
 import math
-import signal
 import sys
 from collections.abc import Sequence
-from types import FrameType
 from typing import Any
 
 import rclpy
@@ -59,10 +60,11 @@ from rcl_interfaces.msg import (
     ParameterDescriptor,
     SetParametersResult,
 )
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
+from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState as RosJointState
 from std_msgs.msg import Float64 as RosFloat64
 from std_msgs.msg import Float64MultiArray as RosFloat64MultiArray
@@ -99,6 +101,7 @@ from genbacklash_ros.node.wiring import (
     selected_type,
     type_mismatches,
 )
+from genbacklash_ros.transports.stop_signals import StopSignals
 
 __all__ = ["BacklashIdentifierNode", "descriptor", "from_ros", "main", "to_ros"]
 
@@ -111,6 +114,7 @@ _ROS_COMMAND = {
 }
 _ROS_ENCODER = {"joint_state": RosJointState, "float64": RosFloat64}
 _SPECS = {spec.name: spec for spec in PARAMETER_SPECS}
+WAKE_S = 0.1  # longest executor wait: a stop request is seen within this
 PENDING_KEY = "parameters_pending"  # diagnostics key: pairs held at their last consistent values
 
 
@@ -417,74 +421,76 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
         self._checkpoints.close()
 
 
-class _Interrupts:
-    """SIGINT/SIGTERM handler: the first one ends the spin (KeyboardInterrupt), later ones
-    are counted and ignored, so that the node finishes (final refit, checkpoint) however many
-    arrive. Installed before ``rclpy.init``: rclpy's own handler wakes the executor and then
-    calls this one."""
-
-    def __init__(self) -> None:
-        self.count = 0
-        self.quiet = False  # True once the spin has ended: finishing is not interrupted
-
-    def __call__(self, signum: int, frame: FrameType | None) -> None:
-        self.count += 1
-        if not self.quiet:
-            self.quiet = True
-            raise KeyboardInterrupt
-
-
 def _error(text: str) -> int:
     print(f"{NODE_NAME}: error: {text}", file=sys.stderr, flush=True)
     return 2
 
 
-def main(args: list[str] | None = None) -> int:
+def main(
+    args: list[str] | None = None, *, stop: StopSignals | None = None, exiting: bool = False
+) -> int:
     """Entry point (``ros2 run genbacklash_ros backlash_identifier``), in the ros2/examples
-    style: Ctrl-C, SIGTERM and an external shutdown end the node quietly, after the final
-    checkpoint; invalid parameters end it with one line on stderr and exit status 2.
+    style: Ctrl-C, SIGTERM and an external shutdown end the node quietly (exit 0, after the
+    final checkpoint), however many come and whenever; invalid parameters (a bad value, an
+    unknown ``-p`` name) end it with one line on stderr and exit status 2.
+
+    Signals: rclpy's own handlers are not installed; ``stop`` (else one of this call's own,
+    released when it returns: ignored from then on when ``exiting``, else restored) only
+    sets a flag, which the spin loop reads at its next wake-up (a message, or at most
+    :data:`WAKE_S`). Then, in order: the node finishes (pending samples, final refit and
+    estimate, checkpoint), the executor and the node are destroyed, rclpy shuts down.
     """
-    argv = list(sys.argv if args is None else args)
+    owned = stop is None
+    signals = StopSignals().install() if stop is None else stop
+    try:
+        return _run(list(sys.argv if args is None else args), signals)
+    finally:
+        if owned:
+            signals.release(exiting=exiting)
+
+
+def _run(argv: list[str], stop: StopSignals) -> int:
     ros = parse_ros_arguments(argv)
-    try:  # the params files as the DDS transport reads them, before rcl does
+    try:  # the params files as the DDS transport reads them, before rcl does; then `-p` names
         for path in ros.params_files:
             load_params_file(path, ros.node_name, namespace=ros.namespace)
+        ros.check_parameter_names()
     except GenBacklashError as err:
         return _error(str(err))
-    interrupts = _Interrupts()
-    previous = {sig: signal.signal(sig, interrupts) for sig in (signal.SIGINT, signal.SIGTERM)}
+    if stop.requested:
+        return 0
+    try:
+        rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+    except Exception as err:  # e.g. a params file rcl cannot parse
+        return _error(f"ROS 2 could not start the node: {err}")
     node: BacklashIdentifierNode | None = None
+    executor: SingleThreadedExecutor | None = None
     status = 0
     try:
-        try:
-            rclpy.init(args=argv)
-        except KeyboardInterrupt:
-            return 0
-        except Exception as err:  # e.g. a params file rcl cannot parse
-            return _error(f"ROS 2 could not start the node: {err}")
-        try:
-            node = BacklashIdentifierNode()
-            rclpy.spin(node)
-        except (KeyboardInterrupt, ExternalShutdownException):
-            pass
-        except GenBacklashError as err:  # invalid parameters at start
-            status = _error(str(err))
-        finally:
-            interrupts.quiet = True
-            if node is not None:
-                before = interrupts.count
-                node.finish()
-                if interrupts.count > before:
-                    node.get_logger().info(
-                        f"{interrupts.count - before} more interrupt(s) ignored while finishing"
-                    )
-                node.destroy_node()
-            rclpy.try_shutdown()
+        node = BacklashIdentifierNode()
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        while not stop.requested:
+            executor.spin_once(timeout_sec=WAKE_S)
+    except ExternalShutdownException:
+        pass
+    except GenBacklashError as err:  # invalid parameters at start
+        status = _error(str(err))
     finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+        if node is not None:
+            before = stop.count
+            node.finish()
+            if stop.count > before:
+                node.get_logger().info(
+                    f"{stop.count - before} more interrupt(s) ignored while finishing"
+                )
+        if executor is not None:
+            executor.shutdown()
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
     return status
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(main(exiting=True))

@@ -189,6 +189,49 @@ def test_unknown_name_in_the_nodes_own_section_is_an_error(tmp_path: Path) -> No
     path = write(tmp_path, "backlash_identifier:\n  ros__parameters:\n    degre: 2\n")
     with pytest.raises(GenBacklashError, match=r"params\.yaml: unknown parameter\(s\) 'degre'"):
         load_params_file(path)
+    with pytest.raises(GenBacklashError) as info:
+        load_params_file(path)
+    # the close matches, not every name of the node (issue 24)
+    assert (
+        str(info.value)
+        == f"params file {path}: unknown parameter(s) 'degre' (close matches: degree)"
+    )
+
+
+def test_unknown_names_each_get_their_close_matches() -> None:
+    with pytest.raises(GenBacklashError) as info:
+        NodeParameters.from_mapping({"degre": 3, "windw": 10, "zzzz": 1})
+    assert str(info.value) == (
+        "unknown parameter(s) 'degre', 'windw', 'zzzz': 'degre': close matches: degree; "
+        "'windw': close matches: window; 'zzzz': no close match"
+    )
+
+
+@pytest.mark.parametrize(
+    ("namespace", "rule"),
+    [("", "degre:=2"), ("/arm", "degre:=2"), ("", "backlash_identifier:degre:=2")],
+)
+def test_an_unknown_ros_args_parameter_is_refused_with_the_close_matches(
+    namespace: str, rule: str
+) -> None:
+    """rcl takes any `-p` name; the node would ignore a typo (issue 24)."""
+    ros = parse_ros_arguments(["n", "--ros-args", "-r", f"__ns:={namespace}", "--param", rule])
+    with pytest.raises(GenBacklashError) as info:
+        ros.check_parameter_names()
+    assert str(info.value) == "-p: unknown parameter 'degre' (close matches: degree)"
+
+
+def test_ros_args_parameters_of_other_nodes_and_standard_ones_pass() -> None:
+    argv = ["n", "--ros-args", "-p", "other_node:degre:=2", "-p", "use_sim_time:=true"]
+    argv += ["-p", "qos_overrides./command.subscription.depth:=5", "-p", "degree:=2"]
+    argv += ["-r", "__ns:=/arm", "-p", "backlash_identifier:degre:=2", "--", "-p", "degre:=1"]
+    ros = parse_ros_arguments(argv)  # (rcl applies `-p NODE:...` as a params file's `NODE:`)
+    ros.check_parameter_names()
+    assert ros.node_parameters() == {
+        "use_sim_time": "true",
+        "qos_overrides./command.subscription.depth": "5",
+        "degree": "2",
+    }
 
 
 def test_invalid_value_in_a_file_names_the_file(tmp_path: Path) -> None:
@@ -324,7 +367,9 @@ def test_ros_arguments_name_the_files_and_the_namespace() -> None:
     assert ros.params_files == ("/tmp/a.yaml", "/tmp/b.yaml")
     assert (ros.namespace, ros.node_name) == ("/arm", "identifier")
     assert parse_ros_arguments(["x", "--params-file", "not_ros.yaml"]).params_files == ()
-    assert parse_ros_arguments(["x", "--ros-args", "-p", "degree:=2"]) == parse_ros_arguments([])
+    only_p = parse_ros_arguments(["x", "--ros-args", "-p", "degree:=2"])
+    assert dataclasses.replace(only_p, parameters=()) == parse_ros_arguments([])
+    assert only_p.parameters == (("", "degree", "2"),)
 
 
 @pytest.mark.parametrize(

@@ -241,6 +241,44 @@ def test_a_bad_command_line_parameter_is_one_line(capfd: pytest.CaptureFixture[s
 
 @needs_rclpy
 @pytest.mark.parametrize(
+    ("args", "line"),
+    [
+        (["-p", "degre:=2"], "-p: unknown parameter 'degre' (close matches: degree)"),
+        (
+            ["-p", "backlash_identifier:windw:=50"],
+            "-p: unknown parameter 'windw' (close matches: window)",
+        ),
+        (
+            ["--params-file", "{misspelt}"],
+            "params file {misspelt}: unknown parameter(s) 'publish_rat' "
+            "(close matches: publish_rate)",
+        ),
+    ],
+)
+def test_an_unknown_parameter_name_is_refused_with_the_close_matches(
+    tmp_path: Path, args: list[str], line: str
+) -> None:
+    """``backlash_identifier --ros-args -p degre:=2`` ran with the default degree, saying
+    nothing; a misspelt name in a params file listed every name of the node (issue 24)."""
+    misspelt = tmp_path / "p.yaml"
+    misspelt.write_text("/**/backlash_identifier:\n  ros__parameters:\n    publish_rat: 5.0\n")
+    args = [a.format(misspelt=misspelt) for a in args]
+    script = Path(sys.executable).with_name("backlash_identifier")
+    assert script.is_file(), "the backlash_identifier script is installed with the package"
+    command = [str(script)]
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id())}
+    try:
+        done = subprocess.run(
+            [*command, "--ros-args", *args], capture_output=True, text=True, env=env, timeout=20
+        )
+    except subprocess.TimeoutExpired:
+        pytest.fail(f"{args}: the node started and ran")
+    assert done.returncode == 2
+    assert done.stderr.strip() == f"backlash_identifier: error: {line.format(misspelt=misspelt)}"
+
+
+@needs_rclpy
+@pytest.mark.parametrize(
     ("low", "high", "goal"),
     [
         ("gate_low", "gate_high", (0.7, 0.9)),
