@@ -33,6 +33,7 @@ from genbacklash_ros.bags.csvio import Series, write_series_csv
 from genbacklash_ros.cli import replay as replay_cli
 from genbacklash_ros.cli.paths import check_paths
 from genbacklash_ros.cli.start import add_checkpoint_option
+from genbacklash_ros.progress import Progress
 
 __all__ = ["main"]
 
@@ -55,25 +56,6 @@ _COMMAND_MODULES: dict[str, tuple[str, str]] = {
 }
 
 
-class _Progress:
-    """A tqdm bar over the iterations on stderr (silent when stderr is not a terminal)."""
-
-    def __init__(self, total: int, enabled: bool) -> None:
-        self._bar = None
-        if enabled:
-            from tqdm import tqdm
-
-            self._bar = tqdm(total=total, desc="iterations", unit="it", leave=False, disable=None)
-
-    def __call__(self, iteration: int, parameters: np.ndarray) -> None:
-        if self._bar is not None:
-            self._bar.update(1)
-
-    def close(self) -> None:
-        if self._bar is not None:
-            self._bar.close()
-
-
 def _identify(
     series: Series,
     *,
@@ -88,7 +70,13 @@ def _identify(
     show_progress: bool = True,
 ) -> IdentificationResult:
     """Run the identifier chosen by ``model`` with a progress bar over the iterations."""
-    progress = _Progress(max_iterations, show_progress)
+    progress = Progress(
+        "genbacklash identify", total=max_iterations, unit="it", enabled=show_progress
+    )
+
+    def step(iteration: int, parameters: np.ndarray) -> None:
+        progress.update(1)
+
     try:
         if model == "cascade":
             return identify_cascade(
@@ -101,7 +89,7 @@ def _identify(
                 refine=refine,
                 max_iterations=max_iterations,
                 nonfinite=nonfinite,
-                callback=progress,
+                callback=step,
                 breaks=series.breaks,
             )
         return identify_backlash(
@@ -112,7 +100,7 @@ def _identify(
             refine=refine,
             max_iterations=max_iterations,
             nonfinite=nonfinite,
-            callback=progress,
+            callback=step,
             breaks=series.breaks,
         )
     finally:

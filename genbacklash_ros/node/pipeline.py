@@ -138,7 +138,7 @@ from genbacklash_core.guard import CompensationGuard, GuardVerdict
 from genbacklash_ros.node.align import Aligner
 from genbacklash_ros.node.batch import BlockView
 from genbacklash_ros.node.checkpoint import Checkpoint, CheckpointError, save_checkpoint, warm_start
-from genbacklash_ros.node.compensate import CompensateStage, CompensationStatus
+from genbacklash_ros.node.compensate import CompensateStage
 
 # the fault thresholds live with the rules in health.py; importable from here as before
 from genbacklash_ros.node.health import _SCALE_SMOOTHING as _SCALE_SMOOTHING
@@ -392,8 +392,6 @@ class BacklashPipeline:
             feed_ns=batch_ns,
         )
         self._worker: IdentifierWorker | None = None
-        #: the compensation's status at the last diagnostics report (what it said and why)
-        self.compensation = CompensationStatus(0.0, "off", "no report yet")
         self._start(params)
 
     # ------------------------------------------------------------------ configuration
@@ -1043,7 +1041,6 @@ class BacklashPipeline:
             parts.extend(period.problems)
         guard = self._guard.verdict
         status = self._comp.status(est, health.active if passing else (), guard)
-        self.compensation = status
         if est.available and self._params.compensate and guard.state in ("faded", "off"):
             parts.append(guard.reason)
             if guard.state == "off":
