@@ -48,8 +48,6 @@ from typing import Any, Literal, NamedTuple
 import numpy as np
 
 from genbacklash_core import GenBacklashError
-from genbacklash_core.samples import lift_bridged, missing_readings, monotone_paths
-from genbacklash_core.settling import carry_marks, settling_keep
 from genbacklash_ros.bags.output_marker import mark_output
 from genbacklash_ros.bags.raw_values import RawValueReader
 from genbacklash_ros.bags.rosbags_types import from_rosbags, jazzy_typestore, to_rosbags
@@ -62,7 +60,7 @@ from genbacklash_ros.node.messages import (
     JointState,
     Message,
 )
-from genbacklash_ros.node.sample_rule import keep_breaks, link_breaks, record_period
+from genbacklash_ros.node.sample_rule import select_rows
 
 __all__ = [
     "COMMAND_MSGTYPES",
@@ -1042,7 +1040,9 @@ def align(
     bridge: bool = False,
     settle_ns: int = 0,
 ) -> AlignedSeries:
-    """Zero-order-hold alignment of a command stream to encoder times (batch form).
+    """Zero-order-hold alignment of a command stream to encoder times (batch form); the rows
+    and their breaks are :func:`~genbacklash_ros.node.sample_rule.select_rows`'s (shared with
+    a CSV of the same readings).
 
     The pipeline's rule (:mod:`genbacklash_ros.node.pipeline`, ``sample_period = 0``): the input
     of the sample at encoder time ``t`` is the latest command with time ``<= t``; samples
@@ -1067,48 +1067,8 @@ def align(
     ct = np.asarray(cmd_t, dtype=np.int64)
     et = np.asarray(enc_t, dtype=np.int64)
     k = np.searchsorted(ct, et, side="right") - 1
-    if settle_ns and bridge:  # the node's settling rule (a backlash alone): as lost readings
-        held = k >= 0
-        settled, _ = settling_keep(
-            et[held], np.asarray(cmd_u, dtype=np.float64)[k[held]], settle_ns
-        )
-        if not settled.all():
-            taken = np.ones(et.size, dtype=bool)
-            taken[np.flatnonzero(held)[~settled]] = False
-            if marks is not None:
-                marks = carry_marks(marks, taken)
-            et, enc_y, k = et[taken], np.asarray(enc_y)[taken], k[taken]
-    keep = k >= 0
-    period = record_period(et)
-    linked = link_breaks(et, period)
-    if bridge and period is not None and et.size > 1:
-        linked = _bridged(linked, et, period, k, np.asarray(cmd_u, dtype=np.float64), keep)
-    if marks is not None:
-        linked |= np.asarray(marks, dtype=bool)
-    breaks, _ = keep_breaks(linked, keep)
-    return AlignedSeries(
-        et[keep],
-        np.asarray(cmd_u, dtype=np.float64)[k[keep]],
-        np.asarray(enc_y, dtype=np.float64)[keep],
-        int(np.count_nonzero(~keep)),
-        breaks,
-    )
-
-
-def _bridged(
-    breaks: np.ndarray,
-    et: np.ndarray,
-    period: float,
-    k: np.ndarray,
-    cmd_u: np.ndarray,
-    keep: np.ndarray,
-) -> np.ndarray:
-    """``breaks`` with those lifted that lost readings made along monotone commands (``k``:
-    the command in force at each reading; :func:`~genbacklash_core.samples.lift_bridged`)."""
-    monotone = np.zeros(et.size, dtype=bool)
-    both = keep[1:] & keep[:-1]  # a reading before the first command holds none
-    monotone[1:][both] = monotone_paths(cmd_u, k[:-1][both], k[1:][both])
-    return lift_bridged(breaks, missing_readings(et, period), monotone)
+    rows = select_rows(et, k, cmd_u, enc_y, marks=marks, bridge=bridge, settle_ns=settle_ns)
+    return AlignedSeries(rows.t, rows.u, rows.y, rows.skipped, rows.breaks)
 
 
 def _increasing(times: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
