@@ -34,6 +34,7 @@ Examples
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import itertools
 import struct
@@ -1021,6 +1022,8 @@ class AlignedSeries:
     ``skipped`` counts encoder samples before the first command; ``breaks`` (bool) the
     sample rule: True where a sample does not follow the one before it on the encoder's
     clock (:mod:`genbacklash_ros.node.sample_rule`; pass it to the identifiers' ``breaks``).
+    ``damage``: why the bag's reading stopped early ("" when it was read to its end; see
+    :func:`read_aligned`'s ``keep_readable``).
     """
 
     t: np.ndarray
@@ -1028,6 +1031,7 @@ class AlignedSeries:
     y: np.ndarray
     skipped: int
     breaks: np.ndarray
+    damage: str = ""
 
 
 def align(
@@ -1094,9 +1098,14 @@ def read_aligned(
     command_index: int = 0,
     bridge: bool = False,
     settle_ns: int = 0,
+    keep_readable: bool = False,
 ) -> AlignedSeries:
     """Read a command and an encoder topic from a bag and align them (see :func:`align`;
     ``bridge`` for a backlash alone; ``settle_ns`` the servo's settling rule, as the node).
+
+    A bag that turns out truncated or corrupt part-way raises :class:`BagError`; with
+    ``keep_readable`` the messages before the damage are aligned instead, as a replay keeps
+    them, and :attr:`AlignedSeries.damage` says where the reading stopped.
 
     Times are header stamps when the message has a non-zero one, else the log time (the
     pipeline's default ``stamp_source = "header"``). Messages the adapters reject (joint
@@ -1128,11 +1137,17 @@ def read_aligned(
                 parts[topic].append((np.where(head != 0, head, log), value, ok))
 
         block: list[RawMessage] = []
-        for item in reader.raw_messages([command_topic, encoder_topic]):
-            block.append(item)
-            if len(block) >= 8192:
-                take(block)
-                block = []
+        damage = ""
+        try:
+            for item in reader.raw_messages([command_topic, encoder_topic]):
+                block.append(item)
+                if len(block) >= 8192:
+                    take(block)
+                    block = []
+        except BagError as err:  # damaged part-way: the messages before it were yielded
+            if not keep_readable:
+                raise
+            damage = str(err)
         take(block)
 
     c_t, c_u, c_ok = (np.concatenate(a) for a in zip(*parts[command_topic], strict=True))
@@ -1140,10 +1155,11 @@ def read_aligned(
     # a reading taken out (rejected) breaks the chain at the next one kept (log order)
     e_m = np.diff(np.cumsum(~e_ok)[e_ok], prepend=0) > 0
     c_t, c_u, e_t, e_y = c_t[c_ok], c_u[c_ok], e_t[e_ok], e_y[e_ok]
+    before = f" before the damage ({damage})" if damage else ""
     if not c_t.size:
-        raise BagError(f"no readable command on {command_topic!r} in {path}")
+        raise BagError(f"no readable command on {command_topic!r} in {path}{before}")
     if not e_t.size:
-        raise BagError(f"no readable encoder reading on {encoder_topic!r} in {path}")
+        raise BagError(f"no readable encoder reading on {encoder_topic!r} in {path}{before}")
     order_c = np.argsort(c_t, kind="stable")
     order_e = np.argsort(e_t, kind="stable")
     c_t, c_u = _increasing(c_t[order_c], c_u[order_c])
@@ -1155,5 +1171,5 @@ def read_aligned(
         e_t, e_y = e_t[unique], e_y[unique]
     series = align(c_t, c_u, e_t, e_y, marks=e_m, bridge=bridge, settle_ns=settle_ns)
     if series.t.size == 0:
-        raise BagError(f"no encoder reading on {encoder_topic!r} follows the first command")
-    return series
+        raise BagError(f"no encoder reading on {encoder_topic!r} follows the first command{before}")
+    return dataclasses.replace(series, damage=damage) if damage else series

@@ -104,6 +104,17 @@ def _draw(ax: Axes, d: DrivetrainSummary, gap_limit: float, view: tuple[int, int
     gap = np.array(d.gap)
     bars = 2 * np.nan_to_num(np.array(d.gap_std))
     ax.errorbar(_dates(t), gap, yerr=bars, fmt="o", ms=4, color="C0", label="gap per bag (2 sigma)")
+    cut = np.array(d.point_truncated, dtype=bool)
+    if cut.size == t.size and cut.any():  # a cut recording: its readable part, flagged
+        ax.plot(
+            _dates(t[cut]),
+            gap[cut],
+            "o",
+            ms=9,
+            mfc="none",
+            mec="C3",
+            label="truncated bag (readable part only)",
+        )
     values.append(gap)
     spreads += [gap - bars, gap + bars]
     # the trend over the whole view: from the bags through to the crossing
@@ -284,6 +295,7 @@ def write_fleet_report(summary: FleetSummary, out: str | Path) -> Path:
     fig.savefig(folder / "fleet.png", dpi=100)
     plt.close(fig)
     rows = []
+    cut_rows: list[list[str]] = []
     figures = [PageFigure("fleet.png", "Days to service per drivetrain, with the intervals.")]
     for d in summary.drivetrains:
         name = _file_name(d)
@@ -299,6 +311,16 @@ def write_fleet_report(summary: FleetSummary, out: str | Path) -> Path:
             else DASH
         )
         last_gap = d.gap[-1] if d.gap else None
+        cut_rows.extend(
+            [
+                f"{d.robot}/{d.joint}",
+                _date(bag.recorded_ns),
+                bag.bag_path,
+                bag.status,
+                bag.flag,
+            ]
+            for bag in d.truncated
+        )
         rows.append(
             [
                 str(d.rank),
@@ -311,6 +333,7 @@ def write_fleet_report(summary: FleetSummary, out: str | Path) -> Path:
                 _num(last_gap, 4),
                 str(d.bags_used),
                 other,
+                str(len(d.truncated)) if d.truncated else DASH,
                 d.note or DASH,
             ]
         )
@@ -323,7 +346,8 @@ def write_fleet_report(summary: FleetSummary, out: str | Path) -> Path:
         )
     level = f"{summary.level:.0%}"
     head = ["rank", "robot", "joint", "days to service", "crossing", f"interval ({level})"]
-    head += ["wear rate [rad/day]", "last gap [rad]", "bags used", "other bags", "note"]
+    head += ["wear rate [rad/day]", "last gap [rad]", "bags used", "other bags"]
+    head += ["truncated bags", "note"]
     first = next((d for d in summary.drivetrains if d.days_to_service is not None), None)
     summary_block = [
         ("Gap limit", f"{summary.gap_limit:.4g} rad (c_L + c_R, as --gap-limit takes it)"),
@@ -331,6 +355,13 @@ def write_fleet_report(summary: FleetSummary, out: str | Path) -> Path:
         ("Drivetrains", str(len(summary.drivetrains))),
         ("First to service", _first(first)),
     ]
+    if cut_rows:
+        summary_block.append(
+            (
+                "Truncated bags",
+                f"{len(cut_rows)}: cut part-way, their readable part analysed (listed below)",
+            )
+        )
     sections = [
         Section(
             "Ranking: time to service",
@@ -339,8 +370,28 @@ def write_fleet_report(summary: FleetSummary, out: str | Path) -> Path:
                 f"at {level} (Fieller, from the fitted line's band). Gap in rad; wear rate in "
                 "rad per day \u00b1 one standard deviation."
             ],
-            tables=[Table(head, rows, align="rllrrrrrrll")],
+            tables=[Table(head, rows, align="rllrrrrrrlrl")],
         ),
+    ]
+    if cut_rows:
+        sections.append(
+            Section(
+                "Truncated bags",
+                paragraphs=[
+                    "Recordings cut part-way (a recorder killed mid-write, a damaged file). "
+                    "Their readable part was analysed, as genbacklash replay keeps it; the "
+                    "play of an 'ok' one is in the trend, drawn with a red ring."
+                ],
+                tables=[
+                    Table(
+                        ["drivetrain", "date", "bag", "status", "what was read"],
+                        cut_rows,
+                        align="lllll",
+                    )
+                ],
+            )
+        )
+    sections += [
         Section("Plots", figures=figures),
         Section("Machine-readable", paragraphs=["summary.json beside this page."]),
     ]

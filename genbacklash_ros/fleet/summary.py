@@ -21,9 +21,14 @@ JSON (:meth:`FleetSummary.to_json`, ``format`` 1)::
        "wear_rate_per_day": b, "wear_rate_std": s, "gap_at_first": a, "scatter_scale": k,
        "crossing": ISO|null, "crossing_low": ISO|null, "crossing_high": ISO|null,
        "days_to_service": d|null, "note": "...",
-       "points": {"t_ns": [...], "gap": [...], "gap_std": [...]}}, ...]}
+       "truncated_bags": [{"bag_path": ..., "recorded_at": ISO, "status": ..., "read_s": x,
+         "recorded_s": x|null, "flag": "truncated: read X of Y s"}, ...],
+       "points": {"t_ns": [...], "gap": [...], "gap_std": [...], "truncated": [...]}}, ...]}
 
-Times are ISO 8601 UTC; gaps in radians; the wear rate in radians per day.
+Times are ISO 8601 UTC; gaps (the play c_L + c_R) in radians; the wear rate in radians per
+day. ``truncated_bags`` lists the drivetrain's bags that were cut part-way and analysed on
+their readable part (:mod:`genbacklash_ros.fleet.job`), whatever their status; a point of a
+truncated bag is flagged in ``points.truncated``.
 """
 
 from __future__ import annotations
@@ -41,7 +46,7 @@ from genbacklash_core import GenBacklashError
 from genbacklash_ros.fleet.database import iso_utc
 from genbacklash_ros.fleet.trends import Trend, fit_trend
 
-__all__ = ["DAY_NS", "DrivetrainSummary", "FleetSummary", "summarise"]
+__all__ = ["DAY_NS", "DrivetrainSummary", "FleetSummary", "TruncatedBag", "summarise"]
 
 DAY_NS = 86_400 * 1_000_000_000
 SUMMARY_FORMAT = 1
@@ -70,6 +75,8 @@ class DrivetrainSummary:
     crossing_high_ns: int | None = None
     days_to_service: float | None = None
     note: str = ""
+    truncated: tuple[TruncatedBag, ...] = ()
+    point_truncated: tuple[bool, ...] = ()
 
     def trend_line(self, t_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The fitted gap and its standard deviation at times ``t_ns`` (NaN without a trend)."""
@@ -85,6 +92,37 @@ class DrivetrainSummary:
 
 def _iso(ns: int | None) -> str | None:
     return iso_utc(ns)
+
+
+@dataclass(frozen=True)
+class TruncatedBag:
+    """A bag cut part-way whose readable part was analysed: where, when, its row's status,
+    the seconds read and the recording's length (None: unknown)."""
+
+    bag_path: str
+    recorded_ns: int | None
+    status: str
+    read_s: float | None
+    recorded_s: float | None
+
+    @property
+    def flag(self) -> str:
+        """``truncated: read X of Y s`` (:func:`~genbacklash_ros.fleet.job.truncation_note`)."""
+        from genbacklash_ros.fleet.job import truncation_note
+
+        return truncation_note(self.read_s, self.recorded_s)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON item of ``truncated_bags``."""
+        return {
+            "bag_path": self.bag_path,
+            "recorded_at": _iso(self.recorded_ns),
+            "recorded_ns": self.recorded_ns,
+            "status": self.status,
+            "read_s": self.read_s,
+            "recorded_s": self.recorded_s,
+            "flag": self.flag,
+        }
 
 
 @dataclass(frozen=True)
@@ -125,7 +163,13 @@ class FleetSummary:
                 "crossing_high_ns": d.crossing_high_ns,
                 "days_to_service": d.days_to_service,
                 "note": d.note,
-                "points": {"t_ns": list(d.t_ns), "gap": list(d.gap), "gap_std": list(d.gap_std)},
+                "truncated_bags": [bag.to_dict() for bag in d.truncated],
+                "points": {
+                    "t_ns": list(d.t_ns),
+                    "gap": list(d.gap),
+                    "gap_std": list(d.gap_std),
+                    "truncated": list(d.point_truncated),
+                },
             }
             items.append(item)
         return {
@@ -174,6 +218,17 @@ class FleetSummary:
                         crossing_high_ns=d["crossing_high_ns"],
                         days_to_service=d["days_to_service"],
                         note=d["note"],
+                        truncated=tuple(
+                            TruncatedBag(
+                                b["bag_path"],
+                                b["recorded_ns"],
+                                b["status"],
+                                b["read_s"],
+                                b["recorded_s"],
+                            )
+                            for b in d.get("truncated_bags", [])
+                        ),
+                        point_truncated=tuple(d["points"].get("truncated", [])),
                     )
                 )
             return cls(data["gap_limit"], data["level"], data["as_of_ns"], tuple(items))
@@ -214,6 +269,10 @@ def _one(
     t_ns = tuple(int(r.recorded_ns) for r in usable)
     gap = tuple(float(r.gap) for r in usable)
     std = tuple(float(r.gap_std) if r.gap_std is not None else math.nan for r in usable)
+    cut = sorted(
+        (r for r in rows if getattr(r, "truncated", None)),  # NULL in an older table: unknown
+        key=lambda r: (r.recorded_ns is None, r.recorded_ns or 0, r.bag_path),
+    )
     base: dict[str, Any] = {
         "rank": 0,
         "robot": robot,
@@ -223,6 +282,17 @@ def _one(
         "t_ns": t_ns,
         "gap": gap,
         "gap_std": std,
+        "truncated": tuple(
+            TruncatedBag(
+                r.bag_path,
+                r.recorded_ns,
+                r.status,
+                r.duration_s,
+                getattr(r, "recorded_s", None),
+            )
+            for r in cut
+        ),
+        "point_truncated": tuple(bool(getattr(r, "truncated", None)) for r in usable),
     }
     if not usable:
         return DrivetrainSummary(**base, note="no bag with an estimate")
