@@ -1,5 +1,5 @@
-"""The fleet summary: per drivetrain, the gap over time, its trend, and the ranking by time
-to service (the JSON ``genbacklash fleet-report`` writes for other tools).
+"""The fleet summary: per drivetrain, the play c_L + c_R over time, its trend, and the
+ranking by time to service (the JSON ``genbacklash fleet-report`` writes for other tools).
 
 :func:`summarise` takes the results rows
 (:meth:`~genbacklash_ros.fleet.database.ResultStore.results`), groups them by drivetrain
@@ -14,20 +14,22 @@ once per drivetrain: its newest row.
 
 JSON (:meth:`FleetSummary.to_json`, ``format`` 1)::
 
-    {"format": 1, "gap_limit": L, "level": 0.95, "as_of": ISO, "as_of_ns": int,
+    {"format": 1, "play_limit": L, "level": 0.95, "as_of": ISO, "as_of_ns": int,
      "drivetrains": [{"rank": 1, "robot": ..., "joint": ..., "bags_used": n,
        "statuses": {"ok": n, "no_motion": n, ...},
-       "first": ISO, "last": ISO, "last_gap": x, "last_gap_std": x,
-       "wear_rate_per_day": b, "wear_rate_std": s, "gap_at_first": a, "scatter_scale": k,
+       "first": ISO, "last": ISO, "last_play": x, "last_play_std": x,
+       "wear_rate_per_day": b, "wear_rate_std": s, "play_at_first": a, "scatter_scale": k,
        "crossing": ISO|null, "crossing_low": ISO|null, "crossing_high": ISO|null,
        "days_to_service": d|null, "note": "...",
        "truncated_bags": [{"bag_path": ..., "recorded_at": ISO, "status": ..., "read_s": x,
          "recorded_s": x|null, "flag": "truncated: read X of Y s"}, ...],
-       "points": {"t_ns": [...], "gap": [...], "gap_std": [...], "truncated": [...]}}, ...]}
+       "points": {"t_ns": [...], "play": [...], "play_std": [...], "truncated": [...]}}, ...]}
 
-Times are ISO 8601 UTC; gaps (the play c_L + c_R) in radians; the wear rate in radians per
-day. ``truncated_bags`` lists the drivetrain's bags that were cut part-way and analysed on
-their readable part (:mod:`genbacklash_ros.fleet.job`), whatever their status; a point of a
+Times are ISO 8601 UTC; the play in radians; the wear rate in radians per day. The same
+numbers stay under their older keys (the play was called the gap): ``gap_limit``,
+``last_gap``, ``last_gap_std``, ``gap_at_first``, ``points.gap``, ``points.gap_std``.
+``truncated_bags`` lists the drivetrain's bags that were cut part-way and analysed on their
+readable part (:mod:`genbacklash_ros.fleet.job`), whatever their status; a point of a
 truncated bag is flagged in ``points.truncated``.
 """
 
@@ -148,9 +150,12 @@ class FleetSummary:
                 "last": _iso(d.t_ns[-1]) if d.t_ns else None,
                 "last_gap": d.gap[-1] if d.gap else None,
                 "last_gap_std": d.gap_std[-1] if d.gap_std else None,
+                "last_play": d.gap[-1] if d.gap else None,
+                "last_play_std": d.gap_std[-1] if d.gap_std else None,
                 "wear_rate_per_day": d.wear_rate_per_day,
                 "wear_rate_std": d.wear_rate_std,
                 "gap_at_first": d.gap_at_first,
+                "play_at_first": d.gap_at_first,
                 "intercept_slope_cov": list(d.intercept_slope_cov)
                 if d.intercept_slope_cov
                 else None,
@@ -168,6 +173,8 @@ class FleetSummary:
                     "t_ns": list(d.t_ns),
                     "gap": list(d.gap),
                     "gap_std": list(d.gap_std),
+                    "play": list(d.gap),
+                    "play_std": list(d.gap_std),
                     "truncated": list(d.point_truncated),
                 },
             }
@@ -175,6 +182,7 @@ class FleetSummary:
         return {
             "format": SUMMARY_FORMAT,
             "gap_limit": self.gap_limit,
+            "play_limit": self.gap_limit,
             "level": self.level,
             "as_of": _iso(self.as_of_ns),
             "as_of_ns": self.as_of_ns,
@@ -307,7 +315,7 @@ def _one(
     crossing_ns = _ns(trend.crossing, origin)
     note = ""
     if trend.crossing is None:
-        note = "the gap does not grow: no crossing predicted"
+        note = "the play does not grow: no crossing predicted"
     elif lo is None:
         note = "the wear rate is not significant: the crossing date cannot be bounded"
     days = None
@@ -350,7 +358,9 @@ def summarise(
         The date days to service count from (default: the newest bag's time).
     """
     if not (math.isfinite(gap_limit) and gap_limit > 0):
-        raise GenBacklashError(f"--gap-limit must be a positive number of radians, got {gap_limit}")
+        raise GenBacklashError(
+            f"--play-limit must be a positive number of radians, got {gap_limit}"
+        )
     kept = _newest_per_bag(rows)
     if as_of_ns is None:
         times = [r.recorded_ns for r in kept if r.recorded_ns is not None]

@@ -111,6 +111,8 @@ def _assert_readable(shown: dict[str, object], images: int) -> None:
         assert raw not in text, raw
     assert not _ENTITY.search(text), _ENTITY.findall(text)  # escaped twice: &ndash; as text
     assert "Summary" in text  # the shared layout's summary block
+    # one word for each thing: play (c_L + c_R) and misfit (NRMSE); gap_drift is a name
+    assert not re.search(r"\bgap\b", text, re.IGNORECASE), re.findall(r".{30}\bgap\b.{30}", text)
 
 
 def test_replay_report_in_a_browser(tmp_path: Path) -> None:
