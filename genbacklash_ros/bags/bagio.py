@@ -34,6 +34,7 @@ Examples
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import itertools
 import struct
@@ -48,8 +49,6 @@ from typing import Any, Literal, NamedTuple
 import numpy as np
 
 from genbacklash_core import GenBacklashError
-from genbacklash_core.samples import lift_bridged, missing_readings, monotone_paths
-from genbacklash_core.settling import carry_marks, settling_keep
 from genbacklash_ros.bags.output_marker import mark_output
 from genbacklash_ros.bags.raw_values import RawValueReader
 from genbacklash_ros.bags.rosbags_types import from_rosbags, jazzy_typestore, to_rosbags
@@ -62,7 +61,7 @@ from genbacklash_ros.node.messages import (
     JointState,
     Message,
 )
-from genbacklash_ros.node.sample_rule import keep_breaks, link_breaks, record_period
+from genbacklash_ros.node.sample_rule import select_rows
 
 __all__ = [
     "COMMAND_MSGTYPES",
@@ -1023,6 +1022,8 @@ class AlignedSeries:
     ``skipped`` counts encoder samples before the first command; ``breaks`` (bool) the
     sample rule: True where a sample does not follow the one before it on the encoder's
     clock (:mod:`genbacklash_ros.node.sample_rule`; pass it to the identifiers' ``breaks``).
+    ``damage``: why the bag's reading stopped early ("" when it was read to its end; see
+    :func:`read_aligned`'s ``keep_readable``).
     """
 
     t: np.ndarray
@@ -1030,6 +1031,7 @@ class AlignedSeries:
     y: np.ndarray
     skipped: int
     breaks: np.ndarray
+    damage: str = ""
 
 
 def align(
@@ -1042,7 +1044,9 @@ def align(
     bridge: bool = False,
     settle_ns: int = 0,
 ) -> AlignedSeries:
-    """Zero-order-hold alignment of a command stream to encoder times (batch form).
+    """Zero-order-hold alignment of a command stream to encoder times (batch form); the rows
+    and their breaks are :func:`~genbacklash_ros.node.sample_rule.select_rows`'s (shared with
+    a CSV of the same readings).
 
     The pipeline's rule (:mod:`genbacklash_ros.node.pipeline`, ``sample_period = 0``): the input
     of the sample at encoder time ``t`` is the latest command with time ``<= t``; samples
@@ -1067,48 +1071,8 @@ def align(
     ct = np.asarray(cmd_t, dtype=np.int64)
     et = np.asarray(enc_t, dtype=np.int64)
     k = np.searchsorted(ct, et, side="right") - 1
-    if settle_ns and bridge:  # the node's settling rule (a backlash alone): as lost readings
-        held = k >= 0
-        settled, _ = settling_keep(
-            et[held], np.asarray(cmd_u, dtype=np.float64)[k[held]], settle_ns
-        )
-        if not settled.all():
-            taken = np.ones(et.size, dtype=bool)
-            taken[np.flatnonzero(held)[~settled]] = False
-            if marks is not None:
-                marks = carry_marks(marks, taken)
-            et, enc_y, k = et[taken], np.asarray(enc_y)[taken], k[taken]
-    keep = k >= 0
-    period = record_period(et)
-    linked = link_breaks(et, period)
-    if bridge and period is not None and et.size > 1:
-        linked = _bridged(linked, et, period, k, np.asarray(cmd_u, dtype=np.float64), keep)
-    if marks is not None:
-        linked |= np.asarray(marks, dtype=bool)
-    breaks, _ = keep_breaks(linked, keep)
-    return AlignedSeries(
-        et[keep],
-        np.asarray(cmd_u, dtype=np.float64)[k[keep]],
-        np.asarray(enc_y, dtype=np.float64)[keep],
-        int(np.count_nonzero(~keep)),
-        breaks,
-    )
-
-
-def _bridged(
-    breaks: np.ndarray,
-    et: np.ndarray,
-    period: float,
-    k: np.ndarray,
-    cmd_u: np.ndarray,
-    keep: np.ndarray,
-) -> np.ndarray:
-    """``breaks`` with those lifted that lost readings made along monotone commands (``k``:
-    the command in force at each reading; :func:`~genbacklash_core.samples.lift_bridged`)."""
-    monotone = np.zeros(et.size, dtype=bool)
-    both = keep[1:] & keep[:-1]  # a reading before the first command holds none
-    monotone[1:][both] = monotone_paths(cmd_u, k[:-1][both], k[1:][both])
-    return lift_bridged(breaks, missing_readings(et, period), monotone)
+    rows = select_rows(et, k, cmd_u, enc_y, marks=marks, bridge=bridge, settle_ns=settle_ns)
+    return AlignedSeries(rows.t, rows.u, rows.y, rows.skipped, rows.breaks)
 
 
 def _increasing(times: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -1134,9 +1098,14 @@ def read_aligned(
     command_index: int = 0,
     bridge: bool = False,
     settle_ns: int = 0,
+    keep_readable: bool = False,
 ) -> AlignedSeries:
     """Read a command and an encoder topic from a bag and align them (see :func:`align`;
     ``bridge`` for a backlash alone; ``settle_ns`` the servo's settling rule, as the node).
+
+    A bag that turns out truncated or corrupt part-way raises :class:`BagError`; with
+    ``keep_readable`` the messages before the damage are aligned instead, as a replay keeps
+    them, and :attr:`AlignedSeries.damage` says where the reading stopped.
 
     Times are header stamps when the message has a non-zero one, else the log time (the
     pipeline's default ``stamp_source = "header"``). Messages the adapters reject (joint
@@ -1168,11 +1137,17 @@ def read_aligned(
                 parts[topic].append((np.where(head != 0, head, log), value, ok))
 
         block: list[RawMessage] = []
-        for item in reader.raw_messages([command_topic, encoder_topic]):
-            block.append(item)
-            if len(block) >= 8192:
-                take(block)
-                block = []
+        damage = ""
+        try:
+            for item in reader.raw_messages([command_topic, encoder_topic]):
+                block.append(item)
+                if len(block) >= 8192:
+                    take(block)
+                    block = []
+        except BagError as err:  # damaged part-way: the messages before it were yielded
+            if not keep_readable:
+                raise
+            damage = str(err)
         take(block)
 
     c_t, c_u, c_ok = (np.concatenate(a) for a in zip(*parts[command_topic], strict=True))
@@ -1180,10 +1155,11 @@ def read_aligned(
     # a reading taken out (rejected) breaks the chain at the next one kept (log order)
     e_m = np.diff(np.cumsum(~e_ok)[e_ok], prepend=0) > 0
     c_t, c_u, e_t, e_y = c_t[c_ok], c_u[c_ok], e_t[e_ok], e_y[e_ok]
+    before = f" before the damage ({damage})" if damage else ""
     if not c_t.size:
-        raise BagError(f"no readable command on {command_topic!r} in {path}")
+        raise BagError(f"no readable command on {command_topic!r} in {path}{before}")
     if not e_t.size:
-        raise BagError(f"no readable encoder reading on {encoder_topic!r} in {path}")
+        raise BagError(f"no readable encoder reading on {encoder_topic!r} in {path}{before}")
     order_c = np.argsort(c_t, kind="stable")
     order_e = np.argsort(e_t, kind="stable")
     c_t, c_u = _increasing(c_t[order_c], c_u[order_c])
@@ -1195,5 +1171,5 @@ def read_aligned(
         e_t, e_y = e_t[unique], e_y[unique]
     series = align(c_t, c_u, e_t, e_y, marks=e_m, bridge=bridge, settle_ns=settle_ns)
     if series.t.size == 0:
-        raise BagError(f"no encoder reading on {encoder_topic!r} follows the first command")
-    return series
+        raise BagError(f"no encoder reading on {encoder_topic!r} follows the first command{before}")
+    return dataclasses.replace(series, damage=damage) if damage else series

@@ -4,8 +4,16 @@ A ``t`` column gives the record its sample rule (:mod:`genbacklash_core.samples`
 that is not one nominal period (the median difference of ``t``, rounded) after the row
 before it -- a lost sample, a gap -- breaks the chain of consecutive samples, so that
 ``identify`` and ``diagnose`` never form a regression row across it. ``t`` may be in seconds
-or in integer nanoseconds (or any one unit): only differences in units of the median one
-count. Without ``t`` every row follows the one before it.
+or in integer nanoseconds: a median step of 1000 or more is read as nanoseconds (integer
+cells exactly, also beyond 2**53), else as seconds. Without ``t`` every row follows the one
+before it.
+
+With increasing stamps the rows go through the same rules as a bag's readings
+(:func:`~genbacklash_ros.node.sample_rule.select_rows`: the servo's settling rule and lost
+readings bridged along monotone commands, as ``settle_ns`` and ``bridge`` say), each row
+being one encoder reading and the command it holds: a CSV of a bag's readings
+(``genbacklash readings``, :func:`write_readings_csv`) gives identify and diagnose the bag's
+rows, so the same answer.
 """
 
 from __future__ import annotations
@@ -22,9 +30,17 @@ import numpy as np
 import numpy.typing as npt
 
 from genbacklash_core import GenBacklashError
-from genbacklash_ros.node.sample_rule import time_breaks
+from genbacklash_ros.node.sample_rule import select_rows, time_breaks
 
-__all__ = ["BadRows", "Series", "dropped_note", "read_series_csv", "write_series_csv"]
+__all__ = [
+    "BadRows",
+    "Series",
+    "dropped_note",
+    "read_series_csv",
+    "stamps_ns",
+    "write_readings_csv",
+    "write_series_csv",
+]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -32,6 +48,9 @@ FloatArray = npt.NDArray[np.float64]
 @dataclass(frozen=True, eq=False)
 class Series:
     """An input/output record: command ``u``, measured output ``y``, optional time ``t`` [s].
+
+    :func:`read_series_csv` gives ``t`` as the file holds it, except stamps in nanoseconds
+    that increase: those become seconds from the first row kept, as a bag's series.
 
     ``breaks`` (optional, bool): the sample rule, True where a sample does not follow the
     one before it on the encoder's clock (None: all do); for the identifiers' ``breaks``.
@@ -64,6 +83,44 @@ class Series:
             return None
         step = float(np.median(steps))
         return step / 1e9 if step >= 1000.0 else step
+
+
+_NS_STEP = 1000.0  # a median step of this or more: the stamps are nanoseconds
+
+
+def _in_ns(t: npt.ArrayLike) -> bool:
+    """Whether stamps ``t`` read as nanoseconds (a median positive step of 1000 or more)."""
+    steps = np.diff(np.asarray(t, dtype=np.float64))
+    positive = steps[steps > 0]
+    return bool(positive.size) and float(np.median(positive)) >= _NS_STEP
+
+
+def stamps_ns(t: npt.ArrayLike) -> npt.NDArray[np.int64] | None:
+    """The stamps ``t`` (seconds, or nanoseconds when the median step is 1000 or more, as
+    :meth:`Series.sample_period` reads them) as int64 nanoseconds; None unless every stamp
+    is finite and each is after the one before (the rows' rules need a clock).
+
+    >>> stamps_ns([0.0, 0.001, 0.0025]).tolist(), stamps_ns([5, 1_000_005]).tolist()
+    ([0, 1000000, 2500000], [5, 1000005])
+    >>> stamps_ns([0.0, 0.002, 0.001]) is None
+    True
+    """
+    raw = np.asarray(t)
+    if raw.ndim != 1 or raw.size == 0:
+        return None
+    if np.issubdtype(raw.dtype, np.integer):
+        out = raw.astype(np.int64)
+    else:
+        tt = np.asarray(raw, dtype=np.float64)
+        if not np.isfinite(tt).all():
+            return None
+        if _in_ns(tt):
+            out = np.rint(tt).astype(np.int64)
+        else:
+            out = np.rint((tt - tt[0]) * 1e9).astype(np.int64)  # relative: exact in float64
+    if out.size > 1 and not bool((np.diff(out) > 0).all()):
+        return None
+    return out
 
 
 BadRows = Literal["raise", "drop", "nan"]
@@ -163,11 +220,16 @@ def dropped_note(path: str | Path, dropped: Sequence[int]) -> str:
     )
 
 
-def read_series_csv(path: str | Path, *, bad_rows: BadRows = "raise") -> Series:
+def read_series_csv(
+    path: str | Path, *, bad_rows: BadRows = "raise", bridge: bool = False, settle_ns: int = 0
+) -> Series:
     r"""Read a CSV whose header names the columns ``u`` and ``y`` (and optionally ``t``).
 
-    With ``t`` the series carries its ``breaks`` (see the module notes). Other columns are
-    ignored, and so are blank lines and lines starting with ``#``.
+    With ``t`` the series carries its ``breaks`` (see the module notes); with increasing
+    stamps the rows are chosen by :func:`~genbacklash_ros.node.sample_rule.select_rows`
+    (``bridge``: a backlash alone; ``settle_ns``: the servo's settling time, with ``bridge``),
+    as a bag's readings are. Other columns are ignored, and so are blank lines and lines
+    starting with ``#``.
 
     A row that cannot be used -- a cell that is empty, not a number, NaN or infinite, or a
     row with too few cells -- is, by ``bad_rows``:
@@ -212,11 +274,14 @@ def read_series_csv(path: str | Path, *, bad_rows: BadRows = "raise") -> Series:
     wanted = [names.index("u"), names.index("y")] + ([names.index("t")] if "t" in names else [])
     dropped: tuple[int, ...] = ()
     kept: list[int] | None = None
+    exact_t: npt.NDArray[np.int64] | None = None
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)  # "no data": reported below instead
             table = np.loadtxt(file, delimiter=",", skiprows=1, usecols=wanted, ndmin=2)
         fast = bool(np.isfinite(table).all())
+        if fast and len(wanted) == 3:
+            exact_t = _integer_column(file, wanted[2], table.shape[0])
     except (ValueError, IndexError):
         fast = False  # a cell that is not a number, a short row: read row by row below
     except UnicodeDecodeError as err:
@@ -235,14 +300,73 @@ def read_series_csv(path: str | Path, *, bad_rows: BadRows = "raise") -> Series:
                 f"numbers in all of {', '.join(names[k] for k in wanted)}"
             )
         raise GenBacklashError(f"{file} has a header but no data rows")
+    u, y = table[:, 0].copy(), table[:, 1].copy()
     t = table[:, 2].copy() if table.shape[1] == 3 else None
-    breaks = None if t is None else time_breaks(t)
+    after_gap = None
     if dropped and kept is not None:
         # a row after dropped ones does not follow the row before it
         after_gap = np.diff(np.asarray(kept), prepend=1) > 1
         after_gap[0] = after_gap[0] or kept[0] > 2
+    clock = None if t is None else stamps_ns(t if exact_t is None else exact_t)
+    if t is not None and clock is not None:
+        # each row a reading and the command it holds: the commands in order are the rows'
+        # changes of u, and the bag's rules choose the rows (select_rows)
+        change = np.ones(u.size, dtype=bool)
+        change[1:] = u[1:] != u[:-1]
+        rows = select_rows(
+            clock,
+            np.cumsum(change) - 1,
+            u[change],
+            y,
+            marks=after_gap,
+            bridge=bridge,
+            settle_ns=settle_ns,
+        )
+        if _in_ns(t):  # seconds from the first row kept, as a bag's series (from exact ns)
+            t = (rows.t - rows.t[0]) / 1e9 if rows.t.size else rows.t.astype(np.float64)
+        else:
+            t = t[rows.index]
+        return Series(u=rows.u, y=rows.y, t=t, breaks=rows.breaks, dropped=dropped)
+    breaks = None if t is None else time_breaks(t)  # no clock: the stamps' steps alone
+    if after_gap is not None:
         breaks = after_gap if breaks is None else breaks | after_gap
-    return Series(u=table[:, 0].copy(), y=table[:, 1].copy(), t=t, breaks=breaks, dropped=dropped)
+    return Series(u=u, y=y, t=t, breaks=breaks, dropped=dropped)
+
+
+def _integer_column(file: Path, column: int, rows: int) -> npt.NDArray[np.int64] | None:
+    """Column ``column`` of ``file`` as int64 when every cell is an integer literal (stamps in
+    ns since the epoch do not fit a float64 exactly), else None."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)
+            ints = np.loadtxt(
+                file, delimiter=",", skiprows=1, usecols=[column], ndmin=1, dtype=np.int64
+            )
+    except (ValueError, OverflowError):
+        return None
+    return ints if ints.size == rows else None
+
+
+def write_readings_csv(
+    path: str | Path,
+    t_ns: npt.ArrayLike,
+    u: npt.ArrayLike,
+    y: npt.ArrayLike,
+) -> None:
+    """Write readings as ``t,u,y``: ``t`` in integer nanoseconds (exact), ``u`` the command
+    held at the reading and ``y`` the reading, at full float precision; what
+    :func:`read_series_csv` reads back into the same rows."""
+    t = np.asarray(t_ns, dtype=np.int64)
+    uu = np.asarray(u, dtype=np.float64)
+    yy = np.asarray(y, dtype=np.float64)
+    file = Path(path)
+    file.parent.mkdir(parents=True, exist_ok=True)
+    with file.open("w", newline="") as handle:
+        handle.write("t,u,y\n")
+        handle.writelines(
+            f"{a},{b!r},{c!r}\n"
+            for a, b, c in zip(t.tolist(), uu.tolist(), yy.tolist(), strict=True)
+        )
 
 
 def write_series_csv(path: str | Path, series: Series) -> None:

@@ -147,7 +147,7 @@ def _positive(text: str) -> float:
 
 def cmd_fleet_report(args: argparse.Namespace) -> int:
     """Run ``genbacklash fleet-report``."""
-    from genbacklash_ros.fleet.database import ResultStore
+    from genbacklash_ros.fleet.database import ResultStore, iso_utc
     from genbacklash_ros.fleet.report import write_fleet_report
     from genbacklash_ros.fleet.summary import summarise
 
@@ -177,6 +177,12 @@ def cmd_fleet_report(args: argparse.Namespace) -> int:
                 interval = "-"
             name = f"{d.robot}/{d.joint}"
             print(f"{d.rank:>4}  {name:<28}{days:>16}  {interval:<24}{d.note}")
+        flagged = [(d, bag) for d in summary.drivetrains for bag in d.truncated]
+        if flagged:
+            print("truncated bags (their readable part analysed):")
+        for d, bag in flagged:
+            when = (iso_utc(bag.recorded_ns) or "no date")[:10]
+            print(f"  {d.robot}/{d.joint} {when} {bag.bag_path}: {bag.flag} ({bag.status})")
     print(f"wrote {index}", file=sys.stderr)
     return EXIT_OK
 

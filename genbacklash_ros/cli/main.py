@@ -51,6 +51,7 @@ _COMMAND_MODULES: dict[str, tuple[str, str]] = {
     "node": ("genbacklash_ros.cli.node", "add_parser"),
     "excite": ("genbacklash_ros.cli.excite", "add_parser"),
     "export": ("genbacklash_ros.cli.export", "add_parser"),
+    "readings": ("genbacklash_ros.cli.readings", "add_parser"),
     "fleet": ("genbacklash_ros.cli.fleet", "add_parsers"),
     "fleet-report": ("genbacklash_ros.cli.fleet", "add_parsers"),
 }
@@ -280,7 +281,8 @@ def _positive_float(text: str) -> float:
 
 
 _BATCH_USES = (
-    "{command} uses model, degree, na, nb and, for a bag, joint, command_index; the others "
+    "{command} uses model, degree, na, nb, settle_time (a bag, or a CSV with t: the same "
+    "row rules) and, for a bag, joint, command_index; the others "
     "are validated, then ignored (a note on stderr names those set to other than their "
     "defaults). Bags are read with header stamps, one sample per encoder message (the node's "
     "default stamp_source and sample_period)."

@@ -95,6 +95,7 @@ COMMAND_PATHS: dict[str, CommandPaths] = {
     ),
     "identify": _opts(("data", "DATA", "input"), _PARAMS, ("plot", "--plot", "dir"), _CHECKPOINT),
     "export": _opts(("model", "MODEL", "input"), ("output", "-o", "file")),
+    "readings": _opts(("bag", "BAG", "input"), _PARAMS, ("output", "-o", "file")),
     "diagnose": _opts(
         ("data", "DATA", "input"),
         _PARAMS,

@@ -176,6 +176,8 @@ def load_series(
     Shared by ``identify`` and ``diagnose``; ``params`` supply ``joint`` and
     ``command_index`` where the options do not. A CSV row that is not all finite numbers
     stops with its line number, or with ``--drop-nonfinite`` is dropped and named on stderr.
+    A bag and a CSV with ``t`` go through the same row rules
+    (:func:`~genbacklash_ros.node.sample_rule.select_rows`: ``bridge``, ``settle_time``).
     """
     file = Path(args.data)
     if is_bag(file):
@@ -183,7 +185,13 @@ def load_series(
     if not file.exists():
         raise GenBacklashError(f"{file} does not exist")
     drop = bool(getattr(args, "drop_nonfinite", False))
-    series = read_series_csv(file, bad_rows="drop" if drop else "raise")
+    # a CSV of readings (with t) takes the rows a bag of them would: the same rules
+    series = read_series_csv(
+        file,
+        bad_rows="drop" if drop else "raise",
+        bridge=bridge,
+        settle_ns=params.settle_ns if params is not None else 0,
+    )
     if series.dropped:  # --drop-nonfinite: say what went, never silently
         print(f"genbacklash {args.command}: {dropped_note(file, series.dropped)}", file=sys.stderr)
     return series
@@ -193,7 +201,8 @@ def load_series(
 
 # what identify and diagnose use of the node's parameters (the rest is validated, then ignored)
 BATCH_PARAMETERS = ("model", "degree", "na", "nb")
-# ... and the rule for which samples are rows (genbacklash_core.settling), on bags
+# ... and the rule for which samples are rows (genbacklash_core.settling), on bags and on
+# a CSV with t (the same rule: genbacklash_ros.node.sample_rule.select_rows)
 _ROW_PARAMETERS = ("settle_time",)
 _BAG_PARAMETERS = ("joint", "command_index")
 # set by the replay itself (genbacklash_ros.bags.replay): the bag's message types, the recorded
@@ -203,7 +212,7 @@ _SET_BY_REPLAY = ("command_type", "encoder_type", "compensation_in_loop", "check
 
 def batch_parameters(data: str | Path) -> tuple[str, ...]:
     """The node parameters ``identify`` / ``diagnose`` use for ``data`` (a CSV or a bag)."""
-    return BATCH_PARAMETERS + (_BAG_PARAMETERS + _ROW_PARAMETERS if is_bag(data) else ())
+    return BATCH_PARAMETERS + _ROW_PARAMETERS + (_BAG_PARAMETERS if is_bag(data) else ())
 
 
 class _ListParams(argparse.Action):

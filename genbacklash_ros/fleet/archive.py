@@ -64,6 +64,7 @@ __all__ = [
     "discover",
     "parse_timestamp",
     "path_identity",
+    "recorded_duration_ns",
 ]
 
 ROBOT_KEY = "genbacklash.robot"
@@ -238,6 +239,22 @@ def bag_start_ns(path: str | Path) -> int | None:
         return None
     finally:
         reader.close()
+
+
+def recorded_duration_ns(path: str | Path) -> int | None:
+    """How long the recording was by its rosbag2 ``metadata.yaml`` (a bag directory's; the
+    recorder writes it apart from the ``.mcap``, so it survives a cut file), or None where
+    there is none (a bare ``.mcap``: its own copy sits at the end of the file, lost with a
+    cut) or it cannot be read."""
+    import yaml
+
+    meta = Path(path) / "metadata.yaml"
+    try:
+        info = yaml.safe_load(meta.read_text(encoding="utf-8"))
+        value = info["rosbag2_bagfile_information"]["duration"]["nanoseconds"]
+    except (OSError, UnicodeDecodeError, yaml.YAMLError, KeyError, TypeError):
+        return None
+    return int(value) if isinstance(value, int) and value >= 0 else None
 
 
 def metadata_identity(custom_data: Mapping[str, str] | None) -> tuple[str | None, str | None]:

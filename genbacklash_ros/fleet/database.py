@@ -23,7 +23,16 @@ Table ``bag_results`` (docs/fleet.md lists the columns with example queries):
 * replay (``--replay``): ``replay_gap``, ``replay_gap_std``, ``replay_state``, ``replay``
   (the replay JSON summary);
 * provenance: ``settings`` (JSON), ``software_version``, ``processed_at`` (ISO 8601 UTC),
-  ``compute_s``.
+  ``compute_s``;
+* a cut recording: ``truncated`` (True when the bag is damaged part-way and its readable
+  part was analysed; False when read to its end; NULL in rows written before the column
+  existed) and ``recorded_s`` (the recording's length by its metadata, NULL when unknown).
+
+**Columns added later.** A table written by an older genbacklash lacks the columns added
+since (:data:`ADDED_COLUMNS`). ``genbacklash fleet`` adds them when it opens the table
+(``ALTER TABLE ... ADD COLUMN``, nullable: the old rows read NULL, unknown) and nothing else
+changes; ``fleet-report`` only reads, and reads an older table as it is (a missing column
+reads as None).
 
 Each bag's rows are written in one transaction, so a run killed at any moment leaves whole
 bags or nothing; the next run redoes only what is missing.
@@ -65,14 +74,17 @@ from sqlalchemy import (
     UniqueConstraint,
     create_engine,
     event,
+    inspect,
+    null,
     select,
+    text,
 )
 from sqlalchemy.exc import ArgumentError, IntegrityError, OperationalError, SQLAlchemyError
 
 from genbacklash_core import GenBacklashError
 from genbacklash_ros.fleet.job import BagResult
 
-__all__ = ["TABLE", "ResultStore", "database_url", "iso_utc"]
+__all__ = ["ADDED_COLUMNS", "TABLE", "ResultStore", "database_url", "iso_utc"]
 
 metadata = MetaData()
 
@@ -120,9 +132,20 @@ TABLE = Table(
     Column("software_version", String(32), nullable=False),
     Column("processed_at", String(32), nullable=False),
     Column("compute_s", Float),
+    Column("truncated", Boolean),
+    Column("recorded_s", Float),
     UniqueConstraint("bag_hash", "joint", "settings_key", name="one_result_per_bag_joint"),
 )
 """The ``bag_results`` table."""
+
+ADDED_COLUMNS = ("truncated", "recorded_s")
+"""Columns added after the table's first release, in order: nullable, added to an older table
+by :class:`ResultStore` (see the module notes)."""
+
+
+def _columns_of(conn: Any) -> set[str]:
+    """The column names of the stored ``bag_results`` table."""
+    return {str(column["name"]) for column in inspect(conn).get_columns(TABLE.name)}
 
 
 def iso_utc(ns: int | None) -> str | None:
@@ -184,11 +207,14 @@ class ResultStore:
             self.engine: Engine = create_engine(url)
         except (ArgumentError, ImportError, SQLAlchemyError) as err:
             raise GenBacklashError(f"cannot use the database {url!r}: {err}") from err
-        if self.engine.dialect.name == "sqlite":
+        if self.engine.dialect.name == "sqlite" and create:
+            # the writer's settings; a reader (fleet-report) leaves the file as it is (the
+            # journal mode is stored in the file)
             event.listen(self.engine, "connect", _sqlite_pragmas)
         try:
             if create:
                 metadata.create_all(self.engine)
+                self._present = self._add_missing_columns()
             else:
                 with self.engine.connect() as conn:
                     if not self.engine.dialect.has_table(conn, TABLE.name):
@@ -196,10 +222,28 @@ class ResultStore:
                             f"{url} has no {TABLE.name} table; is it a 'genbacklash fleet' "
                             "database?"
                         )
+                    self._present = _columns_of(conn)
         except (OperationalError, SQLAlchemyError) as err:
             raise GenBacklashError(
                 f"cannot open the database {url}: {getattr(err, 'orig', None) or err}"
             ) from err
+
+    def _add_missing_columns(self) -> set[str]:
+        """Add to an older table the columns of :data:`ADDED_COLUMNS` it lacks (nullable,
+        no default: its rows read NULL); returns the table's columns after."""
+        with self.engine.begin() as conn:
+            present = _columns_of(conn)
+            quote = conn.dialect.identifier_preparer.quote
+            for name in ADDED_COLUMNS:
+                if name in present:
+                    continue
+                column = TABLE.c[name]
+                kind = column.type.compile(dialect=conn.dialect)
+                conn.execute(
+                    text(f"ALTER TABLE {quote(TABLE.name)} ADD COLUMN {quote(name)} {kind}")
+                )
+                present.add(name)
+        return present
 
     def close(self) -> None:
         """Release the connections."""
@@ -244,8 +288,10 @@ class ResultStore:
         return added
 
     def results(self, statuses: Iterable[str] | None = None) -> list[Row[Any]]:
-        """Every row (or those of ``statuses``), ordered by robot, joint and time."""
-        query = select(TABLE).order_by(
+        """Every row (or those of ``statuses``), ordered by robot, joint and time; a column
+        an older table lacks reads as None."""
+        columns = [c if c.name in self._present else null().label(c.name) for c in TABLE.c]
+        query = select(*columns).order_by(
             TABLE.c.robot, TABLE.c.joint, TABLE.c.recorded_ns, TABLE.c.id
         )
         if statuses is not None:

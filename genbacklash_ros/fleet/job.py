@@ -20,8 +20,14 @@ Statuses: ``ok`` (identified, converged, free-run NRMSE at most ``max_nrmse``), 
 drivetrain the model does not describe; the estimate is kept, trends leave it out),
 ``not_converged`` (identified, the iteration did
 not converge; the estimate is kept), ``no_motion`` (not enough excitation: the joint did not
-move through its gap), ``unreadable`` (the bag, a topic or its messages cannot be read),
+move through its play), ``unreadable`` (the bag, a topic or its messages cannot be read),
 ``failed`` (anything else; the reason names the exception).
+
+A recording cut part-way (a recorder killed mid-write) or corrupt after some point is not
+thrown away: its readable part is analysed, as ``genbacklash replay`` keeps it, and the row
+is flagged -- ``truncated`` True, ``recorded_s`` the recording's length by its
+``metadata.yaml`` (None for a bare ``.mcap``, whose copy was cut off with it), and the reason
+starts with ``truncated: read X of Y s`` and where the damage is.
 """
 
 from __future__ import annotations
@@ -52,6 +58,7 @@ from genbacklash_core.uncertainty import parameter_covariance, play_std
 from genbacklash_ros.bags.bagio import (
     COMMAND_MSGTYPES,
     ENCODER_MSGTYPES,
+    AlignedSeries,
     BagError,
     BagReader,
     read_aligned,
@@ -61,6 +68,7 @@ from genbacklash_ros.fleet.archive import (
     bag_start_ns,
     content_hash,
     metadata_identity,
+    recorded_duration_ns,
 )
 from genbacklash_ros.node.messages import JointState
 from genbacklash_ros.node.parameters import NodeParameters
@@ -74,6 +82,7 @@ __all__ = [
     "analyse_bag",
     "check_archive",
     "inspect_bag",
+    "truncation_note",
 ]
 
 STATUSES = ("ok", "poor_fit", "not_converged", "no_motion", "unreadable", "failed")
@@ -371,6 +380,8 @@ class BagResult:
     converged: bool | None = None
     n_samples: int | None = None
     duration_s: float | None = None
+    truncated: bool | None = None
+    recorded_s: float | None = None
     diagnose_effects: str | None = None
     diagnose_gap_initial: float | None = None
     diagnose_gap_final: float | None = None
@@ -434,6 +445,18 @@ def _fit_fields(
     }
 
 
+def truncation_note(read_s: float | None, recorded_s: float | None) -> str:
+    """The flag of a cut recording whose readable part was used.
+
+    >>> truncation_note(4.46, 9.9993), truncation_note(4.46, None)
+    ('truncated: read 4.5 of 10.0 s', 'truncated: read 4.5 s (the rest is lost)')
+    """
+    read = "?" if read_s is None else f"{read_s:.1f}"
+    if recorded_s is None:
+        return f"truncated: read {read} s (the rest is lost)"
+    return f"truncated: read {read} of {recorded_s:.1f} s"
+
+
 def _replay_fields(
     path: Path, settings: FleetSettings, joint: str, command_index: int
 ) -> dict[str, Any]:
@@ -471,11 +494,37 @@ def _analyse_joint(
         settings.encoder_topic,
         joint=joint,
         command_index=command_index,
+        keep_readable=True,  # a cut recording: its readable part, flagged (as replay keeps it)
     )
     out: dict[str, Any] = {
         "n_samples": int(series.u.size),
         "duration_s": float((series.t[-1] - series.t[0]) / 1e9) if series.t.size else 0.0,
+        "truncated": bool(series.damage),
     }
+    flag = ""
+    if series.damage:
+        recorded = recorded_duration_ns(plan.bag.path)
+        out["recorded_s"] = None if recorded is None else recorded / 1e9
+        flag = f"{truncation_note(out['duration_s'], out['recorded_s'])} ({series.damage})"
+    try:
+        out.update(_measure(plan, settings, joint, command_index, series))
+    except Exception as err:  # the row keeps what was read, and the flag
+        out["status"], out["reason"] = _status_of(err)
+    if flag:
+        out["reason"] = f"{flag}; {out['reason']}"
+    return out
+
+
+def _measure(
+    plan: BagPlan,
+    settings: FleetSettings,
+    joint: str,
+    command_index: int,
+    series: AlignedSeries,
+) -> dict[str, Any]:
+    """Identify, diagnose and replay one joint's aligned samples (raises for data that
+    cannot be used)."""
+    out: dict[str, Any] = {}
     result = _identify(settings.params, series.u, series.y, series.breaks)
     out.update(_fit_fields(result, series.u, series.y, series.breaks))
     out["status"] = "ok" if result.converged else "not_converged"

@@ -3,16 +3,16 @@
 :func:`write_fleet_report` writes into a directory:
 
 * ``index.html``: the ranking table (days to service with its interval, crossing date, wear
-  rate, the last gap, bags used and the other statuses) and the plots, in the layout every
+  rate, the last play, bags used and the other statuses) and the plots, in the layout every
   report shares (:mod:`genbacklash_ros.reports.page`);
 * ``fleet.png``: days to service per drivetrain with the crossing interval, the limit's
   day marked;
-* ``drivetrain-<robot>-<joint>.png``: the gap against time with 2-sigma bars, the fitted trend
+* ``drivetrain-<robot>-<joint>.png``: the play against time with 2-sigma bars, the fitted trend
   with its 95 % band drawn through to the crossing, the limit, and the crossing date with
   its interval;
 * ``summary.json``: :meth:`~genbacklash_ros.fleet.summary.FleetSummary.to_json`.
 
-The gap (the play c_L + c_R) is in rad everywhere, as ``--gap-limit`` takes it; the wear
+The play c_L + c_R is in rad everywhere, as ``--play-limit`` takes it; the wear
 rate in rad per day. A wide crossing interval is clipped to the view (the page's table gives
 its dates) so that it cannot squeeze the measured points into a few pixels.
 """
@@ -103,7 +103,20 @@ def _draw(ax: Axes, d: DrivetrainSummary, gap_limit: float, view: tuple[int, int
     t = np.array(d.t_ns, dtype=np.int64)
     gap = np.array(d.gap)
     bars = 2 * np.nan_to_num(np.array(d.gap_std))
-    ax.errorbar(_dates(t), gap, yerr=bars, fmt="o", ms=4, color="C0", label="gap per bag (2 sigma)")
+    ax.errorbar(
+        _dates(t), gap, yerr=bars, fmt="o", ms=4, color="C0", label="play per bag (2 sigma)"
+    )
+    cut = np.array(d.point_truncated, dtype=bool)
+    if cut.size == t.size and cut.any():  # a cut recording: its readable part, flagged
+        ax.plot(
+            _dates(t[cut]),
+            gap[cut],
+            "o",
+            ms=9,
+            mfc="none",
+            mec="C3",
+            label="truncated bag (readable part only)",
+        )
     values.append(gap)
     spreads += [gap - bars, gap + bars]
     # the trend over the whole view: from the bags through to the crossing
@@ -133,7 +146,7 @@ def _draw(ax: Axes, d: DrivetrainSummary, gap_limit: float, view: tuple[int, int
             label = "crossing interval" + (" (clipped to the view)" if clipped else "")
             a, b = _dates(np.array([lo, hi]))
             ax.axvspan(a, b, color="C3", alpha=0.1, label=label)
-    ax.axhline(gap_limit, color="C3", ls="--", label=f"limit {gap_limit:.4g} rad (--gap-limit)")
+    ax.axhline(gap_limit, color="C3", ls="--", label=f"limit {gap_limit:.4g} rad (--play-limit)")
     ax.set_ylim(*_value_range(values, spreads))
     # concise dates: the default labels overlapped ("2024-02-29" over "2024-03-01")
     locator = mdates.AutoDateLocator(minticks=3, maxticks=9)  # type: ignore[no-untyped-call]
@@ -144,16 +157,16 @@ def _draw(ax: Axes, d: DrivetrainSummary, gap_limit: float, view: tuple[int, int
 
 
 def plot_drivetrain(d: DrivetrainSummary, gap_limit: float) -> Figure:
-    """The gap of one drivetrain against time, with its trend and crossing (two panels
+    """The play of one drivetrain against time, with its trend and crossing (two panels
     when the crossing is far: the bags, then through to the crossing)."""
-    title = f"{d.robot} / {d.joint}: gap c_L + c_R over time"
+    title = f"{d.robot} / {d.joint}: play c_L + c_R over time"
     if not d.t_ns:
         fig, ax = plt.subplots(figsize=(8, 4.8), layout="constrained")
         ax.text(0.5, 0.5, "no bag with an estimate", transform=ax.transAxes, ha="center")
         ax.axhline(gap_limit, color="C3", ls="--", label=f"limit {gap_limit:.4g} rad")
         ax.set_ylim(0.0, 1.5 * gap_limit)
         ax.set_title(title, fontsize=11)
-        ax.set_ylabel("gap c_L + c_R [rad]")
+        ax.set_ylabel("play c_L + c_R [rad]")
         ax.set_xlabel("date (UTC)")
         return fig
     views = _time_ranges(d)
@@ -171,7 +184,7 @@ def plot_drivetrain(d: DrivetrainSummary, gap_limit: float) -> Figure:
                 bbox={"facecolor": "white", "alpha": 0.9, "edgecolor": "0.7"},
             )
         ax.set_title(title, fontsize=11)
-        ax.set_ylabel("gap c_L + c_R [rad]")
+        ax.set_ylabel("play c_L + c_R [rad]")
         fig.legend(*ax.get_legend_handles_labels(), loc="outside lower center", ncol=3, fontsize=8)
         return fig
     fig, (near, far) = plt.subplots(
@@ -181,7 +194,7 @@ def plot_drivetrain(d: DrivetrainSummary, gap_limit: float) -> Figure:
     _draw(far, d, gap_limit, views[1])
     near.set_title("the bags", fontsize=10)
     far.set_title("through to the crossing", fontsize=10)
-    near.set_ylabel("gap c_L + c_R [rad]")
+    near.set_ylabel("play c_L + c_R [rad]")
     fig.suptitle(title, fontsize=11)
     fig.legend(*far.get_legend_handles_labels(), loc="outside lower center", ncol=3, fontsize=8)
     return fig
@@ -238,7 +251,7 @@ def plot_fleet(summary: FleetSummary) -> Figure:
     ax.set_xlim(*view)
     ax.set_ylim(-0.7, len(ranked) - 0.3)
     ax.set_yticks(y, labels, fontsize=8)
-    ax.set_xlabel(f"days to service [days] (the gap reaches {summary.gap_limit:.4g} rad)")
+    ax.set_xlabel(f"days to service [days] (the play reaches {summary.gap_limit:.4g} rad)")
     ax.set_title(
         "Fleet: drivetrains ranked by time to service\n(bars: estimate; lines: interval)",
         fontsize=11,
@@ -284,6 +297,7 @@ def write_fleet_report(summary: FleetSummary, out: str | Path) -> Path:
     fig.savefig(folder / "fleet.png", dpi=100)
     plt.close(fig)
     rows = []
+    cut_rows: list[list[str]] = []
     figures = [PageFigure("fleet.png", "Days to service per drivetrain, with the intervals.")]
     for d in summary.drivetrains:
         name = _file_name(d)
@@ -299,6 +313,16 @@ def write_fleet_report(summary: FleetSummary, out: str | Path) -> Path:
             else DASH
         )
         last_gap = d.gap[-1] if d.gap else None
+        cut_rows.extend(
+            [
+                f"{d.robot}/{d.joint}",
+                _date(bag.recorded_ns),
+                bag.bag_path,
+                bag.status,
+                bag.flag,
+            ]
+            for bag in d.truncated
+        )
         rows.append(
             [
                 str(d.rank),
@@ -311,36 +335,65 @@ def write_fleet_report(summary: FleetSummary, out: str | Path) -> Path:
                 _num(last_gap, 4),
                 str(d.bags_used),
                 other,
+                str(len(d.truncated)) if d.truncated else DASH,
                 d.note or DASH,
             ]
         )
         figures.append(
             PageFigure(
                 name,
-                f"Gap of {d.robot}/{d.joint} over time with its trend, the limit and the "
+                f"Play of {d.robot}/{d.joint} over time with its trend, the limit and the "
                 "crossing date.",
             )
         )
     level = f"{summary.level:.0%}"
     head = ["rank", "robot", "joint", "days to service", "crossing", f"interval ({level})"]
-    head += ["wear rate [rad/day]", "last gap [rad]", "bags used", "other bags", "note"]
+    head += ["wear rate [rad/day]", "last play [rad]", "bags used", "other bags"]
+    head += ["truncated bags", "note"]
     first = next((d for d in summary.drivetrains if d.days_to_service is not None), None)
     summary_block = [
-        ("Gap limit", f"{summary.gap_limit:.4g} rad (c_L + c_R, as --gap-limit takes it)"),
+        ("Play limit", f"{summary.gap_limit:.4g} rad (c_L + c_R, as --play-limit takes it)"),
         ("As of", f"{_date(summary.as_of_ns)} (the newest bag)"),
         ("Drivetrains", str(len(summary.drivetrains))),
         ("First to service", _first(first)),
     ]
+    if cut_rows:
+        summary_block.append(
+            (
+                "Truncated bags",
+                f"{len(cut_rows)}: cut part-way, their readable part analysed (listed below)",
+            )
+        )
     sections = [
         Section(
             "Ranking: time to service",
             paragraphs=[
                 f"Days to service counted from {_date(summary.as_of_ns)}; crossing intervals "
-                f"at {level} (Fieller, from the fitted line's band). Gap in rad; wear rate in "
+                f"at {level} (Fieller, from the fitted line's band). Play in rad; wear rate in "
                 "rad per day \u00b1 one standard deviation."
             ],
-            tables=[Table(head, rows, align="rllrrrrrrll")],
+            tables=[Table(head, rows, align="rllrrrrrrlrl")],
         ),
+    ]
+    if cut_rows:
+        sections.append(
+            Section(
+                "Truncated bags",
+                paragraphs=[
+                    "Recordings cut part-way (a recorder killed mid-write, a damaged file). "
+                    "Their readable part was analysed, as genbacklash replay keeps it; the "
+                    "play of an 'ok' one is in the trend, drawn with a red ring."
+                ],
+                tables=[
+                    Table(
+                        ["drivetrain", "date", "bag", "status", "what was read"],
+                        cut_rows,
+                        align="lllll",
+                    )
+                ],
+            )
+        )
+    sections += [
         Section("Plots", figures=figures),
         Section("Machine-readable", paragraphs=["summary.json beside this page."]),
     ]

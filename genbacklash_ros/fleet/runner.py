@@ -33,7 +33,14 @@ from typing import Any
 from genbacklash_core import GenBacklashError
 from genbacklash_ros.fleet.archive import discover
 from genbacklash_ros.fleet.database import ResultStore
-from genbacklash_ros.fleet.job import BagPlan, BagResult, FleetSettings, analyse_bag, inspect_bag
+from genbacklash_ros.fleet.job import (
+    BagPlan,
+    BagResult,
+    FleetSettings,
+    analyse_bag,
+    inspect_bag,
+    truncation_note,
+)
 
 __all__ = ["FleetRun", "fleet_client", "run_fleet"]
 
@@ -58,6 +65,9 @@ class FleetRun:
         Bags whose task the cluster lost (``relpath: reason``); a re-run retries them.
     seconds : float
         Wall-clock time of the run (cluster start excluded).
+    truncated : list of str
+        Rows of bags cut part-way, analysed on their readable part (``relpath: truncated:
+        read X of Y s``).
     """
 
     bags: int = 0
@@ -67,6 +77,7 @@ class FleetRun:
     statuses: Counter[str] = field(default_factory=Counter)
     lost: list[str] = field(default_factory=list)
     seconds: float = 0.0
+    truncated: list[str] = field(default_factory=list)
 
     def summary(self) -> str:
         """One line for the terminal."""
@@ -77,6 +88,12 @@ class FleetRun:
             f"({rate:.1f} bags/min), "
             f"{self.skipped} already in the database; {self.rows} rows added ({statuses})"
         )
+        if self.truncated:
+            n = len(self.truncated)
+            text += (
+                f"; {n} row{'' if n == 1 else 's'} of truncated bags, from their readable "
+                f"part: {'; '.join(self.truncated)}"
+            )
         if self.lost:
             text += f"; {len(self.lost)} lost to the cluster (run again to retry)"
         return text
@@ -190,6 +207,9 @@ def run_fleet(
             for result in results:
                 done.add((result.bag_hash, result.joint, result.settings_key))
                 run.statuses[result.status] += 1
+                if result.truncated:
+                    note = truncation_note(result.duration_s, result.recorded_s)
+                    run.truncated.append(f"{result.bag_path}: {note}")
             run.rows += added
             run.analysed += 1
             bar.update(1)

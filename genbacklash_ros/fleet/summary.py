@@ -1,5 +1,5 @@
-"""The fleet summary: per drivetrain, the gap over time, its trend, and the ranking by time
-to service (the JSON ``genbacklash fleet-report`` writes for other tools).
+"""The fleet summary: per drivetrain, the play c_L + c_R over time, its trend, and the
+ranking by time to service (the JSON ``genbacklash fleet-report`` writes for other tools).
 
 :func:`summarise` takes the results rows
 (:meth:`~genbacklash_ros.fleet.database.ResultStore.results`), groups them by drivetrain
@@ -14,16 +14,23 @@ once per drivetrain: its newest row.
 
 JSON (:meth:`FleetSummary.to_json`, ``format`` 1)::
 
-    {"format": 1, "gap_limit": L, "level": 0.95, "as_of": ISO, "as_of_ns": int,
+    {"format": 1, "play_limit": L, "level": 0.95, "as_of": ISO, "as_of_ns": int,
      "drivetrains": [{"rank": 1, "robot": ..., "joint": ..., "bags_used": n,
        "statuses": {"ok": n, "no_motion": n, ...},
-       "first": ISO, "last": ISO, "last_gap": x, "last_gap_std": x,
-       "wear_rate_per_day": b, "wear_rate_std": s, "gap_at_first": a, "scatter_scale": k,
+       "first": ISO, "last": ISO, "last_play": x, "last_play_std": x,
+       "wear_rate_per_day": b, "wear_rate_std": s, "play_at_first": a, "scatter_scale": k,
        "crossing": ISO|null, "crossing_low": ISO|null, "crossing_high": ISO|null,
        "days_to_service": d|null, "note": "...",
-       "points": {"t_ns": [...], "gap": [...], "gap_std": [...]}}, ...]}
+       "truncated_bags": [{"bag_path": ..., "recorded_at": ISO, "status": ..., "read_s": x,
+         "recorded_s": x|null, "flag": "truncated: read X of Y s"}, ...],
+       "points": {"t_ns": [...], "play": [...], "play_std": [...], "truncated": [...]}}, ...]}
 
-Times are ISO 8601 UTC; gaps in radians; the wear rate in radians per day.
+Times are ISO 8601 UTC; the play in radians; the wear rate in radians per day. The same
+numbers stay under their older keys (the play was called the gap): ``gap_limit``,
+``last_gap``, ``last_gap_std``, ``gap_at_first``, ``points.gap``, ``points.gap_std``.
+``truncated_bags`` lists the drivetrain's bags that were cut part-way and analysed on their
+readable part (:mod:`genbacklash_ros.fleet.job`), whatever their status; a point of a
+truncated bag is flagged in ``points.truncated``.
 """
 
 from __future__ import annotations
@@ -41,7 +48,7 @@ from genbacklash_core import GenBacklashError
 from genbacklash_ros.fleet.database import iso_utc
 from genbacklash_ros.fleet.trends import Trend, fit_trend
 
-__all__ = ["DAY_NS", "DrivetrainSummary", "FleetSummary", "summarise"]
+__all__ = ["DAY_NS", "DrivetrainSummary", "FleetSummary", "TruncatedBag", "summarise"]
 
 DAY_NS = 86_400 * 1_000_000_000
 SUMMARY_FORMAT = 1
@@ -70,6 +77,8 @@ class DrivetrainSummary:
     crossing_high_ns: int | None = None
     days_to_service: float | None = None
     note: str = ""
+    truncated: tuple[TruncatedBag, ...] = ()
+    point_truncated: tuple[bool, ...] = ()
 
     def trend_line(self, t_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The fitted gap and its standard deviation at times ``t_ns`` (NaN without a trend)."""
@@ -85,6 +94,37 @@ class DrivetrainSummary:
 
 def _iso(ns: int | None) -> str | None:
     return iso_utc(ns)
+
+
+@dataclass(frozen=True)
+class TruncatedBag:
+    """A bag cut part-way whose readable part was analysed: where, when, its row's status,
+    the seconds read and the recording's length (None: unknown)."""
+
+    bag_path: str
+    recorded_ns: int | None
+    status: str
+    read_s: float | None
+    recorded_s: float | None
+
+    @property
+    def flag(self) -> str:
+        """``truncated: read X of Y s`` (:func:`~genbacklash_ros.fleet.job.truncation_note`)."""
+        from genbacklash_ros.fleet.job import truncation_note
+
+        return truncation_note(self.read_s, self.recorded_s)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON item of ``truncated_bags``."""
+        return {
+            "bag_path": self.bag_path,
+            "recorded_at": _iso(self.recorded_ns),
+            "recorded_ns": self.recorded_ns,
+            "status": self.status,
+            "read_s": self.read_s,
+            "recorded_s": self.recorded_s,
+            "flag": self.flag,
+        }
 
 
 @dataclass(frozen=True)
@@ -110,9 +150,12 @@ class FleetSummary:
                 "last": _iso(d.t_ns[-1]) if d.t_ns else None,
                 "last_gap": d.gap[-1] if d.gap else None,
                 "last_gap_std": d.gap_std[-1] if d.gap_std else None,
+                "last_play": d.gap[-1] if d.gap else None,
+                "last_play_std": d.gap_std[-1] if d.gap_std else None,
                 "wear_rate_per_day": d.wear_rate_per_day,
                 "wear_rate_std": d.wear_rate_std,
                 "gap_at_first": d.gap_at_first,
+                "play_at_first": d.gap_at_first,
                 "intercept_slope_cov": list(d.intercept_slope_cov)
                 if d.intercept_slope_cov
                 else None,
@@ -125,12 +168,21 @@ class FleetSummary:
                 "crossing_high_ns": d.crossing_high_ns,
                 "days_to_service": d.days_to_service,
                 "note": d.note,
-                "points": {"t_ns": list(d.t_ns), "gap": list(d.gap), "gap_std": list(d.gap_std)},
+                "truncated_bags": [bag.to_dict() for bag in d.truncated],
+                "points": {
+                    "t_ns": list(d.t_ns),
+                    "gap": list(d.gap),
+                    "gap_std": list(d.gap_std),
+                    "play": list(d.gap),
+                    "play_std": list(d.gap_std),
+                    "truncated": list(d.point_truncated),
+                },
             }
             items.append(item)
         return {
             "format": SUMMARY_FORMAT,
             "gap_limit": self.gap_limit,
+            "play_limit": self.gap_limit,
             "level": self.level,
             "as_of": _iso(self.as_of_ns),
             "as_of_ns": self.as_of_ns,
@@ -174,6 +226,17 @@ class FleetSummary:
                         crossing_high_ns=d["crossing_high_ns"],
                         days_to_service=d["days_to_service"],
                         note=d["note"],
+                        truncated=tuple(
+                            TruncatedBag(
+                                b["bag_path"],
+                                b["recorded_ns"],
+                                b["status"],
+                                b["read_s"],
+                                b["recorded_s"],
+                            )
+                            for b in d.get("truncated_bags", [])
+                        ),
+                        point_truncated=tuple(d["points"].get("truncated", [])),
                     )
                 )
             return cls(data["gap_limit"], data["level"], data["as_of_ns"], tuple(items))
@@ -214,6 +277,10 @@ def _one(
     t_ns = tuple(int(r.recorded_ns) for r in usable)
     gap = tuple(float(r.gap) for r in usable)
     std = tuple(float(r.gap_std) if r.gap_std is not None else math.nan for r in usable)
+    cut = sorted(
+        (r for r in rows if getattr(r, "truncated", None)),  # NULL in an older table: unknown
+        key=lambda r: (r.recorded_ns is None, r.recorded_ns or 0, r.bag_path),
+    )
     base: dict[str, Any] = {
         "rank": 0,
         "robot": robot,
@@ -223,6 +290,17 @@ def _one(
         "t_ns": t_ns,
         "gap": gap,
         "gap_std": std,
+        "truncated": tuple(
+            TruncatedBag(
+                r.bag_path,
+                r.recorded_ns,
+                r.status,
+                r.duration_s,
+                getattr(r, "recorded_s", None),
+            )
+            for r in cut
+        ),
+        "point_truncated": tuple(bool(getattr(r, "truncated", None)) for r in usable),
     }
     if not usable:
         return DrivetrainSummary(**base, note="no bag with an estimate")
@@ -237,7 +315,7 @@ def _one(
     crossing_ns = _ns(trend.crossing, origin)
     note = ""
     if trend.crossing is None:
-        note = "the gap does not grow: no crossing predicted"
+        note = "the play does not grow: no crossing predicted"
     elif lo is None:
         note = "the wear rate is not significant: the crossing date cannot be bounded"
     days = None
@@ -280,7 +358,9 @@ def summarise(
         The date days to service count from (default: the newest bag's time).
     """
     if not (math.isfinite(gap_limit) and gap_limit > 0):
-        raise GenBacklashError(f"--gap-limit must be a positive number of radians, got {gap_limit}")
+        raise GenBacklashError(
+            f"--play-limit must be a positive number of radians, got {gap_limit}"
+        )
     kept = _newest_per_bag(rows)
     if as_of_ns is None:
         times = [r.recorded_ns for r in kept if r.recorded_ns is not None]

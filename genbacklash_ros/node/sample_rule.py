@@ -15,6 +15,12 @@ on a CSV with a ``t`` column):
 * :func:`keep_breaks` -- the breaks of the samples left after some are taken out (spikes,
   samples before the first command): a kept sample breaks when any sample before it, since
   the previous kept one, was taken out;
+* :func:`select_rows` -- the batch path's whole rule in one function: given every reading
+  with the command it holds, which readings are rows and where the chain breaks (the
+  servo's settling rule, lost readings bridged along monotone commands for a backlash alone,
+  marks). A bag (:func:`~genbacklash_ros.bags.bagio.align`) and a CSV of the same readings
+  (:func:`~genbacklash_ros.bags.csvio.read_series_csv`) both go through it, so they give the
+  same rows;
 * :class:`EncoderPeriod` -- the nominal period the node learns from the stream: the median
   of the last :data:`PERIOD_WINDOW` positive stamp differences. The batch path takes the
   median over the whole record (:func:`~genbacklash_core.samples.nominal_period`), the same
@@ -35,18 +41,28 @@ Examples
 from __future__ import annotations
 
 from collections import deque
+from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
-from genbacklash_core.samples import nominal_period, sample_breaks
+from genbacklash_core.samples import (
+    lift_bridged,
+    missing_readings,
+    monotone_paths,
+    nominal_period,
+    sample_breaks,
+)
+from genbacklash_core.settling import carry_marks, settling_keep
 
 __all__ = [
     "PERIOD_WINDOW",
     "EncoderPeriod",
+    "Rows",
     "keep_breaks",
     "link_breaks",
     "record_period",
+    "select_rows",
     "time_breaks",
 ]
 
@@ -140,6 +156,96 @@ def time_breaks(t: npt.ArrayLike) -> BoolArray | None:
     if period is None:
         return None
     return sample_breaks(tt - tt[np.isfinite(tt)][0], period)
+
+
+@dataclass(frozen=True, eq=False)
+class Rows:
+    """The samples :func:`select_rows` keeps: stamps ``t`` (int64 ns), the command held ``u``,
+    the reading ``y``, the sample rule's ``breaks``, ``skipped``: readings before the first
+    command (they hold none), and ``index``: where each row was among the readings given."""
+
+    t: npt.NDArray[np.int64]
+    u: npt.NDArray[np.float64]
+    y: npt.NDArray[np.float64]
+    breaks: BoolArray
+    skipped: int
+    index: npt.NDArray[np.intp]
+
+
+def select_rows(
+    stamps: npt.ArrayLike,
+    held: npt.ArrayLike,
+    commands: npt.ArrayLike,
+    values: npt.ArrayLike,
+    *,
+    marks: npt.ArrayLike | None = None,
+    bridge: bool = False,
+    settle_ns: int = 0,
+) -> Rows:
+    """Which readings are identification samples, and where their chain breaks.
+
+    The one place the batch path's row rules live (a bag's readings and a CSV of the same
+    readings both come here; the node applies the same rules piece by piece in
+    :class:`~genbacklash_ros.node.align.CommandHistory`):
+
+    1. the servo's settling rule (:mod:`genbacklash_core.settling`, ``settle_ns``; for a
+       backlash alone, ``bridge``): a reading taken as a new command lands is taken out as a
+       lost one, its mark carried to the next reading kept;
+    2. the readings before the first command (``held < 0``) are skipped;
+    3. a sample breaks where its stamp is not one nominal period (the median difference,
+       :func:`record_period`) after the one before, and where ``marks`` say a reading was
+       taken out before it; with ``bridge`` a break that only lost readings made (at most
+       :data:`~genbacklash_core.samples.MAX_BRIDGED`, none rejected) is lifted where the
+       commands in force over the gap were monotone.
+
+    Parameters
+    ----------
+    stamps : array_like of int, shape (N,)
+        The readings' stamps, increasing (ns).
+    held : array_like of int, shape (N,)
+        Per reading, the index in ``commands`` of the command it holds (-1: none yet).
+    commands : array_like, shape (M,)
+        The commands in the order they took effect (the monotone test runs over them).
+    values : array_like, shape (N,)
+        The readings.
+    marks : array_like of bool, shape (N,), optional
+        Readings that follow one taken out (a rejected message, a dropped CSV row).
+    bridge : bool
+        A backlash alone: lift breaks lost readings made along monotone commands.
+    settle_ns : int
+        The servo's settling time (applies with ``bridge`` only; 0: off).
+
+    >>> rows = select_rows([5, 10, 15, 25], [-1, 0, 0, 1], [1.0, 2.0], [0.1, 0.2, 0.3, 0.4])
+    >>> rows.u.tolist(), rows.y.tolist(), rows.skipped, rows.breaks.tolist()
+    ([1.0, 1.0, 2.0], [0.2, 0.3, 0.4], 1, [True, False, True])
+    """
+    et = np.asarray(stamps, dtype=np.int64)
+    k = np.asarray(held, dtype=np.int64)
+    cmd_u = np.asarray(commands, dtype=np.float64)
+    ys = np.asarray(values, dtype=np.float64)
+    index = np.arange(et.size)
+    if settle_ns and bridge:  # the node's settling rule (a backlash alone): as lost readings
+        on = k >= 0
+        settled, _ = settling_keep(et[on], cmd_u[k[on]], settle_ns)
+        if not settled.all():
+            taken = np.ones(et.size, dtype=bool)
+            taken[np.flatnonzero(on)[~settled]] = False
+            if marks is not None:
+                marks = carry_marks(marks, taken)
+            et, ys, k, index = et[taken], ys[taken], k[taken], index[taken]
+    keep = k >= 0
+    period = record_period(et)
+    linked = link_breaks(et, period)
+    if bridge and period is not None and et.size > 1:
+        monotone = np.zeros(et.size, dtype=bool)
+        both = keep[1:] & keep[:-1]  # a reading before the first command holds none
+        monotone[1:][both] = monotone_paths(cmd_u, k[:-1][both], k[1:][both])
+        linked = lift_bridged(linked, missing_readings(et, period), monotone)
+    if marks is not None:
+        linked |= np.asarray(marks, dtype=bool)
+    breaks, _ = keep_breaks(linked, keep)
+    skipped = int(np.count_nonzero(~keep))
+    return Rows(et[keep], cmd_u[k[keep]], ys[keep], breaks, skipped, index[keep])
 
 
 class EncoderPeriod:

@@ -315,14 +315,14 @@ def _map_tables(result: Diagnosis, y: np.ndarray, unit: str) -> list[Table]:
 
 
 _CAPTIONS = {
-    "gap_steps.png": "The validation misfit (free-run NRMSE on held-out data) after each step, "
+    "misfit_steps.png": "The validation misfit (free-run NRMSE on held-out data) after each step, "
     "with the floor that quantisation and noise allow.",
     "fit_steps.png": "Measured and simulated (free-run) position on the validation segment, "
     "and their difference, for the starting model and after each step.",
-    "gap_breakdown.png": "Each group's share of the squared validation error against its "
+    "misfit_breakdown.png": "Each group's share of the squared validation error against its "
     "share of the samples, for the starting and the final model: a group whose error share "
     "exceeds its sample share is where the model misses.",
-    "gap_map.png": "Contribution to the misfit per range of travel and per slice of time "
+    "misfit_map.png": "Contribution to the misfit per range of travel and per slice of time "
     "(log scale; the contributions add up in squares to the misfit).",
     "correlations.png": "Residual autocorrelation, input cross-correlation and higher-order "
     "correlations of the starting and the final model, with 95% bounds of white noise.",
@@ -461,10 +461,10 @@ def write_report(
     b_est = None if breaks is None else np.asarray(breaks, dtype=bool)[est]
     context = build_context(uu[est], yy[est], result.initial_fit, DiagnoseSettings(), b_est)
     makers: dict[str, Callable[[], Figure]] = {
-        "gap_steps.png": lambda: plot_gap_steps(result),
+        "misfit_steps.png": lambda: plot_gap_steps(result),
         "fit_steps.png": lambda: plot_fit_steps(result, yy, t, unit),
-        "gap_breakdown.png": lambda: plot_gap_breakdown(result),
-        "gap_map.png": lambda: plot_gap_map(result, yy, unit),
+        "misfit_breakdown.png": lambda: plot_gap_breakdown(result),
+        "misfit_map.png": lambda: plot_gap_map(result, yy, unit),
         "correlations.png": lambda: plot_correlations(result),
         "step_error.png": lambda: plot_step_error(context.step_error, unit=unit),
     }

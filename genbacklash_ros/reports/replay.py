@@ -15,7 +15,7 @@ writes into a directory
   over time and in the zoomed window. The plant is the true drivetrain when the bag holds
   it, else the final estimate (then the numbers are the model's own prediction); the
   measured error (encoder minus command) is drawn as a check;
-* ``gap.png``: the dead zones ``c_L + c_R`` and each of them over data time with +/-2 sigma
+* ``play.png``: the play ``c_L + c_R`` and each dead zone over data time with +/-2 sigma
   from the published estimates' covariance, and the truth when the bag has it;
 * ``coverage.png``: which part of the command range each branch was engaged over (time spent
   on each branch per command bin, classified with the final estimate), and the branches
@@ -706,7 +706,7 @@ def plot_gap(result: ReplayResult, data: ReportData | None = None) -> Figure:
     _robust_limits(bottom, shown[1:3] + ([truth.c_left, truth.c_right] if truth else []))
     est = result.estimate
     names = list(est.names)
-    title = "Gap c_L + c_R over data time"
+    title = "Play c_L + c_R over data time"
     if "c_left" in names and "c_right" in names and est.model is not None:
         i, j = names.index("c_left"), names.index("c_right")
         cov = est.covariance
@@ -1328,8 +1328,8 @@ def write_report(
             plot_compensation_state,
         ),
         (
-            "gap.png",
-            "Dead zones over data time: c_L + c_R and each of them as published by the node, "
+            "play.png",
+            "The play c_L + c_R and each dead zone over data time as published by the node, "
             f"with +/-2 sigma from the estimates' covariance.{truth_note}",
             plot_gap,
         ),

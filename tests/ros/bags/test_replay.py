@@ -92,7 +92,7 @@ def test_output_bag_readable_by_mcap_ros2(replayed: tuple[Path, Path]) -> None:
 
 def test_report_files(replayed: tuple[Path, Path]) -> None:
     _, rep = replayed
-    for name in ("motion", "tracking_error", "gap", "coverage", "characteristic",
+    for name in ("motion", "tracking_error", "play", "coverage", "characteristic",
                  "convergence", "residuals", "compensation"):  # fmt: skip
         assert (rep / f"{name}.png").stat().st_size > 1000
     page = (rep / "index.html").read_text()

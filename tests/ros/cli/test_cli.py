@@ -231,5 +231,5 @@ def test_a_command_imports_only_its_own_module() -> None:
     assert out.stderr.strip() == "[]"
     listed = build_parser().format_help()
     commands = ("identify", "diagnose", "replay", "node", "excite", "fleet", "fleet-report")
-    for command in (*commands, "export"):
+    for command in (*commands, "export", "readings"):
         assert command in listed

@@ -59,9 +59,9 @@ def test_text_output_and_report(tmp_path: Path, capsys: pytest.CaptureFixture[st
     assert "per time" not in captured.out
     for name in (
         "fit_steps.png",
-        "gap_steps.png",
-        "gap_breakdown.png",
-        "gap_map.png",
+        "misfit_steps.png",
+        "misfit_breakdown.png",
+        "misfit_map.png",
         "correlations.png",
         "step_error.png",
         "summary.md",
@@ -71,7 +71,7 @@ def test_text_output_and_report(tmp_path: Path, capsys: pytest.CaptureFixture[st
         assert f"wrote {out_dir / name}" in captured.err
     assert not (out_dir / "report.html").exists()  # the page is index.html, as every report
     summary = (out_dir / "summary.md").read_text(encoding="utf-8")
-    assert "| 1 | gap_drift |" in summary and "![gap_steps.png](gap_steps.png)" in summary
+    assert "| 1 | gap_drift |" in summary and "![misfit_steps.png](misfit_steps.png)" in summary
     page = (out_dir / "index.html").read_text(encoding="utf-8")
     assert '<img src="fit_steps.png"' in page
     assert "<td>gap_drift</td>" in page and "|---|" not in page and "**" not in page
@@ -181,7 +181,7 @@ def test_an_operation_bag_is_read_as_the_node_reads_it(
     assert "**Floor**: quantisation and noise allow" in summary
     assert "| position range [rad] | start |" in summary
     assert "| validation samples | start |" in summary
-    assert (out_dir / "gap_map.png").stat().st_size > 0
+    assert (out_dir / "misfit_map.png").stat().st_size > 0
 
 
 def test_validation_fraction_is_checked(capsys: pytest.CaptureFixture[str]) -> None:

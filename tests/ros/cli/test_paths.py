@@ -221,6 +221,7 @@ def test_unwritable_outputs_stop_before_the_work(
         ["excite", "--range", "0", "1", "--v-max", "1", "--a-max", "5", "-o", "{file}/x.csv"],
         ["fleet-report", "{db}", "--gap-limit", "0.1", "-o", "{file}"],
         ["export", "{csv}", "-o", "{file}/table", "--range", "-1", "1"],
+        ["readings", "{bag}", "--command", "/command", "--encoder", "/encoder", "-o", "{file}/r"],
         ["identify", "{csv}", "--checkpoint", "{file}/start.json"],
     ],
 )

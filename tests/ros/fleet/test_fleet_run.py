@@ -47,17 +47,29 @@ def test_bad_bags_are_rows_with_reasons(
         assert (row.robot, row.joint) == (bag.robot, bag.joint)
         assert row.recorded_at == f"2024-03-{1 + bag.day:02d}T08:00:00Z"
         if bag.kind == "corrupt":
-            assert row.status == "unreadable" and "truncated" in row.reason
+            # cut to 45 % of its size: the readable part is used, and flagged (issue 22, 8)
+            assert row.truncated is True and row.status == "ok", row.reason
+            assert row.reason.startswith("truncated: read "), row.reason
+            assert "is truncated (records end at byte" in row.reason
+            assert 2.0 < row.duration_s < 6.0
+            if bag.relpath.endswith(".mcap"):  # its metadata was at the cut end: unknown
+                assert row.recorded_s is None and "(the rest is lost)" in row.reason
+            else:  # a rosbag2 directory: metadata.yaml says how long it was
+                assert row.recorded_s == pytest.approx(10.0, abs=0.01)
+                assert f"read {row.duration_s:.1f} of 10.0 s" in row.reason
+            truth = fleet.truth(bag.robot, bag.joint).gap_at(bag.day)
+            assert row.gap == pytest.approx(truth, abs=0.005), bag.relpath
         elif bag.kind == "no_motion":
             assert row.status == "no_motion" and "not enough excitation" in row.reason
         else:
             # every bag of the drivetrains in operation is identified (robot-01's day 4 was
             # "converged" with a wrong left branch, a poor_fit row, before the core's fix)
             assert row.status == "ok", (bag.relpath, row.reason)
+            assert row.truncated is False
             assert row.gap_std is not None and row.gap_std > 0
             truth = fleet.truth(bag.robot, bag.joint).gap_at(bag.day)
             assert row.gap == pytest.approx(truth, abs=0.005), bag.relpath
-    assert sum(r.status == "ok" for r in rows.values()) == len(fleet.bags) - 2
+    assert sum(r.status == "ok" for r in rows.values()) == len(fleet.bags) - 1
 
 
 def test_wear_rates_recovered_and_ranking_right(
@@ -141,11 +153,12 @@ def test_readme_queries_run(fleet_db: Path) -> None:
     readme = (Path(__file__).parents[3] / "docs" / "fleet.md").read_text(encoding="utf-8")
     block = readme.split("```sql", 1)[1].split("```", 1)[0]
     queries = [q for q in block.split(";") if q.strip()]
-    assert len(queries) == 4
+    assert len(queries) == 5
     with sqlite3.connect(fleet_db) as conn:
         results = [list(conn.execute(q)) for q in queries]
-    assert len(results[0]) >= 36
-    assert {"unreadable", "no_motion"} <= {r[1] for r in results[1]} <= set(STATUSES) - {"ok"}
+    assert len(results[0]) >= 37
+    assert {"no_motion"} <= {r[1] for r in results[1]} <= set(STATUSES) - {"ok"}
+    assert len(results[4]) == 1 and results[4][0][3].startswith("truncated: read ")
 
 
 def test_scheduler_address_uses_that_cluster(

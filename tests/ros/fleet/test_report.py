@@ -60,8 +60,8 @@ def test_page_is_escaped_text_in_rad(tmp_path: Path) -> None:
     text = _text(page)
     assert "&ndash;" not in text and "&plusmn;" not in text  # no entity shown as text
     assert "&lt;noisy&gt;" in page and "<noisy>" in text  # a name is escaped, shown as is
-    assert "mrad" not in text  # the gap in rad, as --gap-limit takes it
-    assert "Gap limit 0.15 rad" in text and "wear rate [rad/day]" in text
+    assert "mrad" not in text  # the play in rad, as --play-limit takes it
+    assert "Play limit 0.15 rad" in text and "wear rate [rad/day]" in text
     for src in re.findall(r'<img src="([^"]+)"', page):
         assert (tmp_path / "rep" / src).read_bytes()[:4] == b"\x89PNG"
 

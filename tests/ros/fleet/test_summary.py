@@ -61,7 +61,7 @@ def test_a_bag_counts_once_its_newest_row() -> None:
 
 
 def test_bad_limit_and_bad_json() -> None:
-    with pytest.raises(GenBacklashError, match="--gap-limit must be a positive"):
+    with pytest.raises(GenBacklashError, match="--play-limit must be a positive"):
         summarise([], gap_limit=0.0)
     with pytest.raises(GenBacklashError, match="not a fleet summary JSON"):
         FleetSummary.from_json("{}")

@@ -26,7 +26,8 @@ from genbacklash_ros.bags.csvio import Series, write_series_csv
 from genbacklash_ros.bags.simbags import COMMAND_TOPIC, ENCODER_TOPIC, write_operation_bag
 from genbacklash_ros.cli.main import EXIT_OK, main
 from genbacklash_ros.fleet.report import write_fleet_report
-from tests.ros.fleet.test_report import fleet_summary
+from genbacklash_ros.fleet.summary import summarise
+from tests.ros.fleet.test_report import _rows, fleet_summary
 
 _NAMES = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
 _CHECK = """<script>
@@ -111,6 +112,8 @@ def _assert_readable(shown: dict[str, object], images: int) -> None:
         assert raw not in text, raw
     assert not _ENTITY.search(text), _ENTITY.findall(text)  # escaped twice: &ndash; as text
     assert "Summary" in text  # the shared layout's summary block
+    # one word for each thing: play (c_L + c_R) and misfit (NRMSE); gap_drift is a name
+    assert not re.search(r"\bgap\b", text, re.IGNORECASE), re.findall(r".{30}\bgap\b.{30}", text)
 
 
 def test_replay_report_in_a_browser(tmp_path: Path) -> None:
@@ -145,6 +148,18 @@ def test_fleet_report_in_a_browser(tmp_path: Path) -> None:
     shown = open_in_browser(index, tmp_path)
     _assert_readable(shown, images=5)  # fleet.png and one per drivetrain
     assert "<noisy>" in str(shown["text"])  # escaped in the HTML, shown as written
+
+
+def test_fleet_report_with_a_truncated_bag_in_a_browser(tmp_path: Path) -> None:
+    """A bag cut part-way shows its flag in the ranking, a table and the summary."""
+    _chromium()
+    rows = _rows("cut & short", 0.10, 0.004)
+    rows[3].truncated, rows[3].duration_s, rows[3].recorded_s = True, 4.46, 10.0
+    index = write_fleet_report(summarise(rows, gap_limit=0.15), tmp_path / "cut")
+    shown = open_in_browser(index, tmp_path)
+    _assert_readable(shown, images=2)
+    text = str(shown["text"])
+    assert "Truncated bags" in text and "truncated: read 4.5 of 10.0 s" in text
 
 
 def test_the_check_sees_a_broken_image_and_an_entity(tmp_path: Path) -> None:

@@ -29,7 +29,7 @@ from genbacklash_ros.reports.replay import (
 FIGURES = (
     "motion",
     "tracking_error",
-    "gap",
+    "play",
     "coverage",
     "characteristic",
     "convergence",
