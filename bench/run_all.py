@@ -25,6 +25,7 @@ BENCHMARKS = (
     "diagnose",
     "replay",
     "dds_latency",
+    "dds_match",
     "ros_latency",
     "ros_latency_load",
     "ros_latency_operation",
