@@ -26,6 +26,7 @@ BENCHMARKS = (
     "replay",
     "dds_latency",
     "dds_match",
+    "startup_latency",
     "ros_latency",
     "ros_latency_load",
     "ros_latency_operation",
