@@ -25,6 +25,8 @@ BENCHMARKS = (
     "diagnose",
     "replay",
     "dds_latency",
+    "dds_match",
+    "startup_latency",
     "ros_latency",
     "ros_latency_load",
     "ros_latency_operation",

@@ -50,9 +50,17 @@ from ._typing import FloatArray
 from .backlash import GeneralBacklash
 from .cascade import Cascade
 from .errors import GenBacklashError
-from .simulate import simulate_backlash
+from .play import play_operator
+from .simulate import play_bounds
 
-__all__ = ["HISTORY", "JUDGE_EVERY", "CompensationGuard", "GuardSettings", "GuardVerdict"]
+__all__ = [
+    "HISTORY",
+    "JUDGE_EVERY",
+    "CompensationGuard",
+    "GuardSettings",
+    "GuardVerdict",
+    "free_run",
+]
 
 JUDGE_EVERY = 1024
 """Samples the guard lets gather before it judges them (a new model is judged at once)."""
@@ -257,22 +265,32 @@ class CompensationGuard:
         backlash = model.backlash if isinstance(model, Cascade) else model
         if brk.size and brk[0]:
             self._x = None  # the batch does not follow the last one
+        try:
+            predicted = free_run(backlash, u, y, brk, self._x)
+        except GenBacklashError:  # a branch not finite somewhere: stretch by stretch
+            predicted = self._free_run_by_stretch(backlash, u, y, brk)
+        self._x = float(predicted[-1]) if predicted.size else self._x
+        self._accumulate(y - predicted, y - u)
+
+    def _free_run_by_stretch(
+        self, backlash: GeneralBacklash, u: FloatArray, y: FloatArray, brk: np.ndarray
+    ) -> FloatArray:
+        """:func:`free_run` one stretch between breaks at a time; a stretch whose branches
+        are not finite is predicted NaN (left out of the window)."""
         starts = [0, *(np.flatnonzero(brk[1:]) + 1).tolist()]
         ends = [*starts[1:], u.size]
         predicted = np.empty_like(y)
+        x = self._x
         for start, stop in zip(starts, ends, strict=True):
-            if start > 0:
-                self._x = None  # a break: the chain starts again at the measured load
-            x0 = self._x
-            if x0 is None:
-                lo, hi = sorted(backlash.branches_at(float(u[start])))
-                x0 = min(max(float(y[start]), lo), hi)
+            part = slice(start, stop)
             try:
-                predicted[start:stop] = simulate_backlash(backlash, u[start:stop], x0)  # eq. 8
+                predicted[part] = free_run(
+                    backlash, u[part], y[part], np.zeros(stop - start, bool), x
+                )
             except GenBacklashError:
-                predicted[start:stop] = np.nan
-            self._x = float(predicted[stop - 1])
-        self._accumulate(y - predicted, y - u)
+                predicted[part] = np.nan
+            x = None  # the next stretch starts at its measured load
+        return predicted
 
     def _accumulate(self, e_model: FloatArray, e_none: FloatArray) -> None:
         ok = np.isfinite(e_model) & np.isfinite(e_none)
@@ -323,3 +341,40 @@ class CompensationGuard:
         return GuardVerdict(
             trust, state, ratio, model_rms, none_rms, self._samples, f"{why} {numbers}"
         )
+
+
+def free_run(
+    model: GeneralBacklash,
+    u: FloatArray,
+    y: FloatArray,
+    breaks: np.ndarray,
+    x_prev: float | None = None,
+) -> FloatArray:
+    """The backlash run free on the commands ``u`` (eq. 8), restarted at the measured load
+    after every break: at a sample where ``breaks`` is true (and at the first one when
+    ``x_prev`` is None) the state is the measured ``y`` clamped into the play there; from
+    there on it follows the play operator. One play-operator scan over the whole batch (a
+    restart is a clamp to a single value), exactly what a simulation per stretch between
+    breaks gives (:func:`~genbacklash_core.simulate.simulate_backlash` from the clamped
+    reading), at the cost of one: the guard judges several thousand samples with a break
+    every few samples (the servo's settling rule) each time a new estimate is adopted.
+
+    Raises :class:`~genbacklash_core.errors.GenBacklashError` when a branch is not finite.
+
+    >>> bl = GeneralBacklash.ideal(1.0, 0.5, 0.5)
+    >>> u = np.array([0.0, 1.0, 0.8, 0.0, 2.0, 1.9])
+    >>> y = np.array([0.0, 0.5, 0.5, 0.5, 0.3, 1.5])
+    >>> free_run(bl, u, y, np.array([False, False, False, False, True, False]), 0.0).tolist()
+    [0.0, 0.5, 0.5, 0.5, 1.5, 1.5]
+    """
+    left, right = model.left(u), model.right(u)
+    if not (np.all(np.isfinite(left)) and np.all(np.isfinite(right))):
+        raise GenBacklashError("a branch of the model is not finite on these commands")
+    lo, hi = play_bounds(left, right)
+    restart = np.array(breaks, dtype=bool, copy=True)
+    if restart.size and x_prev is None:
+        restart[0] = True
+    start = np.minimum(np.maximum(y[restart], lo[restart]), hi[restart])
+    lo[restart] = start
+    hi[restart] = start
+    return play_operator(lo, hi, 0.0 if x_prev is None else x_prev)

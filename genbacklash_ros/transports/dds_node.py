@@ -16,7 +16,9 @@ Interface (GUIDE §4; every name remappable, see :class:`Topics`)
 -----------------------------------------------------------------
 * subscribes ``command`` (default QoS: RELIABLE, VOLATILE) and ``encoder`` (sensor-data QoS:
   BEST_EFFORT, VOLATILE), each reader with a history of :data:`READER_DEPTH` samples rather than
-  ROS 2's 10 and 5, so that a busy loop does not lose messages;
+  ROS 2's 10 and 5, so that a busy loop does not lose messages; the readers are created once
+  discovery has settled (:func:`~genbacklash_ros.transports.ros_graph.await_discovery`, 0.5-3 s
+  after the start), so that a publisher already running loses nothing after it matches them;
 * publishes ``~/estimate`` (``/backlash_identifier/estimate``), ``compensated_command`` (the
   command's type) and ``/diagnostics``, all with the default QoS.
 
@@ -87,6 +89,7 @@ from genbacklash_ros.transports.ros_graph import (
     PublicationWatch,
     Subscribed,
     WiringMismatch,
+    await_discovery,
     endpoint_qos,
 )
 
@@ -310,6 +313,16 @@ class DdsNode:
         command_type, encoder_type = DDS_TYPES[command_ros], DDS_TYPES[encoder_ros]
         estimate_ros, diagnostics_ros = Float64MultiArray.ros_type, DiagnosticArray.ros_type
         t = self.topics
+        # the readers only once this participant knows the endpoints of those running already:
+        # else a Fast DDS publisher matches them first and its first second of samples is lost
+        self.discovered = await_discovery(dp)
+        if self.discovered.without_endpoints:
+            _LOG.warning(
+                "discovery: %d of %d participants announced no endpoint in %.1f s",
+                self.discovered.without_endpoints,
+                self.discovered.participants,
+                self.discovered.waited_s,
+            )
         self._command_reader: DataReader[Any] = DataReader(
             dp,
             Topic(dp, dds_topic(t["command"]), command_type),

@@ -15,6 +15,11 @@ ROS 2 node, as rmw_cyclonedds_cpp / rmw_dds_common (Jazzy) do it:
   peers match these gids against the endpoints they discover. ``ros2 node list`` and the node
   names in ``ros2 topic info -v`` come from this message.
 
+Before the node creates its readers it lets discovery settle (:func:`await_discovery`): a
+newly started cyclonedds participant learns the endpoints of a Fast DDS participant that was
+already running up to a second after that participant has matched the new readers, and drops
+what it is sent meanwhile (see the function).
+
 And the reverse check for the node's own subscriptions: :class:`PublicationWatch` reads the
 ``DCPSPublication`` builtin topic and reports publishers of another type on a subscribed topic
 (:class:`WiringMismatch`, worded by :mod:`genbacklash_ros.node.wiring`), which DDS would
@@ -25,12 +30,18 @@ This module imports cyclonedds; import it only where the DDS transport is used.
 
 from __future__ import annotations
 
+import time
 import uuid
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication
+from cyclonedds.builtin import (
+    BuiltinDataReader,
+    BuiltinTopicDcpsParticipant,
+    BuiltinTopicDcpsPublication,
+    BuiltinTopicDcpsSubscription,
+)
 from cyclonedds.core import InstanceState
 from cyclonedds.domain import DomainParticipant
 from cyclonedds.pub import DataWriter
@@ -43,13 +54,17 @@ from genbacklash_ros.transports import dds_types
 from genbacklash_ros.transports.type_hash import typehash_user_data
 
 __all__ = [
+    "DISCOVERY_MAX_S",
+    "DISCOVERY_MIN_S",
     "DISCOVERY_QOS",
     "DISCOVERY_TOPIC",
     "PARTICIPANT_USER_DATA",
+    "Discovered",
     "GraphAnnouncer",
     "PublicationWatch",
     "Subscribed",
     "WiringMismatch",
+    "await_discovery",
     "endpoint_qos",
     "gid_bytes",
     "node_namespace",
@@ -71,6 +86,16 @@ DISCOVERY_QOS = Qos(
 )
 """rmw's QoS for ``ros_discovery_info``: RELIABLE, TRANSIENT_LOCAL, KEEP_LAST 1 (late joiners
 get the last message), with its type hash."""
+
+DISCOVERY_MIN_S = 0.5
+"""Shortest wait of :func:`await_discovery`: the participants already running answer a new
+participant's announcement within milliseconds; this leaves room for a loaded machine."""
+
+DISCOVERY_MAX_S = 3.0
+"""Longest wait of :func:`await_discovery` (a participant that announces no endpoint at all
+holds it this long). Fast DDS resends its endpoints at its discovery heartbeat, once a second."""
+
+_DISCOVERY_POLL_S = 0.01
 
 _T: Any = dds_types  # the IDL classes are runtime descriptors mypy cannot read
 
@@ -258,3 +283,64 @@ class PublicationWatch:
             wanted.parameter,
             wanted.choices,
         )
+
+
+@dataclass(frozen=True)
+class Discovered:
+    """What :func:`await_discovery` saw: the other participants, how many of them had announced
+    no endpoint when it returned (0 unless it timed out), and how long it waited."""
+
+    participants: int
+    without_endpoints: int
+    waited_s: float
+
+
+def await_discovery(
+    participant: DomainParticipant,
+    *,
+    min_s: float = DISCOVERY_MIN_S,
+    max_s: float = DISCOVERY_MAX_S,
+    stop: Callable[[], bool] = lambda: False,
+) -> Discovered:
+    """Wait until this new participant knows the endpoints of every participant it discovered.
+
+    Call it before creating the readers. A Fast DDS participant (rclpy from the ROS 2 wheels)
+    that is already running hears the new participant's announcement, sends its own and, at
+    once, a heartbeat for its endpoint announcements. cyclonedds often takes that heartbeat
+    before it has taken the announcement, drops it, and its first acknowledgement does not
+    make Fast DDS resend; so it learns Fast DDS's writers only at Fast DDS's next discovery
+    heartbeat, a second later. Fast DDS meanwhile has learnt the new readers, counts them as
+    matched and sends them its samples, which cyclonedds drops (their writer is unknown to it):
+    a publisher that starts writing when its subscription count rises lost its first 0.02-1 s
+    of messages. Readers created once the writers are known are matched from both sides at once.
+
+    Returns after at least ``min_s`` seconds, once every other participant discovered has
+    announced at least one endpoint (every ROS 2 participant has some), or after ``max_s``,
+    or when ``stop()`` is true.
+    """
+    start = time.monotonic()
+    own = participant.guid
+    readers = {
+        "participants": BuiltinDataReader(participant, BuiltinTopicDcpsParticipant),
+        "publications": BuiltinDataReader(participant, BuiltinTopicDcpsPublication),
+        "subscriptions": BuiltinDataReader(participant, BuiltinTopicDcpsSubscription),
+    }
+    participants: set[uuid.UUID] = set()
+    announcing: set[uuid.UUID] = set()
+    try:
+        while True:
+            for kind, reader in readers.items():
+                for sample in reader.take(256):
+                    if not sample.sample_info.valid_data:
+                        continue
+                    if kind == "participants":
+                        participants.add(sample.key)
+                    else:
+                        announcing.add(sample.participant_key)
+            waiting = participants - announcing - {own}
+            waited = time.monotonic() - start
+            if (waited >= min_s and not waiting) or waited >= max_s or stop():
+                return Discovered(len(participants - {own}), len(waiting), waited)
+            time.sleep(_DISCOVERY_POLL_S)
+    finally:
+        readers.clear()  # cyclonedds deletes an entity with its last Python reference

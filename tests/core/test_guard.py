@@ -18,6 +18,7 @@ from genbacklash_core import (
     compensate,
     simulate_backlash,
 )
+from genbacklash_core.guard import free_run
 from genbacklash_core.scenarios import (
     OPERATION_BACKLASH,
     HiddenEffects,
@@ -127,7 +128,9 @@ def test_batches_equal_one_call_and_breaks_restart_the_chain() -> None:
     whole = CompensationGuard().update(u, y, brk, model)
     parts = CompensationGuard()
     for start in range(0, u.size, 128):
-        parts.update(u[start : start + 128], y[start : start + 128], brk[:128], model)
+        parts.update(
+            u[start : start + 128], y[start : start + 128], brk[start : start + 128], model
+        )
     verdict = parts.flush()
     assert verdict.ratio == pytest.approx(whole.ratio, rel=1e-9)
     # a break re-anchors the model's output at the measured load: a jump of the load the
@@ -194,3 +197,45 @@ def test_a_new_model_is_judged_at_once_on_the_samples_remembered() -> None:
     fresh = CompensationGuard()
     fresh.update(u, y, np.zeros(u.size, dtype=bool), None)
     assert fresh.update(u[:10], y[:10], np.zeros(10, dtype=bool), true).samples == 6010
+
+
+@pytest.mark.parametrize("decreasing", [False, True])
+@pytest.mark.parametrize("x_prev", [None, 0.1])
+def test_free_run_equals_a_simulation_per_stretch_between_breaks(
+    decreasing: bool, x_prev: float | None
+) -> None:
+    """One play-operator scan over a batch with a break every few samples gives exactly what
+    the guard computed before: one simulation per stretch, from the measured load clamped into
+    the play (the first stretch from ``x_prev`` when the chain goes on)."""
+    rng = np.random.default_rng(11)
+    u = np.cumsum(rng.normal(0.0, 0.02, 3000))
+    model = GeneralBacklash(
+        m_left=(1.1, 0.05, -0.02), c_left=0.04, m_right=(0.9, 0.03, 0.01), c_right=0.06
+    )
+    if decreasing:
+        model = GeneralBacklash(
+            m_left=(-1.1, 0.05, -0.02), c_left=0.04, m_right=(-0.9, 0.03, 0.01), c_right=0.06
+        )
+    y = simulate_backlash(model, u) + rng.normal(0.0, 0.01, u.size)
+    brk = rng.random(u.size) < 0.4
+    brk[0] = False
+    starts = [0, *(np.flatnonzero(brk[1:]) + 1).tolist()]
+    ends = [*starts[1:], u.size]
+    expected = np.empty(u.size)
+    for start, stop in zip(starts, ends, strict=True):
+        x0 = x_prev if start == 0 and x_prev is not None else None
+        if x0 is None:
+            lo, hi = sorted(model.branches_at(float(u[start])))
+            x0 = min(max(float(y[start]), lo), hi)
+        expected[start:stop] = simulate_backlash(model, u[start:stop], x0)
+    got = free_run(model, u, y, brk, x_prev)
+    np.testing.assert_array_equal(got, expected)
+
+
+def test_free_run_refuses_branches_that_are_not_finite() -> None:
+    model = GeneralBacklash(
+        m_left=(1.0, 0.0, 1e300), c_left=0.1, m_right=(1.0, 0.0, 0.0), c_right=0.1
+    )
+    u = np.array([0.0, 1e200])
+    with pytest.raises(GenBacklashError, match="not finite"):
+        free_run(model, u, np.zeros(2), np.zeros(2, dtype=bool))

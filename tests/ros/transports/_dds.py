@@ -6,6 +6,9 @@ doctests, imported by test modules that also hold in-process tests) imports with
 
 from __future__ import annotations
 
+import json
+import os
+import signal
 import subprocess
 import sys
 import threading
@@ -96,8 +99,6 @@ def start_node(params: Path, log: Path, domain: int) -> subprocess.Popen[bytes]:
 
 def stop_node(node: subprocess.Popen[bytes], log: Path) -> int:
     """SIGINT the node and its exit status; fail the test if it does not exit within 30 s."""
-    import signal
-
     import pytest
 
     node.send_signal(signal.SIGINT)
@@ -121,3 +122,44 @@ def wait_for(predicate: Any, timeout: float) -> bool:
 def diagnostic_values(diag: Any) -> dict[str, str]:
     """The key/value pairs of a DiagnosticArray's first status."""
     return {kv.key: kv.value for kv in diag.status[0].values}
+
+
+def match_trial(
+    domain: int, params: Path, log: Path, *, rate: float, seconds: float, lead: float = 0.5
+) -> tuple[dict[str, Any], int]:
+    """One run of ``match_player.py`` (rclpy, already publishing) and then the DDS node: the
+    player's JSON summary (what was lost after it matched the node) and the node's exit status.
+    ``lead``: seconds the player runs before the node is started."""
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain), "PYTHONUNBUFFERED": "1"}
+    here = Path(__file__).resolve().parent
+    cmd = [sys.executable, str(here / "match_player.py"), "--rate", str(rate)]
+    player = subprocess.Popen(
+        [*cmd, "--seconds", str(seconds)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
+    node = None
+    try:
+        assert player.stdout is not None
+        first = player.stdout.readline()
+        if first.strip() != "publishing":
+            player.kill()
+            _, err = player.communicate()
+            raise RuntimeError(f"match_player did not start: {first!r} {err[-2000:]}")
+        time.sleep(lead)
+        node = start_node(params, log, domain)
+        out, err = player.communicate(timeout=120)
+        lines = out.strip().splitlines()
+        if player.returncode != 0 or not lines:
+            raise RuntimeError(f"match_player failed ({player.returncode}): {out} {err[-2000:]}")
+        summary: dict[str, Any] = json.loads(lines[-1])
+        node.send_signal(signal.SIGINT)
+        status = node.wait(timeout=30)
+        return summary, status
+    finally:
+        for process in (player, node):
+            if process is not None and process.poll() is None:
+                process.kill()
+                process.wait(10)
