@@ -38,6 +38,7 @@ Examples
 
 from __future__ import annotations
 
+import math
 from types import MappingProxyType
 from typing import Literal
 
@@ -191,28 +192,38 @@ class MultiJointPipeline:
             return []
         kind = self._kind
         outputs: list[Output] = []
+        array = _finite_data(msg) if kind == "float64_multi_array" else None
+        data = None if array is None else list(array)
         out_msg: CommandMessage = msg
         stamp: int | None = None
         for joint, pipe in self._pipes.items():
             params = pipe.params
-            try:
-                header_ns, value = read_command(
-                    msg, kind, index=params.command_index, joint=params.joint
-                )
-            except MessageError as err:
-                pipe.reject("command", str(err))
-                continue
+            index = params.command_index
+            if data is not None and index < len(data):  # every element finite: read it
+                header_ns: int | None = None
+                value = float(data[index])
+            else:  # the adapter says why (or reads a JointState command)
+                try:
+                    header_ns, value = read_command(msg, kind, index=index, joint=params.joint)
+                except MessageError as err:
+                    pipe.reject("command", str(err))
+                    continue
             taken = pipe.on_command_value(header_ns, value, receive_ns)
             if taken is None:
                 continue
             at, sent, due = taken
             stamp = at if stamp is None else stamp
-            out_msg = compensated_command(
-                out_msg, sent, kind, index=params.command_index, joint=params.joint
-            )
-            outputs.extend(_tagged(due, joint))
+            if data is not None:
+                data[index] = float(sent)
+            else:
+                out_msg = compensated_command(out_msg, sent, kind, index=index, joint=params.joint)
+            if due:
+                outputs.extend(_tagged(due, joint))
         if stamp is None:
             return outputs
+        if data is not None:
+            assert isinstance(msg, Float64MultiArray)
+            out_msg = Float64MultiArray(msg.layout, tuple(data))
         outputs.insert(0, Output("compensated_command", out_msg, stamp))
         return outputs
 
@@ -220,8 +231,15 @@ class MultiJointPipeline:
         """An encoder JointState: each joint's reading to its pipeline; the periodic outputs
         now due."""
         outputs: list[Output] = []
+        found = _positions(msg)
         for joint, pipe in self._pipes.items():
-            outputs.extend(_tagged(pipe.on_encoder(msg, receive_ns), joint))
+            if found is not None and joint in found[1]:  # a plain reading: the value itself
+                value = found[1][joint]
+                due = pipe.on_encoder_value(found[0], value, receive_ns)
+            else:  # the adapter reads it, or says why it cannot
+                due = pipe.on_encoder(msg, receive_ns)
+            if due:
+                outputs.extend(_tagged(due, joint))
         return outputs
 
     def reject(self, stream: Literal["command", "encoder"], reason: str) -> None:
@@ -250,6 +268,37 @@ class MultiJointPipeline:
             statuses.extend(message.status)
         merged = DiagnosticArray(Header(Time.from_ns(stamp_ns)), tuple(statuses))
         return Output("diagnostics", merged, stamp_ns)
+
+
+def _finite_data(msg: object) -> tuple[float, ...] | None:
+    """A Float64MultiArray's data when it is a non-empty tuple of finite floats (what
+    :func:`~genbacklash_ros.node.messages.read_command` would accept at any index within
+    it), else None (the adapter then reads each joint's element and says what is wrong)."""
+    data = getattr(msg, "data", None)
+    if not isinstance(data, tuple) or not data:
+        return None
+    isfinite = math.isfinite
+    return data if all(type(v) is float and isfinite(v) for v in data) else None
+
+
+def _positions(msg: object) -> tuple[int, dict[str, float]] | None:
+    """A JointState's header stamp and its finite positions by name, when it has as many
+    names as positions (what the adapter reads the same way), else None."""
+    if not isinstance(msg, JointState):
+        return None
+    names, position = msg.name, msg.position
+    if len(names) != len(position) or not names:
+        return None
+    stamp = msg.header.stamp.to_ns()
+    seen: set[str] = set()
+    found: dict[str, float] = {}
+    for name, value in zip(names, position, strict=True):
+        if name in seen:  # the adapter reads a name's first position only
+            continue
+        seen.add(name)
+        if type(value) is float and math.isfinite(value):
+            found[name] = value
+    return stamp, found
 
 
 def _tagged(outputs: list[Output], joint: str) -> list[Output]:

@@ -232,4 +232,12 @@ def test_a_joint_missing_from_a_message_passes_only_its_own_element() -> None:
     assert pipe.pipelines["b"].stats.dropped["encoder_invalid"] == 1
     assert pipe.on_command(JointState(name=("a",), position=(0.1,)), 3_000_000) == []  # type: ignore[arg-type]
     assert pipe.pipelines["a"].stats.dropped["command_invalid"] == 1
+    # a NaN anywhere in the array: every joint drops it (the echo would publish it)
+    assert pipe.on_command(Float64MultiArray(data=(0.3, float("nan"))), 4_000_000) == []
+    assert pipe.pipelines["a"].stats.dropped["command_invalid"] == 2
+    # a NaN position drops only its joint's reading
+    both = JointState(Header(Time.from_ns(5_000_000)), ("b", "a"), (float("nan"), 0.2))
+    pipe.on_encoder(both, 5_100_000)
+    assert pipe.pipelines["a"].stats.encoder_messages == 2
+    assert pipe.pipelines["b"].stats.dropped["encoder_invalid"] == 2
     pipe.close()
