@@ -970,10 +970,13 @@ def command_line_parameters(
     """
     file_values = read_params_file(params_file) if params_file else {}
     if params_file:
-        _params_from_file(params_file, file_values)
+        _check_joint_values(params_file, file_values)
+    node_values = {k: v for k, v in file_values.items() if not is_joint_parameter(k)}
+    if params_file:
+        _params_from_file(params_file, node_values)
     own = {k: v for k, v in overrides.items() if k in _SPECS}
     try:
-        params = NodeParameters.from_mapping({**file_values, **own})
+        params = NodeParameters.from_mapping({**node_values, **own})
     except GenBacklashError as err:
         raise GenBacklashError(f"--param: {err}") from err
     for name, value in (options or {}).items():
@@ -990,6 +993,19 @@ def command_line_parameters(
         if name in _SPECS:
             given[name] = getattr(params, name)
     return params, given
+
+
+def _check_joint_values(path: str | Path, values: Mapping[str, object]) -> None:
+    """A node params file's ``joints``, ``command_indices`` and ``<joint>.<name>`` checked as
+    the node checks them (the commands take their joints from ``--joint``, not from these)."""
+    if not any(is_joint_parameter(k) for k in values):
+        return
+    from genbacklash_ros.node.joints import JointSet  # (joints imports this module)
+
+    try:
+        JointSet.from_mapping(values)
+    except GenBacklashError as err:
+        raise GenBacklashError(f"params file {Path(path)}: {err}") from err
 
 
 def parameter_table() -> str:

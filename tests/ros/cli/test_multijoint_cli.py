@@ -174,3 +174,21 @@ def test_a_bad_selection_stops_before_any_work(
     assert captured.out == ""  # nothing identified
     assert len(captured.err.strip().splitlines()) == 1
     assert re.search(match, captured.err), captured.err
+
+
+def test_a_node_params_file_with_joints_serves_the_commands_too(
+    arm_bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The node's multi-joint params file is checked as the node checks it; the commands
+    take their joints from --joint and say the file's are not used."""
+    params = tmp_path / "arm.yaml"
+    body = "    joints: [shoulder, elbow]\n    command_indices: [0, 2]\n    {j}:\n      degree: 2\n"
+    params.write_text("/**/backlash_identifier:\n  ros__parameters:\n" + body.format(j="elbow"))
+    args = ["identify", str(arm_bag), *TOPICS, "--joint", "wrist", "--command-index", "3"]
+    assert main([*args, "--params-file", str(params), "--json"]) == 0
+    captured = capsys.readouterr()
+    assert json.loads(captured.out)["converged"]
+    assert "joints, command_indices, elbow.degree not used by identify" in captured.err
+    params.write_text("/**/backlash_identifier:\n  ros__parameters:\n" + body.format(j="elbw"))
+    assert main([*args, "--params-file", str(params), "--json"]) == 2
+    assert "'elbw' is not in 'joints' (close matches: elbow)" in capsys.readouterr().err
