@@ -1,6 +1,6 @@
 """Six joints at 1 kHz through one node under rclpy, next to a plain rclpy echo (issue 24).
 
-    python bench/six_joint.py [--seconds S] [--transport rclpy|dds] [--seed N]
+    python bench/six_joint.py [--seconds S] [--transport rclpy|dds] [--seed N] [--quick]
 
 Three processes share a DDS domain of their own (an id in 201-231, apart from the tests'):
 the node (``genbacklash node --transport rclpy`` with ``joints: [joint_1 .. joint_6]`` and
@@ -345,7 +345,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seconds", type=float, default=20.0)
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--transport", choices=("rclpy", "dds"), default="rclpy")
+    parser.add_argument("--quick", action="store_true", help="5 s (a smoke test)")
     args = parser.parse_args(argv)
+    if args.quick:
+        args.seconds = 5.0
     if args.role == "echo":
         return echo(args.lifetime)
     text = run(args.seconds, args.seed, args.transport)
