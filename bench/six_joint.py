@@ -84,6 +84,7 @@ class Played:
     commands: np.ndarray  # the arrays sent
     estimates: dict[str, list[float]]
     status_names: set[str]
+    faults: set[str]  # fault names any joint's diagnostics reported
     late: int
     cpu_s: float
     wall_s: float
@@ -113,6 +114,7 @@ def play(u: np.ndarray, y: np.ndarray, node_pid: int) -> Played:
     values = np.full((n, m + 1), np.nan)
     estimates: dict[str, list[float]] = {}
     names: set[str] = set()
+    faults: set[str] = set()
 
     def on_compensated(msg: Any) -> None:
         now = time.monotonic_ns()
@@ -134,7 +136,11 @@ def play(u: np.ndarray, y: np.ndarray, node_pid: int) -> Played:
         return take
 
     def on_diagnostics(msg: Any) -> None:
-        names.update(str(s.name) for s in msg.status)
+        for status in msg.status:
+            names.add(str(status.name))
+            for kv in status.values:
+                if kv.key == "faults" and kv.value != "none":
+                    faults.update(kv.value.split(","))
 
     node.create_subscription(Float64MultiArray, "/compensated_command", on_compensated, 2000)
     node.create_subscription(Float64MultiArray, PONG, on_pong, 2000)
@@ -195,7 +201,7 @@ def play(u: np.ndarray, y: np.ndarray, node_pid: int) -> Played:
         executor.shutdown(timeout_sec=1.0)
         node.destroy_node()
         rclpy.try_shutdown()
-    return Played(sent, back, pong, values, commands, estimates, names, late, cpu, wall)
+    return Played(sent, back, pong, values, commands, estimates, names, faults, late, cpu, wall)
 
 
 def pipeline_cost(u: np.ndarray, y: np.ndarray) -> float:
@@ -363,7 +369,9 @@ Node CPU: {p.cpu_s:.1f} s over {p.wall_s:.1f} s (first command to last reply) =
 **{cpu:.2f} of a core**. The pipeline alone, the same messages fed in process with no
 middleware (after the run; CPU time per second of data, every identification in line):
 {alone:.2f} of a core. The element no joint uses came back unchanged in every answered
-array: {passed}. Diagnostics statuses seen: {", ".join(f"`{s}`" for s in statuses)}.
+array: {passed}. Faults the joints' diagnostics reported (their elements pass through
+while one is active): {", ".join(sorted(p.faults)) or "none"}. Diagnostics statuses seen:
+{", ".join(f"`{s}`" for s in statuses)}.
 
 Targets:
 - every joint's estimate within 0.05 of its truth: {mark(est_ok)} (largest
