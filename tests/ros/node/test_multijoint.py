@@ -241,3 +241,33 @@ def test_a_joint_missing_from_a_message_passes_only_its_own_element() -> None:
     assert pipe.pipelines["a"].stats.encoder_messages == 2
     assert pipe.pipelines["b"].stats.dropped["encoder_invalid"] == 2
     pipe.close()
+
+
+def test_a_joint_state_command_is_compensated_joint_by_joint(
+    arm: list[tuple[int, str, Float64MultiArray | JointState]],
+) -> None:
+    """A JointState command: each listed joint's position compensated, by name, in one
+    message; a joint the node does not serve passes through; no command_indices."""
+    js = JointSet.from_mapping({"joints": ["wrist", "shoulder"], "command_type": "joint_state"})
+    pipe = MultiJointPipeline(js)
+    names = ("shoulder", "gripper", "elbow", "wrist")
+    sent = []
+    for receive_ns, topic, msg in arm:
+        if topic == COMMAND_TOPIC:
+            assert isinstance(msg, Float64MultiArray)
+            positions = (msg.data[0], msg.data[1], msg.data[2], msg.data[3])
+            command = JointState(Header(Time.from_ns(receive_ns)), names, positions)
+            out = pipe.on_command(command, receive_ns)
+            assert out[0].topic == "compensated_command"
+            reply = out[0].message
+            assert isinstance(reply, JointState) and reply.name == names
+            sent.append((positions, reply.position))
+        else:
+            pipe.on_encoder(msg, receive_ns)
+    pipe.close()
+    given = np.array([s[0] for s in sent])
+    got = np.array([s[1] for s in sent])
+    assert np.array_equal(got[:, 1:3], given[:, 1:3])  # gripper, elbow: not served
+    for k in (0, 3):  # shoulder, wrist compensated once their models are in
+        assert np.mean(got[:, k] != given[:, k]) > 0.3
+    assert pipe.pipelines["wrist"].estimate.available
