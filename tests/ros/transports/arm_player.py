@@ -7,7 +7,8 @@ jitter), played in real time: every 1 ms a ``sensor_msgs/JointState`` on ``/enco
 three positions (stamped when published), every 10 ms first a ``std_msgs/Float64MultiArray``
 on ``/command`` of four elements: ``[shoulder, k, elbow, wrist]`` with ``k`` the command's
 sequence number (element 1 is no joint's: it must come back unchanged). It waits until the
-node's subscriptions match, then ``--settle`` seconds, plays, waits for the answers and prints
+node's endpoints match (its subscriptions and its publishers, both ways), then ``--settle``
+seconds, plays, waits for the answers and prints
 one JSON line: what was sent, the compensated arrays received (by ``k``), the last estimate on
 each ``/backlash_identifier/<joint>/estimate``, the ``/diagnostics`` status names seen, and
 each joint's true parameters.
@@ -105,7 +106,14 @@ def main() -> int:
     try:
         deadline = time.monotonic() + args.match_timeout
         while time.monotonic() < deadline:
-            if command.get_subscription_count() >= 1 and encoder.get_subscription_count() >= 1:
+            if (
+                command.get_subscription_count() >= 1
+                and encoder.get_subscription_count() >= 1
+                and node.count_publishers("compensated_command") >= 1  # both ways matched
+                and all(
+                    node.count_publishers(f"/backlash_identifier/{n}/estimate") >= 1 for n in NAMES
+                )
+            ):
                 break
             time.sleep(0.05)
         else:
@@ -131,7 +139,7 @@ def main() -> int:
             reading.header.stamp = node.get_clock().now().to_msg()
             encoder.publish(reading)
         elapsed = time.monotonic() - start
-        wait_until = time.monotonic() + 10.0
+        wait_until = time.monotonic() + 30.0  # a loaded machine: the node may be behind
         while len(answered) < len(sent) and time.monotonic() < wait_until:
             time.sleep(0.05)
         time.sleep(1.5)  # an estimate and a diagnostics report more
