@@ -19,6 +19,10 @@ Interface (GUIDE §4; every name remappable, see :class:`Topics`)
   ROS 2's 10 and 5, so that a busy loop does not lose messages;
 * publishes ``~/estimate`` (``/backlash_identifier/estimate``), ``compensated_command`` (the
   command's type) and ``/diagnostics``, all with the default QoS.
+* with several joints (a :class:`~genbacklash_ros.node.joints.JointSet` with ``joints``) the
+  same pipeline as the rclpy node's (:func:`~genbacklash_ros.node.multijoint.make_pipeline`):
+  ``~/<joint>/estimate`` per joint instead of ``~/estimate``, one compensated array, one
+  ``/diagnostics`` status per joint.
 
 The loop
 --------

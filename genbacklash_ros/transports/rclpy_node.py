@@ -12,6 +12,10 @@ what it returns. All logic is in the pipeline.
   loaded machine a depth of 10 lost 2 % of the commands while the process was descheduled;
 * publishes ``~/estimate``, ``compensated_command`` (the command's type) and ``/diagnostics``
   (also on a 1 Hz timer with level STALE while no message arrives);
+* several joints (``joints``, ``command_indices``, ``<joint>.<name>``;
+  :mod:`~genbacklash_ros.node.joints`): still one subscription each, one compensated array,
+  ``~/<joint>/estimate`` per joint and one ``/diagnostics`` status per joint, all from one
+  :class:`~genbacklash_ros.node.multijoint.MultiJointPipeline` (:func:`make_pipeline`);
 * parameters: the params files in ``--ros-args`` are read first by the reader the DDS
   transport uses (:func:`~genbacklash_ros.node.parameters.load_params_file`, the same
   sections under the same namespace), so both transports accept and refuse a file alike, with
