@@ -36,6 +36,7 @@ BENCHMARKS = (
     "restart",
     "shutdown",
     "shutdown_dds",
+    "six_joint_rclpy",
     "fleet",
     "fleet_kill",
 )
@@ -44,6 +45,7 @@ BENCHMARKS = (
 RUNS = {
     "ros_latency_load": ("ros_latency", ["--load", "--rate", "500", "--warmup", "4"]),
     "shutdown_dds": ("shutdown", ["--transport", "dds"]),
+    "six_joint_rclpy": ("six_joint", []),
     "ros_latency_operation": ("ros_latency", ["--scenario", "operation", "--seeds", "0", "1", "2"]),
     "ros_latency_operation_load": (
         "ros_latency",

@@ -41,6 +41,7 @@ True
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -59,6 +60,7 @@ __all__ = [
     "HiddenEffects",
     "OperationRecord",
     "OperationSettings",
+    "arm_records",
     "operation_commands",
     "operation_record",
     "readings",
@@ -724,3 +726,64 @@ def operation_record(
         phase_starts=phase_starts,
         hidden=hidden,
     )
+
+
+def arm_records(
+    models: tuple[GeneralBacklash, ...] | list[GeneralBacklash],
+    settings: OperationSettings | None = None,
+    seed: int = 0,
+) -> list[OperationRecord]:
+    """An arm of several drivetrains on one clock: one :class:`OperationRecord` per model.
+
+    Each joint moves on its own (its commands drawn from its own stream, seeded by ``seed``
+    and the joint's index) with its own backlash, but the commands, the readings' stamps and
+    the lost readings are shared, as when one controller sends one command array and one
+    encoder message holds every joint. ``settings.model`` is replaced by each joint's.
+
+    >>> recs = arm_records([OPERATION_BACKLASH, worn(OPERATION_BACKLASH, 2.0)],
+    ...                    OperationSettings(duration=2.0), seed=3)
+    >>> bool((recs[0].sample_t_ns == recs[1].sample_t_ns).all())
+    True
+    >>> bool((recs[0].command_u != recs[1].command_u).any())
+    True
+    """
+    base = OperationSettings() if settings is None else settings
+    if not isinstance(base, OperationSettings):
+        raise GenBacklashError(f"settings must be OperationSettings, got {base!r}")
+    if len(models) == 0:
+        raise GenBacklashError("arm_records needs at least one model")
+    out: list[OperationRecord] = []
+    for j, model in enumerate(models):
+        cfg = dataclasses.replace(base, model=model)
+        values, phase_starts = operation_commands(np.random.default_rng([int(seed), 12, j]), cfg)
+        clock = np.random.default_rng([int(seed), 13])  # the same clocks and losses for all
+        cmd_t, t, u, x, y, received, c_left, c_right = drive(
+            clock,
+            values,
+            model,
+            command_rate=cfg.command_rate,
+            encoder_rate=cfg.encoder_rate,
+            command_jitter_ns=round(cfg.command_jitter * 1e9),
+            stamp_jitter_ns=cfg.stamp_jitter * 1e9,
+            wear=cfg.wear,
+            noise=cfg.noise,
+            quantum=cfg.quantum,
+            loss=cfg.loss,
+        )
+        out.append(
+            OperationRecord(
+                settings=cfg,
+                seed=int(seed),
+                command_t_ns=cmd_t,
+                command_u=values,
+                sample_t_ns=t,
+                u_all=u,
+                x_all=x,
+                y_all=np.asarray(y, dtype=np.float64),
+                received=received,
+                c_left=c_left,
+                c_right=c_right,
+                phase_starts=phase_starts,
+            )
+        )
+    return out

@@ -23,6 +23,7 @@ from genbacklash_core.diagnose import (
     diagnose,
     effect_names,
 )
+from genbacklash_ros.cli.joints import per_joint
 from genbacklash_ros.cli.replay import (
     BATCH_PARAMETERS,
     CommandParameters,
@@ -337,5 +338,7 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
         "command_index; the others are validated, then ignored (a note on stderr names those "
         "set to other than their defaults).",
     )
-    parser.set_defaults(func=cmd_diagnose)
+    parser.set_defaults(
+        func=per_joint(cmd_diagnose, data="data", dirs=("report",), report="report")
+    )
     return parser

@@ -31,6 +31,7 @@ from genbacklash_core.data import NonFinitePolicy
 from genbacklash_core.uncertainty import parameter_covariance, play_std
 from genbacklash_ros.bags.csvio import Series, write_series_csv
 from genbacklash_ros.cli import replay as replay_cli
+from genbacklash_ros.cli.joints import per_joint
 from genbacklash_ros.cli.paths import check_paths
 from genbacklash_ros.cli.start import add_checkpoint_option
 from genbacklash_ros.progress import Progress
@@ -378,7 +379,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
         "--plot", metavar="DIR", help="also write characteristic.png and history.png into DIR"
     )
     replay_cli.add_node_parameter_options(ident, used=_BATCH_USES.format(command="identify"))
-    ident.set_defaults(func=_cmd_identify)
+    ident.set_defaults(
+        func=per_joint(_cmd_identify, data="data", dirs=("plot",), files=("checkpoint",))
+    )
 
     sim = sub.add_parser(
         "simulate",

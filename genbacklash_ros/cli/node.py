@@ -19,7 +19,8 @@ from collections.abc import Sequence
 from typing import Any
 
 from genbacklash_core import GenBacklashError
-from genbacklash_ros.node.parameters import NODE_NAME, NodeParameters, load_params_file
+from genbacklash_ros.node.joints import JointSet, load_joint_set
+from genbacklash_ros.node.parameters import NODE_NAME
 from genbacklash_ros.transports.stop_signals import StopSignals
 
 __all__ = ["add_parser", "choose_transport", "main", "ros2_main", "run_node"]
@@ -122,7 +123,7 @@ def _domain_id(value: str) -> int:
     return number
 
 
-def _run_dds(args: argparse.Namespace, params: NodeParameters, stop: StopSignals) -> int:
+def _run_dds(args: argparse.Namespace, params: JointSet, stop: StopSignals) -> int:
     try:
         from genbacklash_ros.transports.dds_node import DdsNode, Topics
     except ImportError as err:
@@ -186,13 +187,13 @@ def run_node(args: argparse.Namespace) -> int:
         # (with the namespace: the sections that apply are the ones rcl applies to the rclpy
         # node)
         params = (
-            load_params_file(args.params_file, NODE_NAME, namespace=args.namespace)
+            load_joint_set(args.params_file, NODE_NAME, namespace=args.namespace)
             if args.params_file
             else None
         )
         if transport == "rclpy":
             return _run_rclpy(args, stop)
-        return _run_dds(args, params or NodeParameters(), stop)
+        return _run_dds(args, params or JointSet(), stop)
     finally:
         stop.release(exiting=bool(getattr(args, "entry_point", False)))
 

@@ -22,6 +22,7 @@ from genbacklash_ros.bags.bagio import BagError, read_aligned
 from genbacklash_ros.bags.csvio import Series, dropped_note, read_series_csv
 from genbacklash_ros.bags.replay import OUTPUT_TOPICS, ReplayResult, replay
 from genbacklash_ros.bags.simbags import COMMAND_TOPIC, ENCODER_TOPIC, MOTOR_TOPIC, SimulatedBag
+from genbacklash_ros.cli.joints import ListOption, per_joint
 from genbacklash_ros.cli.start import add_checkpoint_option, write_start
 from genbacklash_ros.node.parameters import (
     PARAMETER_SPECS,
@@ -109,16 +110,20 @@ def add_bag_input_options(parser: argparse.ArgumentParser, *, required: bool) ->
         "--joint",
         metavar="NAME",
         default=None,
+        action=ListOption,
         help="bag input: joint name in JointState messages (needed when they hold several "
-        "joints; a name the bag lacks stops with the names it has)",
+        "joints; a name the bag lacks stops with the names it has). Repeat it (or give "
+        "a,b,c) for several joints from one bag: each is run on its own, --json prints an "
+        "object keyed by joint, output directories get a sub-directory per joint",
     )
     parser.add_argument(
         "--command-index",
         metavar="I",
         type=int,
         default=None,
+        action=ListOption,
         help="bag input: element of a Float64MultiArray command (default 0; one beyond the "
-        "array stops with its length)",
+        "array stops with its length); with several --joint, one per joint in the same order",
     )
 
 
@@ -760,4 +765,12 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
         "--json", action="store_true", help="print the final estimate as one JSON object"
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-    parser.set_defaults(func=cmd_replay)
+    parser.set_defaults(
+        func=per_joint(
+            cmd_replay,
+            data="bag",
+            dirs=("output", "report"),
+            files=("checkpoint",),
+            report="report",
+        )
+    )

@@ -44,6 +44,7 @@ from genbacklash_core.guard import GuardSettings
 from genbacklash_ros.node.messages import COMMAND_TYPES, ENCODER_TYPES, CommandType, EncoderType
 
 __all__ = [
+    "JOINT_KEYS",
     "NODE_NAME",
     "PAIRS",
     "PARAMETER_SPECS",
@@ -51,6 +52,7 @@ __all__ = [
     "ParameterSpec",
     "RosArguments",
     "command_line_parameters",
+    "is_joint_parameter",
     "load_params_file",
     "parameter_table",
     "parse_param_overrides",
@@ -645,7 +647,7 @@ class RosArguments:
         genbacklash_core.errors.GenBacklashError: -p: unknown parameter 'degre' (close matches: ...)
         """
         for name in self.node_parameters():
-            if name not in _SPECS and not _is_standard(name):
+            if name not in _SPECS and not _is_standard(name) and not is_joint_parameter(name):
                 raise GenBacklashError(_unknown_name(name, "-p"))
 
 
@@ -819,7 +821,7 @@ def read_params_file(
         for name, value in _flatten("", params):
             if name in _STANDARD or name.startswith(_STANDARD_PREFIXES):
                 continue
-            if specific or name in _SPECS:
+            if specific or name in _SPECS or is_joint_parameter(name):
                 merged[name] = value
     return merged
 
@@ -850,6 +852,25 @@ def _params_from_file(path: str | Path, values: Mapping[str, object]) -> NodePar
 
 def _is_standard(name: str) -> bool:
     return name in _STANDARD or name.startswith(_STANDARD_PREFIXES)
+
+
+#: Names that select several joints in one node (:mod:`genbacklash_ros.node.joints`).
+JOINT_KEYS = ("joints", "command_indices")
+
+
+def is_joint_parameter(name: str) -> bool:
+    """True for ``joints``, ``command_indices`` and a ``<joint>.<name>`` override's *form*
+    (:mod:`genbacklash_ros.node.joints` checks the joint against ``joints``).
+
+    >>> is_joint_parameter("joints"), is_joint_parameter("elbow.degree")
+    (True, True)
+    >>> is_joint_parameter("elbow.degre"), is_joint_parameter("degree")
+    (False, False)
+    """
+    if name in JOINT_KEYS:
+        return True
+    joint, dot, rest = name.rpartition(".")
+    return bool(dot) and bool(joint) and rest in _SPECS
 
 
 def _close_matches(name: str) -> str:
@@ -949,10 +970,13 @@ def command_line_parameters(
     """
     file_values = read_params_file(params_file) if params_file else {}
     if params_file:
-        _params_from_file(params_file, file_values)
+        _check_joint_values(params_file, file_values)
+    node_values = {k: v for k, v in file_values.items() if not is_joint_parameter(k)}
+    if params_file:
+        _params_from_file(params_file, node_values)
     own = {k: v for k, v in overrides.items() if k in _SPECS}
     try:
-        params = NodeParameters.from_mapping({**file_values, **own})
+        params = NodeParameters.from_mapping({**node_values, **own})
     except GenBacklashError as err:
         raise GenBacklashError(f"--param: {err}") from err
     for name, value in (options or {}).items():
@@ -969,6 +993,19 @@ def command_line_parameters(
         if name in _SPECS:
             given[name] = getattr(params, name)
     return params, given
+
+
+def _check_joint_values(path: str | Path, values: Mapping[str, object]) -> None:
+    """A node params file's ``joints``, ``command_indices`` and ``<joint>.<name>`` checked as
+    the node checks them (the commands take their joints from ``--joint``, not from these)."""
+    if not any(is_joint_parameter(k) for k in values):
+        return
+    from genbacklash_ros.node.joints import JointSet  # (joints imports this module)
+
+    try:
+        JointSet.from_mapping(values)
+    except GenBacklashError as err:
+        raise GenBacklashError(f"params file {Path(path)}: {err}") from err
 
 
 def parameter_table() -> str:

@@ -232,12 +232,18 @@ class Output:
     estimate : Estimate or None
         The estimate behind an ``estimate`` or ``diagnostics`` output (with its covariance,
         for reports); None for commands.
+    joint : str
+        With several joints in one node (:mod:`~genbacklash_ros.node.multijoint`): the joint
+        an ``estimate`` or ``diagnostics`` output is about (an estimate goes to
+        ``~/<joint>/estimate``); "" for a single joint's outputs and for the compensated
+        command.
     """
 
     topic: TopicKey
     message: CommandMessage | Float64MultiArray | DiagnosticArray
     stamp_ns: int
     estimate: Estimate | None = None
+    joint: str = ""
 
 
 @dataclass(frozen=True)
@@ -345,6 +351,9 @@ class BacklashPipeline:
         :class:`~genbacklash_ros.node.identify.SyncWorker` (default: replay, tests; the same
         outputs on every run) or :class:`~genbacklash_ros.node.identify.ThreadWorker` (live
         transports: identification off the message path). Also a seam for tests.
+    status_name : str
+        Name of the ``/diagnostics`` status (several joints in one node: one per joint, the
+        name ending in the joint's name).
 
     Notes
     -----
@@ -362,6 +371,7 @@ class BacklashPipeline:
         batch: int = BATCH_SAMPLES,
         batch_ns: int = BATCH_NS,
         worker: WorkerFactory = SyncWorker,
+        status_name: str = "backlash_identifier",
     ) -> None:
         if not isinstance(params, NodeParameters):
             raise GenBacklashError(f"params must be NodeParameters, got {params!r}")
@@ -374,6 +384,7 @@ class BacklashPipeline:
                 raise GenBacklashError(f"{name} must be a whole number >= {low}, got {value!r}")
         if not callable(worker):
             raise GenBacklashError(f"worker must make an identifier worker, got {worker!r}")
+        self._status_name = str(status_name)
         self._writer: CheckpointWriter = (
             checkpoint_writer if checkpoint_writer is not None else save_checkpoint
         )
@@ -1083,6 +1094,7 @@ class BacklashPipeline:
             est,
             level=level,
             message="; ".join(parts),
+            name=self._status_name,
             hardware_id=self._params.joint,
             extra=extra,
         )

@@ -21,6 +21,10 @@ Interface (GUIDE §4; every name remappable, see :class:`Topics`)
   after the start), so that a publisher already running loses nothing after it matches them;
 * publishes ``~/estimate`` (``/backlash_identifier/estimate``), ``compensated_command`` (the
   command's type) and ``/diagnostics``, all with the default QoS.
+* with several joints (a :class:`~genbacklash_ros.node.joints.JointSet` with ``joints``) the
+  same pipeline as the rclpy node's (:func:`~genbacklash_ros.node.multijoint.make_pipeline`):
+  ``~/<joint>/estimate`` per joint instead of ``~/estimate``, one compensated array, one
+  ``/diagnostics`` status per joint.
 
 The loop
 --------
@@ -68,6 +72,7 @@ from cyclonedds.util import duration
 from genbacklash_core import GenBacklashError
 from genbacklash_ros.node.checkpoint_writer import BackgroundCheckpointWriter
 from genbacklash_ros.node.identify import live_worker
+from genbacklash_ros.node.joints import JointSet
 from genbacklash_ros.node.messages import (
     DiagnosticArray,
     DiagnosticStatus,
@@ -78,8 +83,9 @@ from genbacklash_ros.node.messages import (
     Message,
     MessageError,
 )
+from genbacklash_ros.node.multijoint import make_pipeline
 from genbacklash_ros.node.parameters import NODE_NAME, NodeParameters
-from genbacklash_ros.node.pipeline import BacklashPipeline, Output
+from genbacklash_ros.node.pipeline import Output
 from genbacklash_ros.node.wiring import READER_DEPTH
 from genbacklash_ros.transports.dds_convert import DDS_TYPES, from_dds, to_dds
 from genbacklash_ros.transports.dds_types import dds_topic
@@ -259,7 +265,9 @@ class DdsNode:
 
     Parameters
     ----------
-    params : NodeParameters
+    params : NodeParameters or JointSet
+        One joint's parameters, or several joints' (``joints``: one estimate topic each,
+        ``~/<joint>/estimate``; :mod:`~genbacklash_ros.node.multijoint`).
     domain_id : int, optional
         DDS domain; default ``ROS_DOMAIN_ID`` (0 when unset).
     topics : Topics
@@ -279,7 +287,7 @@ class DdsNode:
 
     def __init__(
         self,
-        params: NodeParameters,
+        params: NodeParameters | JointSet,
         *,
         domain_id: int | None = None,
         topics: Topics | None = None,
@@ -289,7 +297,10 @@ class DdsNode:
     ) -> None:
         if receive_time not in ("source", "take"):
             raise GenBacklashError(f"receive_time must be 'source' or 'take', got {receive_time!r}")
+        joints = params if isinstance(params, JointSet) else JointSet.single(params)
+        params = joints.base
         self.params = params
+        self.joints = joints
         self.domain_id = domain_id_from_env() if domain_id is None else int(domain_id)
         if not 0 <= self.domain_id <= MAX_DOMAIN_ID:
             raise GenBacklashError(f"domain id must lie in [0, {MAX_DOMAIN_ID}]")
@@ -299,8 +310,8 @@ class DdsNode:
         self._clock = clock
         self._stop = threading.Event()
         self._checkpoints = BackgroundCheckpointWriter()
-        self.pipeline = BacklashPipeline(
-            params, checkpoint_writer=self._checkpoints, worker=live_worker
+        self.pipeline = make_pipeline(
+            joints, checkpoint_writer=self._checkpoints, worker=live_worker
         )
         self._last_receive = {"command": -1, "encoder": -1}
         self._seq = 0
@@ -339,19 +350,28 @@ class DdsNode:
                 Topic(dp, dds_topic(t["compensated_command"]), command_type),
                 endpoint_qos(DEFAULT_QOS, command_ros),
             ),
-            "estimate": DataWriter(
-                dp,
-                Topic(dp, dds_topic(t["estimate"]), DDS_TYPES[estimate_ros]),
-                endpoint_qos(DEFAULT_QOS, estimate_ros),
-            ),
             "diagnostics": DataWriter(
                 dp,
                 Topic(dp, dds_topic(t["diagnostics"]), DDS_TYPES[diagnostics_ros]),
                 endpoint_qos(DEFAULT_QOS, diagnostics_ros),
             ),
         }
+        # one estimate writer per joint with `joints` (~/<joint>/estimate), else ~/estimate
+        estimate_topic = Topic(dp, dds_topic(t["estimate"]), DDS_TYPES[estimate_ros])
+        self._estimate_writers: dict[str, DataWriter[Any]] = {}
+        for joint in joints.joints or ("",):
+            topic = estimate_topic
+            if joint:
+                name = resolve_topic(f"~/{joint}/estimate", NODE_NAME, namespace)
+                topic = Topic(dp, dds_topic(name), DDS_TYPES[estimate_ros])
+            self._estimate_writers[joint] = DataWriter(
+                dp, topic, endpoint_qos(DEFAULT_QOS, estimate_ros)
+            )
         self._graph = GraphAnnouncer(dp, NODE_NAME, namespace)
-        self._graph.announce((self._command_reader, self._encoder_reader), self._writers.values())
+        self._graph.announce(
+            (self._command_reader, self._encoder_reader),
+            [*self._writers.values(), *self._estimate_writers.values()],
+        )
         self._watch = PublicationWatch(
             dp,
             {
@@ -518,7 +538,11 @@ class DdsNode:
 
     def _publish(self, outputs: list[Output]) -> None:
         for output in outputs:
-            writer = self._writers[output.topic]
+            writer = (
+                self._estimate_writers[output.joint]
+                if output.topic == "estimate"
+                else self._writers[output.topic]
+            )
             message = output.message
             if output.topic == "diagnostics" and isinstance(message, DiagnosticArray):
                 message = with_wiring(message, self._watch.mismatches)

@@ -12,6 +12,10 @@ what it returns. All logic is in the pipeline.
   loaded machine a depth of 10 lost 2 % of the commands while the process was descheduled;
 * publishes ``~/estimate``, ``compensated_command`` (the command's type) and ``/diagnostics``
   (also on a 1 Hz timer with level STALE while no message arrives);
+* several joints (``joints``, ``command_indices``, ``<joint>.<name>``;
+  :mod:`~genbacklash_ros.node.joints`): still one subscription each, one compensated array,
+  ``~/<joint>/estimate`` per joint and one ``/diagnostics`` status per joint, all from one
+  :class:`~genbacklash_ros.node.multijoint.MultiJointPipeline` (:func:`make_pipeline`);
 * parameters: the params files in ``--ros-args`` are read first by the reader the DDS
   transport uses (:func:`~genbacklash_ros.node.parameters.load_params_file`, the same
   sections under the same namespace), so both transports accept and refuse a file alike, with
@@ -73,6 +77,7 @@ from std_msgs.msg import MultiArrayDimension as RosMultiArrayDimension
 from genbacklash_core import GenBacklashError
 from genbacklash_ros.node.checkpoint_writer import BackgroundCheckpointWriter
 from genbacklash_ros.node.identify import live_worker
+from genbacklash_ros.node.joints import JointSet, is_joint_parameter, load_joint_set
 from genbacklash_ros.node.messages import (
     DiagnosticArray,
     Float64,
@@ -85,16 +90,15 @@ from genbacklash_ros.node.messages import (
     MultiArrayLayout,
     Time,
 )
+from genbacklash_ros.node.multijoint import MultiJointPipeline, make_pipeline
 from genbacklash_ros.node.parameters import (
     NODE_NAME,
     PARAMETER_SPECS,
-    NodeParameters,
     ParameterSpec,
-    load_params_file,
     parse_ros_arguments,
     resolve_requested,
 )
-from genbacklash_ros.node.pipeline import BacklashPipeline, Output
+from genbacklash_ros.node.pipeline import Output
 from genbacklash_ros.node.wiring import (
     READER_DEPTH,
     annotate,
@@ -106,7 +110,7 @@ from genbacklash_ros.transports.stop_signals import StopSignals
 __all__ = ["BacklashIdentifierNode", "descriptor", "from_ros", "main", "to_ros"]
 
 DEFAULT_DEPTH = 10  # ROS 2 default QoS: KEEP_LAST 10, RELIABLE, VOLATILE
-READ_ONLY = frozenset({"command_type", "encoder_type"})
+READ_ONLY = frozenset({"command_type", "encoder_type", "joints", "command_indices"})
 _ROS_COMMAND = {
     "float64": RosFloat64,
     "float64_multi_array": RosFloat64MultiArray,
@@ -121,15 +125,18 @@ PENDING_KEY = "parameters_pending"  # diagnostics key: pairs held at their last 
 # --------------------------------------------------------------------------- descriptors
 
 
-def descriptor(spec: ParameterSpec) -> Any:
-    """The ``ParameterDescriptor`` of one parameter (description, range, read-only)."""
+def descriptor(spec: ParameterSpec, name: str | None = None) -> Any:
+    """The ``ParameterDescriptor`` of one parameter (description, range, read-only);
+    ``name`` for a joint's own (``<joint>.<name>``)."""
     text = spec.description
     if spec.unit:
         text += f" [{spec.unit}]"
     if spec.restarts:
         text += " Changing it restarts identification."
+    if name is not None:
+        text = f"Joint {name.rpartition('.')[0]!r} only: {text}"
     desc = ParameterDescriptor(
-        name=spec.name,
+        name=name or spec.name,
         description=text,
         read_only=spec.name in READ_ONLY,
     )
@@ -233,20 +240,24 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
         # NodeParameters before rclpy sees them: rclpy would raise on an integer for a double
         # and on a value out of range, with a traceback. Raises: the node does not start.
         overrides = {
-            name: param.value for name, param in self._parameter_overrides.items() if name in _SPECS
+            name: param.value
+            for name, param in self._parameter_overrides.items()
+            if name in _SPECS or is_joint_parameter(name)
         }
-        self._params = NodeParameters.from_mapping(overrides)
+        self._joints = JointSet.from_mapping(overrides)
+        self._params = self._joints.base
         for spec in PARAMETER_SPECS:
             value = getattr(self._params, spec.name)
             self.declare_parameter(spec.name, value, descriptor(spec), ignore_override=True)
-        self._requested = self._params.to_mapping()  # what `ros2 param get` shows
+        self._declare_joint_parameters()
+        self._requested: dict[str, object] = dict(self._joints.to_mapping())  # `ros2 param get`
         self._pending: tuple[str, ...] = ()
         self._wiring: tuple[str, ...] = ()
         self._checkpoints = BackgroundCheckpointWriter(
             on_error=lambda reason: self.get_logger().warning(reason)
         )
-        self._pipeline = BacklashPipeline(
-            self._params, checkpoint_writer=self._checkpoints, worker=live_worker
+        self._pipeline = make_pipeline(
+            self._joints, checkpoint_writer=self._checkpoints, worker=live_worker
         )
         if self._pipeline.warm_start_note:
             self.get_logger().info(self._pipeline.warm_start_note)
@@ -262,8 +273,16 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
             "compensated_command": self.create_publisher(
                 command_type, "compensated_command", DEFAULT_DEPTH
             ),
-            "estimate": self.create_publisher(RosFloat64MultiArray, "~/estimate", DEFAULT_DEPTH),
             "diagnostics": self.create_publisher(RosDiagnosticArray, "/diagnostics", DEFAULT_DEPTH),
+        }
+        # one estimate topic per joint with `joints` (~/<joint>/estimate), else ~/estimate
+        self._estimates = {
+            joint: self.create_publisher(
+                RosFloat64MultiArray,
+                f"~/{joint}/estimate" if joint else "~/estimate",
+                DEFAULT_DEPTH,
+            )
+            for joint in (self._joints.joints or ("",))
         }
         # deep histories: the same QoS as ROS 2's defaults for matching, more room while busy
         self._command_sub = self.create_subscription(
@@ -285,12 +304,48 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
 
     # ------------------------------------------------------------------ parameters
 
+    def _declare_joint_parameters(self) -> None:
+        """With ``joints``: ``joints``, ``command_indices`` (read-only) and each
+        ``<joint>.<name>`` the params file or ``-p`` set (settable at run time)."""
+        joints = self._joints
+        if not joints.multi:
+            return
+        self.declare_parameter(
+            "joints",
+            list(joints.joints),
+            ParameterDescriptor(
+                name="joints",
+                description="Joints served (names in the encoder's JointState).",
+                read_only=True,
+            ),
+            ignore_override=True,
+        )
+        if joints.command_indices:
+            self.declare_parameter(
+                "command_indices",
+                list(joints.command_indices),
+                ParameterDescriptor(
+                    name="command_indices",
+                    description="Float64MultiArray command: each joint's element, in order.",
+                    read_only=True,
+                ),
+                ignore_override=True,
+            )
+        for joint, name, _ in joints.overrides:
+            params = joints.per_joint[joints.joints.index(joint)]
+            self.declare_parameter(
+                f"{joint}.{name}",
+                getattr(params, name),
+                descriptor(_SPECS[name], f"{joint}.{name}"),
+                ignore_override=True,
+            )
+
     def _coerce_parameters(self, parameters: Sequence[Any]) -> list[Any]:
         """A whole number for a double parameter becomes the double (``ros2 param set``
         sends ``5`` as an integer); everything else passes unchanged."""
         out = []
         for param in parameters:
-            spec = _SPECS.get(param.name)
+            spec = _spec_of(param.name)
             value = param.value
             if (
                 spec is not None
@@ -306,7 +361,7 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
         """Refuse a value that is invalid on its own, with the reason; pairs are resolved
         after the request (:func:`resolve_requested`), so a pair moves in either order."""
         for param in parameters:
-            spec = _SPECS.get(param.name)
+            spec = _spec_of(param.name)
             if spec is None:
                 continue
             try:
@@ -316,10 +371,13 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, parameters: Sequence[Any]) -> None:
-        changes = {p.name: p.value for p in parameters if p.name in _SPECS}
+        changes = {p.name: p.value for p in parameters if _spec_of(p.name) is not None}
         if not changes:
             return
         self._requested.update(changes)
+        if isinstance(self._pipeline, MultiJointPipeline):
+            self._apply_joint_parameters()
+            return
         params, pending = resolve_requested(self._params, self._requested)
         for line in pending:
             if line not in self._pending:
@@ -330,8 +388,29 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
                 k: v for k, v in params.to_mapping().items() if v != getattr(self._params, k)
             }
             self._params = params
+            assert not isinstance(self._pipeline, MultiJointPipeline)
             self._pipeline.set_params(params)
             self.get_logger().info(f"parameters changed: {applied}")
+
+    def _apply_joint_parameters(self) -> None:
+        """Several joints: the values held, as a whole, applied when they are consistent;
+        otherwise the node keeps running on its last consistent set and says so under
+        ``parameters_pending`` until a later set makes them consistent."""
+        assert isinstance(self._pipeline, MultiJointPipeline)
+        try:
+            joints = JointSet.from_mapping(self._requested)
+        except GenBacklashError as err:
+            line = f"{err}: running on the last consistent parameters until it is resolved"
+            if (line,) != self._pending:
+                self.get_logger().warning(line)
+            self._pending = (line,)
+            return
+        self._pending = ()
+        if joints != self._joints:
+            self._pipeline.set_joint_set(joints)
+            self._joints = joints
+            self._params = joints.base
+            self.get_logger().info("parameters changed")
 
     # ------------------------------------------------------------------ callbacks
 
@@ -401,7 +480,10 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
             if isinstance(message, DiagnosticArray):
                 message = annotate(message, self._wiring)
                 message = annotate(message, self._pending, key=PENDING_KEY)
-            self._outputs[output.topic].publish(to_ros(message))
+            if output.topic == "estimate":
+                self._estimates[output.joint].publish(to_ros(message))
+            else:
+                self._outputs[output.topic].publish(to_ros(message))
 
     # ------------------------------------------------------------------ shutdown
 
@@ -419,6 +501,14 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
         except Exception as err:  # the middleware may be shutting down: keep the checkpoint
             self.get_logger().warning(f"final outputs not published: {err}")
         self._checkpoints.close()
+
+
+def _spec_of(name: str) -> ParameterSpec | None:
+    """The spec of a parameter name: its own, or a joint's override's (``<joint>.<name>``)."""
+    spec = _SPECS.get(name)
+    if spec is None and is_joint_parameter(name) and "." in name:
+        spec = _SPECS.get(name.rpartition(".")[2])
+    return spec
 
 
 def _error(text: str) -> int:
@@ -453,7 +543,7 @@ def _run(argv: list[str], stop: StopSignals) -> int:
     ros = parse_ros_arguments(argv)
     try:  # the params files as the DDS transport reads them, before rcl does; then `-p` names
         for path in ros.params_files:
-            load_params_file(path, ros.node_name, namespace=ros.namespace)
+            load_joint_set(path, ros.node_name, namespace=ros.namespace)
         ros.check_parameter_names()
     except GenBacklashError as err:
         return _error(str(err))

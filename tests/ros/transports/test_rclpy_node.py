@@ -449,3 +449,49 @@ def test_a_second_sigint_during_the_final_refit_is_ignored(
     assert events == ["finish", "refit done", "checkpoints closed"]
     assert "Traceback" not in err and "2 more interrupt(s) ignored while finishing" in err
     assert signal.getsignal(signal.SIGINT) == before  # restored
+
+
+@needs_rclpy
+def test_several_joints_topics_and_parameters(
+    ros_init: Callable[..., None], tmp_path: Path
+) -> None:
+    """With ``joints``: one estimate topic per joint (no ``~/estimate``), the joint lists
+    read-only, a ``<joint>.<name>`` set at start settable at run time for that joint only,
+    and a change that makes the joints inconsistent held (parameters_pending) until resolved."""
+    from rclpy.parameter import Parameter
+
+    from genbacklash_ros.node.multijoint import MultiJointPipeline
+    from genbacklash_ros.transports import rclpy_node
+
+    arm = tmp_path / "arm.yaml"
+    arm.write_text(
+        "/**/backlash_identifier:\n  ros__parameters:\n"
+        "    joints: [a, b]\n    command_indices: [1, 0]\n    b:\n      degree: 2\n"
+    )
+    ros_init("--params-file", str(arm))
+    node = rclpy_node.BacklashIdentifierNode()
+    try:
+        own = {p.topic_name for p in node.publishers}
+        assert {"/backlash_identifier/a/estimate", "/backlash_identifier/b/estimate"} <= own
+        assert "/backlash_identifier/estimate" not in own
+        assert [s.topic_name for s in node.subscriptions].count("/encoder") == 1
+        pipe = node._pipeline
+        assert isinstance(pipe, MultiJointPipeline)
+        assert [p.params.degree for p in pipe.pipelines.values()] == [3, 2]
+        assert list(node.get_parameter("joints").value) == ["a", "b"]
+        result = node.set_parameters([Parameter("joints", value=["a"])])[0]
+        assert not result.successful  # read-only
+        result = node.set_parameters([Parameter("b.degree", value=12)])[0]
+        assert not result.successful and "degree" in result.reason
+        assert node.set_parameters([Parameter("b.degree", value=4)])[0].successful
+        assert [p.params.degree for p in pipe.pipelines.values()] == [3, 4]
+        assert node.set_parameters([Parameter("publish_rate", value=2)])[0].successful
+        assert [p.params.publish_rate for p in pipe.pipelines.values()] == [2.0, 2.0]
+        # gate_low above gate_high: held, and said, until gate_high follows
+        assert node.set_parameters([Parameter("gate_low", value=0.7)])[0].successful
+        assert pipe.pipelines["a"].params.gate_low == 0.2 and node._pending
+        assert node.set_parameters([Parameter("gate_high", value=0.9)])[0].successful
+        assert pipe.pipelines["a"].params.gate_low == 0.7 and not node._pending
+    finally:
+        node.finish()
+        node.destroy_node()

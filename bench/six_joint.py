@@ -1,0 +1,408 @@
+"""Six joints at 1 kHz through one node under rclpy, next to a plain rclpy echo (issue 24).
+
+    python bench/six_joint.py [--seconds S] [--transport rclpy|dds] [--seed N] [--quick]
+
+Three processes share a DDS domain of their own (an id in 201-231, apart from the tests'):
+the node (``genbacklash node --transport rclpy`` with ``joints: [joint_1 .. joint_6]`` and
+``command_indices: [0 .. 5]``; defaults otherwise), a plain rclpy echo (this script with
+``--role echo``: every ``std_msgs/Float64MultiArray`` taken on ``/six_joint/ping`` published
+back on ``/six_joint/pong``; default QoS, ``rclpy.spin_once``) and the player (this process,
+rclpy). The arm: six drivetrains of the operation scenario's backlash with dead zones 0.6x to
+2x (:func:`genbacklash_core.scenarios.arm_records`; each joint its own motion; commands and
+readings at 1 kHz, no jitter, no loss). Once the node and the echo have matched, at each 1 ms
+tick (sleeping until its deadline) the player publishes the command ``[u_1 .. u_6, k]`` on
+``/command`` (element 6, the sequence number, is no joint's: the node passes it through), the
+six-joint ``sensor_msgs/JointState`` stamped after it on ``/encoder`` (sensor-data QoS) and a
+ping ``[k]``. An executor thread of the player takes ``/compensated_command``, the pongs,
+every ``/backlash_identifier/<joint>/estimate`` and ``/diagnostics``.
+
+Measured, over every command from the first (the first 5 s included): commands answered (a
+compensated array with that ``k``), per joint the share of answered arrays whose element
+differs from the command in the second half (compensated), latency (receive time in the
+callback less publish time, the player's monotonic clock) of the compensated command and of
+the pong in the same run, the node's CPU fraction (``utime + stime`` from
+``/proc/<pid>/stat`` from the first command to the last reply, divided by that wall time)
+and each joint's largest |parameter error| of its last estimate against its truth.
+Targets (issue 24): every estimate within 0.05, 100 % answered with all six compensated, at
+most 0.6 of a core, median and p99 within 1.5x the echo's.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import random
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from _common import command_line, machine_description, md_table, write_section
+
+from genbacklash_core.scenarios import OPERATION_BACKLASH, OperationSettings, arm_records, worn
+
+JOINTS = tuple(f"joint_{i + 1}" for i in range(6))
+FACTORS = (0.6, 0.8, 1.0, 1.2, 1.5, 2.0)
+PING, PONG = "/six_joint/ping", "/six_joint/pong"
+TICK_NS = 1_000_000
+
+
+def echo(lifetime_s: float) -> int:
+    """The reference: ping -> pong, nothing else."""
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+    from std_msgs.msg import Float64MultiArray
+
+    rclpy.init()
+    node = rclpy.create_node("six_joint_echo")
+    pong = node.create_publisher(Float64MultiArray, PONG, 10)
+    node.create_subscription(Float64MultiArray, PING, pong.publish, 2000)
+    end = time.monotonic() + lifetime_s
+    try:
+        while rclpy.ok() and time.monotonic() < end:
+            rclpy.spin_once(node, timeout_sec=0.5)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+@dataclass
+class Played:
+    sent: np.ndarray  # publish time per command, monotonic ns
+    back: np.ndarray  # compensated array received, monotonic ns (0: never)
+    pong: np.ndarray
+    values: np.ndarray  # the compensated arrays received (NaN where none)
+    commands: np.ndarray  # the arrays sent
+    estimates: dict[str, list[float]]
+    status_names: set[str]
+    faults: set[str]  # fault names any joint's diagnostics reported
+    late: int
+    cpu_s: float
+    wall_s: float
+
+
+def cpu_seconds(pid: int) -> float:
+    """``utime + stime`` of a process, seconds (Linux ``/proc``)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def play(u: np.ndarray, y: np.ndarray, node_pid: int) -> Played:
+    """Publish the arm's commands and readings in real time; what came back."""
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import qos_profile_sensor_data
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray
+
+    n, m = u.shape[1], len(JOINTS)
+    rclpy.init()
+    node = rclpy.create_node("six_joint_player")
+    sent = np.zeros(n, dtype=np.int64)
+    back = np.zeros(n, dtype=np.int64)
+    pong = np.zeros(n, dtype=np.int64)
+    values = np.full((n, m + 1), np.nan)
+    estimates: dict[str, list[float]] = {}
+    names: set[str] = set()
+    faults: set[str] = set()
+
+    def on_compensated(msg: Any) -> None:
+        now = time.monotonic_ns()
+        k = int(msg.data[m])
+        if 0 <= k < n and not back[k]:
+            back[k] = now
+            values[k] = msg.data
+
+    def on_pong(msg: Any) -> None:
+        now = time.monotonic_ns()
+        k = int(msg.data[0])
+        if 0 <= k < n and not pong[k]:
+            pong[k] = now
+
+    def on_estimate(joint: str) -> Any:
+        def take(msg: Any) -> None:
+            estimates[joint] = list(msg.data)
+
+        return take
+
+    def on_diagnostics(msg: Any) -> None:
+        for status in msg.status:
+            names.add(str(status.name))
+            for kv in status.values:
+                if kv.key == "faults" and kv.value != "none":
+                    faults.update(kv.value.split(","))
+
+    node.create_subscription(Float64MultiArray, "/compensated_command", on_compensated, 2000)
+    node.create_subscription(Float64MultiArray, PONG, on_pong, 2000)
+    for joint in JOINTS:
+        node.create_subscription(
+            Float64MultiArray, f"/backlash_identifier/{joint}/estimate", on_estimate(joint), 10
+        )
+    node.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, 10)
+    command = node.create_publisher(Float64MultiArray, "/command", 10)
+    encoder = node.create_publisher(JointState, "/encoder", qos_profile_sensor_data)
+    ping = node.create_publisher(Float64MultiArray, PING, 10)
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
+    commands = np.vstack([u, np.arange(n, dtype=np.float64)]).T
+    try:
+        deadline = time.monotonic() + 60.0
+        while min(command.get_subscription_count(), encoder.get_subscription_count()) < 1 or (
+            ping.get_subscription_count() < 1
+            or node.count_publishers("/compensated_command") < 1
+            or node.count_publishers(PONG) < 1
+        ):
+            if time.monotonic() > deadline:
+                raise RuntimeError("the node's or the echo's endpoints did not match in 60 s")
+            time.sleep(0.05)
+        time.sleep(1.0)  # let discovery settle both ways
+        rows = commands.tolist()
+        readings = y.T.tolist()
+        joints = list(JOINTS)
+        cpu0, start = cpu_seconds(node_pid), time.monotonic_ns()
+        late = 0
+        for k in range(n):
+            tick = start + k * TICK_NS
+            while (wait := tick - time.monotonic_ns()) > 0:
+                time.sleep(wait / 1e9)
+            if time.monotonic_ns() - tick > TICK_NS:
+                late += 1
+            sent[k] = time.monotonic_ns()
+            command.publish(Float64MultiArray(data=rows[k]))
+            reading = JointState(name=joints, position=readings[k])
+            reading.header.stamp = node.get_clock().now().to_msg()
+            encoder.publish(reading)
+            ping.publish(Float64MultiArray(data=[float(k)]))
+        # replies in flight (a node behind works off its backlog): until all came or none
+        # for 3 s; the node's CPU and the wall time run to the last reply (at least the play)
+        quiet_since, last_count = time.monotonic(), -1
+        while time.monotonic() - quiet_since < 3.0 and int((back > 0).sum()) < n:
+            count = int((back > 0).sum())
+            if count != last_count:
+                quiet_since, last_count = time.monotonic(), count
+            time.sleep(0.05)
+        cpu = cpu_seconds(node_pid) - cpu0
+        end = max(int(back.max()), int(sent[-1]))
+        wall = (end - start) / 1e9
+        time.sleep(1.5)  # the last estimates and diagnostics
+    finally:
+        executor.shutdown(timeout_sec=1.0)
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return Played(sent, back, pong, values, commands, estimates, names, faults, late, cpu, wall)
+
+
+def pipeline_cost(u: np.ndarray, y: np.ndarray) -> float:
+    """CPU seconds per second of data of the node's pipeline alone (no middleware): the same
+    messages fed in process to the six-joint pipeline, as fast as it takes them, with the
+    synchronous identify workers (every batch identified in line: a thread worker fed faster
+    than real time would skip batches and understate the cost)."""
+    from genbacklash_ros.node.joints import JointSet
+    from genbacklash_ros.node.messages import Float64MultiArray, Header, JointState, Time
+    from genbacklash_ros.node.multijoint import MultiJointPipeline
+
+    joints = JointSet.from_mapping(
+        {"joints": list(JOINTS), "command_indices": list(range(len(JOINTS)))}
+    )
+    pipe = MultiJointPipeline(joints)
+    n = u.shape[1]
+    rows = np.vstack([u, np.arange(n, dtype=np.float64)]).T.tolist()
+    readings = y.T.tolist()
+    t0 = 1_700_000_000 * 1_000_000_000
+    cpu0 = time.process_time()
+    for k in range(n):
+        at = t0 + k * TICK_NS
+        pipe.on_command(Float64MultiArray(data=tuple(rows[k])), at)
+        reading = JointState(Header(Time.from_ns(at + 100_000)), JOINTS, tuple(readings[k]))
+        pipe.on_encoder(reading, at + 200_000)
+    pipe.finish(refit=False)
+    cpu = time.process_time() - cpu0
+    pipe.close()
+    return cpu / (n * TICK_NS / 1e9)
+
+
+def latency(sent: np.ndarray, back: np.ndarray) -> tuple[int, float, float, float]:
+    """(answered, median ms, p99 ms, max ms) over the answered ones."""
+    ok = back > 0
+    ms = (back[ok] - sent[ok]) / 1e6
+    if not ms.size:
+        return 0, float("nan"), float("nan"), float("nan")
+    return int(ok.sum()), float(np.median(ms)), float(np.percentile(ms, 99)), float(ms.max())
+
+
+def run(seconds: float, seed: int, transport: str) -> str:
+    models = [worn(OPERATION_BACKLASH, f) for f in FACTORS]
+    settings = OperationSettings(
+        duration=seconds,
+        command_rate=1000.0,
+        encoder_rate=1000.0,
+        command_jitter=0.0,
+        stamp_jitter=0.0,
+        loss=0.0,
+    )
+    records = arm_records(models, settings, seed)
+    u = np.stack([r.command_u for r in records])
+    y = np.stack([r.y_all for r in records])
+    n = min(u.shape[1], y.shape[1])
+    u, y = u[:, :n], y[:, :n]
+    domain = str(random.randint(201, 231))
+    env = {**os.environ, "ROS_DOMAIN_ID": domain}
+    with tempfile.TemporaryDirectory(prefix="six_joint_") as tmp:
+        params = Path(tmp) / "six.yaml"
+        params.write_text(
+            "/**/backlash_identifier:\n  ros__parameters:\n"
+            "    command_type: float64_multi_array\n"
+            f"    joints: [{', '.join(JOINTS)}]\n"
+            f"    command_indices: [{', '.join(str(i) for i in range(len(JOINTS)))}]\n"
+        )
+        log = Path(tmp) / "node.log"
+        node = subprocess.Popen(
+            [
+                *(sys.executable, "-m", "genbacklash_ros.cli.node", "--transport", transport),
+                *("--params-file", str(params)),
+            ],
+            env=env,
+            stdout=subprocess.DEVNULL,
+            stderr=log.open("wb"),
+        )
+        echo_proc = subprocess.Popen(
+            [sys.executable, __file__, "--role", "echo", "--lifetime", f"{seconds + 120:.0f}"],
+            env=env,
+        )
+        os.environ["ROS_DOMAIN_ID"] = domain
+        try:
+            played = play(u, y, node.pid)
+        finally:
+            for proc in (node, echo_proc):
+                proc.send_signal(signal.SIGINT)
+            code = node.wait(timeout=60)
+            echo_proc.wait(timeout=30)
+        node_log = log.read_text()
+    alone = pipeline_cost(u, y)
+    return report(played, models, seconds, seed, transport, code, node_log, alone)
+
+
+def report(
+    p: Played,
+    models: list[Any],
+    seconds: float,
+    seed: int,
+    transport: str,
+    code: int,
+    log: str,
+    alone: float,
+) -> str:
+    n = p.sent.size
+    comp = latency(p.sent, p.back)
+    ref = latency(p.sent, p.pong)
+    first5 = p.sent - p.sent[0] < 5_000_000_000
+    comp5 = latency(p.sent[first5], p.back[first5])
+    ref5 = latency(p.sent[first5], p.pong[first5])
+    half = slice(n // 2, n)
+    answered = p.back[half] > 0
+    shares = [
+        float(np.mean(p.values[half][answered, j] != p.commands[half][answered, j]))
+        for j in range(len(JOINTS))
+    ]
+    passed = bool(np.array_equal(p.values[p.back > 0, -1], p.commands[p.back > 0, -1]))
+    errors = {
+        j: float(np.max(np.abs(np.array(p.estimates[j]) - mdl.parameters())))
+        if j in p.estimates
+        else float("nan")
+        for j, mdl in zip(JOINTS, models, strict=True)
+    }
+    cpu = p.cpu_s / p.wall_s
+    rows = [
+        ["compensated command (node)", f"{comp[0]} / {n}", *(f"{v:.2f}" for v in comp[1:])],
+        ["pong (plain rclpy echo)", f"{ref[0]} / {n}", *(f"{v:.2f}" for v in ref[1:])],
+        ["node / echo", "", f"{comp[1] / ref[1]:.2f}x", f"{comp[2] / ref[2]:.2f}x", ""],
+        ["first 5 s: node", f"{comp5[0]}", *(f"{v:.2f}" for v in comp5[1:])],
+        ["first 5 s: echo", f"{ref5[0]}", *(f"{v:.2f}" for v in ref5[1:])],
+    ]
+    table = md_table(["", "answered", "median ms", "p99 ms", "max ms"], rows)
+    joint_rows = [
+        [j, f"{FACTORS[i]:g}x", f"{errors[j]:.4f}", f"{100 * shares[i]:.1f} %"]
+        for i, j in enumerate(JOINTS)
+    ]
+    joints_table = md_table(
+        ["joint", "dead zones", "max |parameter error|", "elements compensated (2nd half)"],
+        joint_rows,
+    )
+    statuses = sorted(s for s in p.status_names if s.startswith("backlash_identifier"))
+
+    def mark(ok: bool) -> str:
+        return "met" if ok else "NOT met"
+
+    all_answered = comp[0] == n
+    lat_ok = comp[1] <= 1.5 * ref[1] and comp[2] <= 1.5 * ref[2]
+    est_ok = all(e < 0.05 for e in errors.values())
+    six_ok = all(s > 0.5 for s in shares)
+    spread = f"{min(shares) * 100:.0f}-{max(shares) * 100:.0f}"
+    return f"""## Six joints through one node ({transport}, issue 24)
+
+`{command_line()}`. Machine: {machine_description()}.
+
+One `genbacklash node --transport {transport}` serving six joints (`joints`,
+`command_indices`), fed for {seconds:g} s at 1 kHz (seed {seed}) by an rclpy player: a
+7-element Float64MultiArray command (element 6 the sequence number, no joint's), a six-joint
+JointState and a ping to a plain rclpy echo at each tick. Every command counts, from the
+first (the first 5 s included). Player ticks late by more than 1 ms: {p.late}. Node exit
+status {code}{", no traceback" if "Traceback" not in log else ", with a traceback"}.
+
+{table}
+
+{joints_table}
+
+Node CPU: {p.cpu_s:.1f} s over {p.wall_s:.1f} s (first command to last reply) =
+**{cpu:.2f} of a core**. The pipeline alone, the same messages fed in process with no
+middleware (after the run; CPU time per second of data, every identification in line):
+{alone:.2f} of a core. The element no joint uses came back unchanged in every answered
+array: {passed}. Faults the joints' diagnostics reported (their elements pass through
+while one is active): {", ".join(sorted(p.faults)) or "none"}. Diagnostics statuses seen:
+{", ".join(f"`{s}`" for s in statuses)}.
+
+Targets:
+- every joint's estimate within 0.05 of its truth: {mark(est_ok)} (largest
+  {max(errors.values()):.4f});
+- 100 % of the commands answered, all six compensated: {mark(all_answered and six_ok)}
+  ({comp[0]} of {n}; each joint's element compensated in {spread} % of the second half's
+  arrays);
+- at most 0.6 of a core: {mark(cpu <= 0.6)} ({cpu:.2f});
+- latency median and p99 within 1.5x of the echo's: {mark(lat_ok)} (median
+  {comp[1] / ref[1]:.2f}x, p99 {comp[2] / ref[2]:.2f}x).
+"""
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--role", choices=("player", "echo"), default="player")
+    parser.add_argument("--lifetime", type=float, default=300.0, help="echo: seconds to live")
+    parser.add_argument("--seconds", type=float, default=20.0)
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--transport", choices=("rclpy", "dds"), default="rclpy")
+    parser.add_argument("--quick", action="store_true", help="5 s (a smoke test)")
+    args = parser.parse_args(argv)
+    if args.quick:
+        args.seconds = 5.0
+    if args.role == "echo":
+        return echo(args.lifetime)
+    text = run(args.seconds, args.seed, args.transport)
+    print(text)
+    write_section(f"six_joint_{args.transport}", text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

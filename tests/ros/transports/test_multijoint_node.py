@@ -1,0 +1,132 @@
+"""One node, three joints, as real processes: the node (rclpy, or the plain-DDS transport) and
+a player publishing a simulated arm over rclpy (``arm_player.py``: a three-joint JointState at
+1 kHz, a four-element Float64MultiArray command at 100 Hz whose element 1 is no joint's).
+
+Checked per transport: every command answered with one compensated array (the free element
+unchanged, every joint's element compensated), each joint's estimate on
+``/backlash_identifier/<joint>/estimate`` near its own truth (three different drivetrains), one
+``/diagnostics`` status per joint named after it, and a clean exit on SIGINT.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from ._dds import stop_node
+from ._ros2 import domain_id, rclpy_missing
+
+HERE = Path(__file__).parent
+NAMES = ("shoulder", "elbow", "wrist")
+SECONDS = 10.0
+
+pytestmark = pytest.mark.skipif(bool(rclpy_missing()), reason=rclpy_missing() or "-")
+
+
+@dataclass
+class Played:
+    summary: dict[str, Any]
+    returncode: int
+    log: str
+
+
+def _params(path: Path) -> Path:
+    path.write_text(
+        "/**/backlash_identifier:\n"
+        "  ros__parameters:\n"
+        "    command_type: float64_multi_array\n"
+        "    joints: [shoulder, elbow, wrist]\n"
+        "    command_indices: [0, 2, 3]\n"
+        "    publish_rate: 5.0\n"
+        "    wrist:\n"
+        "      publish_rate: 10.0\n"
+    )
+    return path
+
+
+@pytest.fixture(scope="module", params=["rclpy", "dds"])
+def played(
+    request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
+) -> Iterator[Played]:
+    transport = str(request.param)
+    if transport == "dds":
+        pytest.importorskip("cyclonedds", reason="cyclonedds is not installed (pip install .[dds])")
+    tmp = tmp_path_factory.mktemp(f"arm_{transport}")
+    domain = domain_id()
+    log = tmp / "node.log"
+    cmd = [sys.executable, "-m", "genbacklash_ros.cli.node", "--transport", transport]
+    cmd += ["--params-file", str(_params(tmp / "arm.yaml")), "--domain-id", str(domain)]
+    node = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=log.open("wb"))
+    try:
+        # the DDS transport may lose what a Fast DDS peer sends in its first second after
+        # matching (issue 24's deliverable 3, not this test's subject): the player waits
+        settle = "2.0" if transport == "dds" else "0.5"
+        player = subprocess.run(
+            [
+                sys.executable,
+                str(HERE / "arm_player.py"),
+                "--domain-id",
+                str(domain),
+                "--seconds",
+                str(SECONDS),
+                "--settle",
+                settle,
+            ],
+            capture_output=True,
+            text=True,
+            timeout=120,
+            check=False,
+        )
+        assert player.returncode == 0, player.stdout + player.stderr + log.read_text()
+        summary = json.loads(player.stdout.strip().splitlines()[-1])
+        returncode = stop_node(node, log)
+    finally:
+        if node.poll() is None:
+            node.kill()
+            node.wait(10)
+    yield Played(summary, returncode, log.read_text())
+
+
+def test_every_command_is_answered_with_one_compensated_array(played: Played) -> None:
+    sent = np.array(played.summary["sent"])
+    answered = played.summary["answered"]
+    assert len(answered) == len(sent), played.log  # 100 %: one array per command
+    got = np.array([answered[str(k)] for k in range(len(sent))])
+    assert got.shape == sent.shape == (len(sent), 4)
+    assert np.array_equal(got[:, 1], sent[:, 1])  # no joint's element: passed through
+    # each joint's element compensated once its model is in (when depends on the joint's
+    # motion and, live, on the run: from 1 to 8 s here; checked to the bit in process by
+    # tests/ros/node/test_multijoint.py)
+    for index in (0, 2, 3):
+        assert np.sum(got[:, index] != sent[:, index]) >= 20, index
+
+
+def test_each_joint_estimate_is_near_its_own_truth(played: Played) -> None:
+    s = played.summary
+    for name in NAMES:
+        assert s["estimate_counts"][name] >= 5, name
+        assert s["labels"][name].startswith("m_left_1,"), name
+        error = np.max(np.abs(np.array(s["estimates"][name]) - np.array(s["truth"][name])))
+        assert error < 0.05, (name, error)
+    # the wrist publishes at its own rate (10 Hz against the node's 5 Hz)
+    assert s["estimate_counts"]["wrist"] > 1.5 * s["estimate_counts"]["shoulder"]
+
+
+def test_one_diagnostics_status_per_joint(played: Played) -> None:
+    names = played.summary["status_names"]
+    for joint in NAMES:
+        assert [n for n in names if n.endswith(joint)] == [f"backlash_identifier: {joint}"]
+    assert "backlash_identifier" not in names  # no single-joint status besides
+
+
+def test_the_node_exits_cleanly(played: Played) -> None:
+    assert played.returncode == 0, played.log
+    assert "Traceback" not in played.log
