@@ -14,7 +14,6 @@ from genbacklash_core import GenBacklashError
 from genbacklash_ros.demo.arm import ArmSettings, SimulatedArm
 from genbacklash_ros.demo.live import node_params_yaml
 from genbacklash_ros.node.parameters import NodeParameters
-
 from tests.ros.transports._ros2 import domain_id
 
 pytest.importorskip("mujoco", reason="the physics drivetrains need mujoco (genbacklash[physics])")
