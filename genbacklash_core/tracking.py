@@ -156,7 +156,7 @@ def dead_zone_drift(
     """
     if structure.cascade:
         return None
-    u0, u1, y0, y1 = (np.asarray(r, dtype=np.float64) for r in rows)
+    _, u1, y0, y1 = (np.asarray(r, dtype=np.float64) for r in rows)  # the clamp tells the branch
     if u1.size == 0:
         return None
     prediction, sens = one_step_sensitivity(structure, p, u1, y0)
