@@ -110,7 +110,7 @@ def physics_coverage(path: Path, seed: int, method: str) -> dict[str, float]:
     bag = path / f"physics-{seed}"
     if not bag.exists():
         write_physics_bag(bag, variant("near_ideal", bandwidth=60.0), seed=seed)
-    return coverage(bag, method, None)
+    return coverage(bag, method, "drive_joint")
 
 
 def main() -> None:
