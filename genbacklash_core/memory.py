@@ -318,6 +318,18 @@ class RowMemory:
         self._file()
         return self._u0, self._u1, self._y0, self._y1
 
+    @property
+    def taken(self) -> int:
+        """Rows taken so far, filed or not: the memory's clock (a row's ``order`` is the
+        clock when it was taken)."""
+        return self.added + self._pending_count + len(self._singles)
+
+    def stamps(self) -> tuple[IntArray, BoolArray]:
+        """Per filed row (time order, as :meth:`rows`): its order among the rows taken, and
+        whether the input moved up (the right branch, eq. 19) rather than down (eq. 18)."""
+        self._file()
+        return self._order, self._u1 > self._u0
+
     def discard(self, drop: BoolArray) -> int:
         """Forget the filed rows flagged in ``drop`` (time order, as :meth:`rows`); how many."""
         self._file()

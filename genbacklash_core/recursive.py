@@ -89,6 +89,7 @@ from .play import play_operator
 from .samples import as_breaks, run_lengths
 from .simulate import play_bounds
 from .structure import Structure
+from .tracking import DeadZoneDrift, dead_zone_drift
 from .windowed import (
     SampleRing,
     SeedPrior,
@@ -110,6 +111,7 @@ _INIT_ITERATIONS = 10  # warm iterations over the memory after a batch fit
 _INIT_TOL = 1e-6  # they stop when no parameter moves more than this (relative)
 _MAX_REJECTIONS = 8  # restarts that may be rejected for a poor fit before any fit is taken
 _MAX_INVALID = 8  # consecutive invalid iterates before a re-initialisation
+_DRIFT_EVERY = 1000  # samples between two fits of the bands' tracking term
 _MAX_MEMORY = 1 << 16  # rows per branch when nothing is forgotten (forgetting = 1)
 
 _WARMING, _RUNNING, _HELD, _STOPPED = "warming", "running", "held", "stopped"
@@ -469,6 +471,14 @@ class _Solution:
     rows: int  # rows used
 
 
+def _with_tracking(
+    covariance: FloatArray, drift: DeadZoneDrift | None, p: FloatArray
+) -> FloatArray:
+    """``covariance`` of the estimate ``p`` plus the bands' tracking term
+    (:mod:`genbacklash_core.tracking`)."""
+    return covariance if drift is None else covariance + drift.tracking_covariance(p)
+
+
 def _ewma(values: FloatArray, alpha: float, start: float) -> float:
     """The last of ``m(t) = m(t-1) + alpha (v(t) - m(t-1))`` from ``m = start``.
 
@@ -736,6 +746,8 @@ class RecursiveIdentifier:
         self._u1 = self._y1 = 0.0  # the latest sample (backlash)
         self._anchor = (0.0, 0.0)  # u_a, d_a of the latest engaged row (backlash)
         self._lags = _Lags.unknown(structure)  # cascade
+        self._drift: DeadZoneDrift | None = None  # the tracking term of the bands
+        self._next_drift = 0  # the sample from which the next iterate refits it
         self._settling = 0
         self._settled_at = 0  # sample count of the last settling-horizon update
         self._break_next = False  # a dropped sample ended the previous call
@@ -822,6 +834,7 @@ class RecursiveIdentifier:
         self._ever_started = True
         self._next_solve = self._samples + s.block
         self._reason = f"seeded from a saved estimate ({estimate.state.value})"
+        self._drift, self._next_drift = None, 0  # the saved covariance carries its bands
         self._version += 1
         return self.estimate
 
@@ -1237,6 +1250,7 @@ class RecursiveIdentifier:
             return False
         if self._ever_started:
             self._restarts += 1
+        self._drift, self._next_drift = None, 0  # a new memory: refit the bands' term at once
         self._structure = structure
         self._sign_now = True
         self._memory = memory
@@ -1394,6 +1408,7 @@ class RecursiveIdentifier:
         self._invalid = 0
         self._note = ""
         self._version += 1
+        self._track_drift()
 
     def _prior_weights(self) -> FloatArray:
         """Per parameter, the share of the seed's information still counted: one minus the
@@ -1437,6 +1452,20 @@ class RecursiveIdentifier:
         self._version += 1
         self._why = why
         self._initialise()
+
+    def _track_drift(self) -> None:
+        """The tracking term of the bands (:mod:`genbacklash_core.tracking`): the memory's
+        rows, aged from this iterate's sample, fitted with dead zones that drift. Once per
+        :data:`_DRIFT_EVERY` samples at most (a fit over the memory costs ~1-2 ms), at the
+        iterates' own samples, so chunking does not matter. Nothing for the cascade."""
+        structure = self._structure
+        if structure.cascade or self._samples < self._next_drift:
+            return
+        self._next_drift = self._samples + _DRIFT_EVERY
+        rows, stamps = self._memory.rows()
+        p = np.array(natural_from_theta(structure, self._theta.tolist()))
+        cols = (rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3])
+        self._drift = dead_zone_drift(structure, p, cols, float(self._samples) - stamps)
 
     def _valid_theta(self) -> FloatArray:
         """The last valid estimate (the current one unless it was corrupted)."""
@@ -1512,10 +1541,14 @@ class RecursiveIdentifier:
         residual = self._recent_sq if math.isfinite(self._recent_sq) else sigma2
         theta_copy = theta.copy()
         cov_theta = sigma2 * self._unit_cov  # sigma^2 (Phi^T Phi + R_0 + prior)^-1
+        drift = self._drift
+        p_now = np.array(p_list)
         est = Estimate.trusted(
             structure,
-            np.array(p_list),
-            lambda: natural_covariance(structure, theta_copy, cov_theta),
+            p_now,
+            lambda: _with_tracking(
+                natural_covariance(structure, theta_copy, cov_theta), drift, p_now
+            ),
             math.sqrt(residual),
             excitation,
             state,

@@ -51,6 +51,7 @@ from .refine import refine_parameters
 from .samples import as_breaks, breaks_to_rows, run_lengths
 from .simulate import play_bounds
 from .structure import Structure
+from .tracking import DeadZoneDrift, dead_zone_drift
 
 __all__ = ["WindowedIdentifier", "WindowedSettings"]
 
@@ -1027,6 +1028,7 @@ class WindowedIdentifier:
         self._seed: SeedPrior | None = None  # a saved estimate the window still leans on
         self._seed_samples = 0  # samples of the window the seed stands for
         self._seed_rows = 0  # rows taken when the seed was planted (memory mode)
+        self._drift: DeadZoneDrift | None = None  # the tracking term of the bands
         self._estimate = Estimate.empty(self._structure)
 
     @property
@@ -1124,6 +1126,7 @@ class WindowedIdentifier:
         self._set_p(prior.p.copy())
         self._reported = prior.p.copy()
         self._covariance = np.array(estimate.covariance, dtype=np.float64)
+        self._drift = None  # the saved covariance carries the saved bands
         self._residual = estimate.residual
         self._excitation = estimate.excitation
         rel = relative_std(prior.p, self._covariance)
@@ -1588,6 +1591,7 @@ class WindowedIdentifier:
         self._restarted = False
         self._reported = reported
         self._covariance = fit.covariance
+        self._drift = self._track_drift(reported)
         self._residual = fit.residual
         self._excitation = fit.excitation
         rel = relative_std(reported, fit.covariance)
@@ -1607,6 +1611,16 @@ class WindowedIdentifier:
             if fit.reason:
                 self._reason += f"; stopped early: {fit.reason}"
 
+    def _track_drift(self, reported: FloatArray) -> DeadZoneDrift | None:
+        """The memory's rows, each aged by the rows taken since, fitted with dead zones
+        that drift (the tracking term of the bands, :mod:`genbacklash_core.tracking`); on
+        the rows' own clock, so chunking does not matter. None for the cascade."""
+        if self._memory is None:
+            return None
+        order, _ = self._memory.stamps()
+        age = self._memory.taken - order
+        return dead_zone_drift(self._structure, reported, self._memory.rows(), age)
+
     def _rebuild(self) -> None:
         if self._reported is not None and self._covariance is not None:
             rel = relative_std(self._reported, self._covariance)
@@ -1619,7 +1633,11 @@ class WindowedIdentifier:
         state, reason, confidence = self._published_state()
         p = self._reported.copy()
         p.flags.writeable = False
+        # the bands: the fit's covariance plus how far a drifting drivetrain has moved past
+        # the rows the fit remembers (genbacklash_core.tracking)
         cov = self._covariance.copy()
+        if self._drift is not None:
+            cov += self._drift.tracking_covariance()
         cov.flags.writeable = False
         self._estimate = Estimate(
             self._structure,

@@ -1,0 +1,80 @@
+"""``genbacklash demo --live``: a simulated arm and the identifier node in one ROS 2 graph."""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from genbacklash_core import GenBacklashError
+from genbacklash_ros.demo.arm import ArmSettings, SimulatedArm
+from genbacklash_ros.demo.live import node_params_yaml
+from genbacklash_ros.node.parameters import NodeParameters
+from tests.ros.transports._ros2 import domain_id
+
+pytest.importorskip("mujoco", reason="the physics drivetrains need mujoco (genbacklash[physics])")
+
+
+def test_the_twin_and_the_arm_agree_on_the_same_commands() -> None:
+    """Given the desired commands as its answers, the arm is its twin (the comparison the
+    demo prints is fair: only the compensation differs)."""
+    arm = SimulatedArm(ArmSettings(joints=("a", "b"), duration=2.0, encoder_rate=500.0))
+    for k in range(0, 150):
+        tick = k // 5
+        if k % 5 == 0:
+            arm.obey(arm.desired(tick), tick)
+        arm.advance(k * 2_000_000, tick)
+    for obeyed, twin in arm.window():
+        assert obeyed == twin and np.isfinite(obeyed)
+    with pytest.raises(GenBacklashError, match="needs as many values"):
+        arm.obey((0.1,), 0)
+
+
+def test_the_joints_move_differently() -> None:
+    arm = SimulatedArm(ArmSettings(joints=("a", "b", "c"), duration=5.0))
+    values = np.array([arm.desired(k) for k in range(arm.commands)])
+    assert values.shape[1] == 3
+    assert not np.allclose(values[:, 0], values[:, 1])
+
+
+@pytest.mark.parametrize("bad", [{"joints": ()}, {"joints": ("a", "a")}, {"duration": 0.5}])
+def test_settings_are_checked(bad: dict[str, object]) -> None:
+    with pytest.raises(GenBacklashError):
+        ArmSettings(**bad)  # type: ignore[arg-type]
+
+
+def test_the_node_params_select_the_arm_joint() -> None:
+    import yaml
+
+    text = node_params_yaml(("joint_1",))
+    values = yaml.safe_load(text)["/**/backlash_identifier"]["ros__parameters"]
+    params = NodeParameters.from_mapping(values)
+    assert (params.joint, params.command_index) == ("joint_1", 0)
+    assert (params.command_type, params.encoder_type) == ("float64_multi_array", "joint_state")
+
+
+def test_live_demo_runs_the_node_beside_a_simulated_arm() -> None:
+    """The whole demo under the rclpy wheels: the node answers the arm's commands, publishes
+    an estimate of the play, and the run ends with exit 0 and its table."""
+    pytest.importorskip("rclpy", reason="demo --live needs rclpy (genbacklash[ros])")
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id()))
+    proc = subprocess.run(
+        [sys.executable, "-m", "genbacklash_ros.cli.main", "demo", "--live", "--duration", "25"],
+        capture_output=True,
+        text=True,
+        timeout=180,
+        env=env,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:] + proc.stdout[-2000:]
+    out = proc.stdout
+    answered = re.search(r"(\d+) of (\d+) commands answered", out)
+    assert answered, out[-2000:]
+    assert int(answered[1]) >= 0.9 * int(answered[2])
+    row = re.search(r"^joint_1\s+(\S+)\s+(\S+)", out, re.M)
+    assert row, out[-2000:]
+    assert row[1] != "n/a", out[-3000:]  # the node estimated the play
+    assert 0.5 < float(row[1]) / float(row[2]) < 2.0, out[-3000:]
