@@ -101,6 +101,8 @@ class _Joint:
     desired: np.ndarray
     arm: object
     twin: object
+    arm_part: object = None  # the last stretch stepped (a Trajectory)
+    twin_part: object = None
     window: JointErrors = field(default_factory=JointErrors)
     late: JointErrors = field(default_factory=JointErrors)  # the second half of the motion
 
@@ -139,6 +141,7 @@ class SimulatedArm:
         self.commands = min(j.desired.size for j in self._joints)
         self.obeyed = [float(j.desired[0]) for j in self._joints]  # the command in force
         self.twin_tick = 0  # the desired command the twins hold
+        self.step_to(0)
 
     @property
     def play(self) -> float:
@@ -160,17 +163,26 @@ class SimulatedArm:
         self.obeyed = [float(v) for v in values[: len(self._joints)]]
         self.twin_tick = tick
 
-    def advance(self, until_ns: int, tick: int) -> tuple[float, ...]:
+    def step_to(self, until_ns: int) -> None:
         """Step every drivetrain to ``until_ns`` (the arm on the command it obeys, the twin
-        on the desired command it holds); the loads' positions, and their errors against the
-        desired command of ``tick`` (the one in force now) counted."""
-        desired = self.desired(tick)
+        on the desired command it holds), keeping the stretch for :meth:`loads_at`. One
+        stretch per command period, not per reading: a MuJoCo rollout call costs far more
+        than its few steps."""
         held = self.desired(self.twin_tick)
+        for j, obeyed, twin_u in zip(self._joints, self.obeyed, held, strict=True):
+            j.arm_part = j.arm.hold(obeyed, until_ns)  # type: ignore[attr-defined]
+            j.twin_part = j.twin.hold(twin_u, until_ns)  # type: ignore[attr-defined]
+
+    def loads_at(self, t_ns: int, tick: int) -> tuple[float, ...]:
+        """The arm's load positions at ``t_ns`` (inside the last stretch), and both loads'
+        errors against the desired command of ``tick`` (the one in force) counted."""
+        desired = self.desired(tick)
         late = tick >= self.commands // 2
+        at = np.array([t_ns], dtype=np.int64)
         loads = []
-        for j, want, obeyed, twin_u in zip(self._joints, desired, self.obeyed, held, strict=True):
-            load = float(j.arm.hold(obeyed, until_ns).load[-1])  # type: ignore[attr-defined]
-            twin = float(j.twin.hold(twin_u, until_ns).load[-1])  # type: ignore[attr-defined]
+        for j, want in zip(self._joints, desired, strict=True):
+            load = float(j.arm_part.load_at(at)[0])  # type: ignore[attr-defined]
+            twin = float(j.twin_part.load_at(at)[0])  # type: ignore[attr-defined]
             j.window.add(load - want, twin - want)
             if late:
                 j.late.add(load - want, twin - want)

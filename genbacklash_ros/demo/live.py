@@ -42,6 +42,7 @@ from genbacklash_ros.demo.arm import ArmSettings, SimulatedArm
 __all__ = ["LiveResult", "main_live", "node_params_yaml", "run_live"]
 
 NODE_NAME = "backlash_identifier"
+ANSWER_NS = 1_000_000  # the node's answer to a command is taken this long after it (ns)
 MATCH_TIMEOUT_S = 60.0  # the node's start (imports, DDS discovery) before the arm gives up
 
 
@@ -251,7 +252,6 @@ def _run_arm(
 ) -> LiveResult:
     """The arm's real-time loop: commands at their rate, the physics and the JointState at
     the encoder's, a line a second."""
-    from rclpy.time import Time
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
@@ -261,42 +261,53 @@ def _run_arm(
     size = len(joints) + 1
     dim = MultiArrayDimension(label="joints,command_number", size=size, stride=size)
     start = time.monotonic_ns()
-    start_stamp = node.get_clock().now().nanoseconds  # the stamps: the simulated instants
     behind = 0  # how far the loop fell behind real time at worst, ns
-    next_cmd, tick, k, sent = 0, -1, 0, 0
+    sent, k = 0, 0
     next_line = 1_000_000_000
     end_ns = arm.commands * cmd_ns
-    while True:
-        now = k * enc_ns
-        if now >= end_ns:
-            break
-        while next_cmd <= now:
-            tick = next_cmd // cmd_ns
-            msg = Float64MultiArray()
-            msg.layout.dim = [dim]
-            msg.data = [*arm.desired(tick), float(tick)]
-            cmd_pub.publish(msg)
-            sent += 1
-            next_cmd += cmd_ns
-        with inbox.lock:
-            answer, inbox.command = inbox.command, None
-        if answer is not None and len(answer) == len(joints) + 1:
-            arm.obey(answer[:-1], int(answer[-1]))
-        loads = arm.advance(now, tick)
-        state = JointState()
-        state.header.stamp = Time(nanoseconds=start_stamp + now).to_msg()
-        state.name = list(joints)
-        state.position = list(loads)
-        enc_pub.publish(state)
-        if now >= next_line:
-            _line(arm, inbox, now, log)
-            next_line += 1_000_000_000
-        k += 1
-        wait = start + (k * enc_ns) - time.monotonic_ns()
+    # Each command period: publish command c at c * cmd_ns; at c * cmd_ns + ANSWER_NS take
+    # the latest answer and step the physics one period ahead on it; publish the readings
+    # of that stretch as real time reaches them.
+    events: list[tuple[int, int, int]] = []  # (time, kind, index): 0 command, 1 step, 2 reading
+    for c in range(arm.commands):
+        events.append((c * cmd_ns, 0, c))
+        events.append((c * cmd_ns + ANSWER_NS, 1, c))
+    events += [(j * enc_ns, 2, j) for j in range(1, end_ns // enc_ns)]
+    events.sort()
+    arm.step_to(ANSWER_NS)  # before the first answer the arm holds where it stands
+    tick = 0
+    for when, kind, index in events:
+        wait = start + when - time.monotonic_ns()
         if wait > 0:
             time.sleep(wait / 1e9)
         else:
             behind = max(behind, -wait)
+        if kind == 0:
+            tick = index
+            msg = Float64MultiArray()
+            msg.layout.dim = [dim]
+            msg.data = [*arm.desired(index), float(index)]
+            cmd_pub.publish(msg)
+            sent += 1
+        elif kind == 1:
+            with inbox.lock:
+                answer, inbox.command = inbox.command, None
+            if answer is not None and len(answer) == len(joints) + 1:
+                arm.obey(answer[:-1], int(answer[-1]))
+            arm.step_to(when + cmd_ns)
+        else:
+            loads = arm.loads_at(when, tick)
+            state = JointState()
+            # stamped when published, on the clock the node stamps the (headerless) commands
+            # by: if the arm falls behind real time, readings and commands stay in order
+            state.header.stamp = node.get_clock().now().to_msg()
+            state.name = list(joints)
+            state.position = list(loads)
+            enc_pub.publish(state)
+            k += 1
+            if when >= next_line:
+                _line(arm, inbox, when, log)
+                next_line += 1_000_000_000
     time.sleep(0.3)  # the last answers and estimates
     result = LiveResult(joints, arm.play, commands_sent=sent, behind_s=behind / 1e9)
     with inbox.lock:
@@ -342,6 +353,18 @@ def _table(result: LiveResult, log: Callable[[str], None]) -> None:
         f"{result.commands_answered} of {result.commands_sent} commands answered "
         "(the arm obeys only the compensated commands)"
     )
+    worse = [
+        joint
+        for joint, comp, raw in zip(
+            result.joints, result.compensated_rms, result.uncompensated_rms, strict=True
+        )
+        if raw > 0 and comp > 1.02 * raw
+    ]
+    if worse:
+        log(
+            f"WARNING: compensation made tracking worse on {', '.join(worse)} in this run "
+            "(the compensation guard did not stop it); please report it with this output"
+        )
     if result.behind_s > 0.02:
         log(
             f"note: the simulated arm fell behind real time by up to {1e3 * result.behind_s:.0f} "

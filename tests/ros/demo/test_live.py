@@ -23,11 +23,11 @@ def test_the_twin_and_the_arm_agree_on_the_same_commands() -> None:
     """Given the desired commands as its answers, the arm is its twin (the comparison the
     demo prints is fair: only the compensation differs)."""
     arm = SimulatedArm(ArmSettings(joints=("a", "b"), duration=2.0, encoder_rate=500.0))
-    for k in range(0, 150):
-        tick = k // 5
-        if k % 5 == 0:
-            arm.obey(arm.desired(tick), tick)
-        arm.advance(k * 2_000_000, tick)
+    for tick in range(30):
+        arm.obey(arm.desired(tick), tick)
+        arm.step_to((tick + 1) * 10_000_000)
+        for k in range(5):
+            arm.loads_at(tick * 10_000_000 + 2_000_000 * (k + 1), tick)
     for obeyed, twin in arm.window():
         assert obeyed == twin and np.isfinite(obeyed)
     with pytest.raises(GenBacklashError, match="needs as many values"):
