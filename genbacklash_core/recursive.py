@@ -111,7 +111,7 @@ _INIT_ITERATIONS = 10  # warm iterations over the memory after a batch fit
 _INIT_TOL = 1e-6  # they stop when no parameter moves more than this (relative)
 _MAX_REJECTIONS = 8  # restarts that may be rejected for a poor fit before any fit is taken
 _MAX_INVALID = 8  # consecutive invalid iterates before a re-initialisation
-_DRIFT_EVERY = 1000  # samples between two fits of the bands' tracking term
+_DRIFT_EVERY = 250  # samples between two fits of the bands' tracking term (~0.3 ms each)
 _MAX_MEMORY = 1 << 16  # rows per branch when nothing is forgotten (forgetting = 1)
 
 _WARMING, _RUNNING, _HELD, _STOPPED = "warming", "running", "held", "stopped"
@@ -472,11 +472,13 @@ class _Solution:
 
 
 def _with_tracking(
-    covariance: FloatArray, drift: DeadZoneDrift | None, p: FloatArray
+    covariance: FloatArray, drift: DeadZoneDrift | None, p: FloatArray, ticks: float
 ) -> FloatArray:
     """``covariance`` of the estimate ``p`` plus the bands' tracking term
-    (:mod:`genbacklash_core.tracking`)."""
-    return covariance if drift is None else covariance + drift.tracking_covariance(p)
+    (:mod:`genbacklash_core.tracking`), ``ticks`` samples after the drift was fitted."""
+    if drift is None:
+        return covariance
+    return covariance + drift.tracking_covariance(p, ticks)
 
 
 def _ewma(values: FloatArray, alpha: float, start: float) -> float:
@@ -748,6 +750,8 @@ class RecursiveIdentifier:
         self._lags = _Lags.unknown(structure)  # cascade
         self._drift: DeadZoneDrift | None = None  # the tracking term of the bands
         self._next_drift = 0  # the sample from which the next iterate refits it
+        self._drift_at = 0  # the sample it was fitted at
+        self._committed_at = 0  # the sample of the last iterate taken
         self._settling = 0
         self._settled_at = 0  # sample count of the last settling-horizon update
         self._break_next = False  # a dropped sample ended the previous call
@@ -1408,6 +1412,7 @@ class RecursiveIdentifier:
         self._invalid = 0
         self._note = ""
         self._version += 1
+        self._committed_at = self._samples
         self._track_drift()
 
     def _prior_weights(self) -> FloatArray:
@@ -1462,6 +1467,7 @@ class RecursiveIdentifier:
         if structure.cascade or self._samples < self._next_drift:
             return
         self._next_drift = self._samples + _DRIFT_EVERY
+        self._drift_at = self._samples
         rows, stamps = self._memory.rows()
         p = np.array(natural_from_theta(structure, self._theta.tolist()))
         cols = (rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3])
@@ -1543,11 +1549,14 @@ class RecursiveIdentifier:
         cov_theta = sigma2 * self._unit_cov  # sigma^2 (Phi^T Phi + R_0 + prior)^-1
         drift = self._drift
         p_now = np.array(p_list)
+        # the drift goes on between its fits (one per _DRIFT_EVERY samples): counted to the
+        # last iterate's sample, not the publishing moment (chunking must not matter)
+        ticks = float(self._committed_at - self._drift_at)
         est = Estimate.trusted(
             structure,
             p_now,
             lambda: _with_tracking(
-                natural_covariance(structure, theta_copy, cov_theta), drift, p_now
+                natural_covariance(structure, theta_copy, cov_theta), drift, p_now, ticks
             ),
             math.sqrt(residual),
             excitation,

@@ -71,6 +71,7 @@ class DeadZoneDrift:
     rate: FloatArray
     rate_std: FloatArray
     rows: int
+    dead: tuple[int, int] = (0, 0)  # where c_left and c_right sit in the parameters
 
     @property
     def drifting(self) -> bool:
@@ -80,14 +81,20 @@ class DeadZoneDrift:
         added it everywhere would be wider where it was right already."""
         return bool(np.any(np.abs(self.rate) > DRIFT_Z * self.rate_std))
 
-    def tracking_covariance(self, current: FloatArray | None = None) -> FloatArray:
+    def tracking_covariance(
+        self, current: FloatArray | None = None, ticks: float = 0.0
+    ) -> FloatArray:
         """``b b^T`` when :attr:`drifting`, else zeros: the term the bands add to the
-        covariance of the estimate ``current`` (default :attr:`estimate`), where ``b`` is
-        how far the drivetrain has moved past it: ``estimate + correction - current``."""
+        covariance of the estimate ``current`` (default :attr:`estimate`) ``ticks`` after
+        the rows were fitted, where ``b`` is how far the drivetrain has moved past it:
+        ``estimate + correction - current``, the dead zones ``rate * ticks`` further."""
         size = self.correction.size
         if not self.drifting:
             return np.zeros((size, size))
         b = self.correction if current is None else self.estimate + self.correction - current
+        if ticks:
+            b = b.copy()
+            b[list(self.dead)] += self.rate * ticks
         return np.asarray(np.outer(b, b), dtype=np.float64)
 
 
@@ -196,4 +203,5 @@ def dead_zone_drift(
         np.asarray(coef[p.size :], dtype=np.float64),
         np.asarray(rate_std, dtype=np.float64),
         int(target.size),
+        (dead[0], dead[1]),
     )
