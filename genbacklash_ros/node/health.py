@@ -301,8 +301,17 @@ def _one_step_errors(
     return errors, on_low, on_high
 
 
-def _follows(
+def _step(value: float, low: float, high: float, low_next: float, high_next: float) -> float:
+    """The clamp of eq. (20) one reading on from ``value`` (band ``low .. high``) into the
+    band ``low_next .. high_next``: the part inside the band moves, the offset outside it
+    stays (a band that lags the drivetrain by an offset lags it as much one reading later)."""
+    inside = min(max(value, low), high)
+    return min(max(inside, low_next), high_next) + (value - inside)
+
+
+def _isolated(
     y: float,
+    predicted: float,
     low: float,
     high: float,
     y_next: float,
@@ -310,13 +319,14 @@ def _follows(
     high_next: float,
     limit: float,
 ) -> bool:
-    """Whether the reading ``y_next`` (band ``low_next .. high_next``) follows the reading
-    ``y`` (band ``low .. high``) within ``limit``: the clamp of eq. (20) moves ``y`` within
-    its band and keeps its offset outside it (a band that lags the drivetrain by some
-    offset lags it by as much one reading later)."""
-    inside = min(max(y, low), high)
-    predicted = min(max(inside, low_next), high_next) + (y - inside)
-    return abs(y_next - predicted) <= limit
+    """Whether the reading ``y`` (band ``low .. high``), far from its prediction
+    ``predicted``, is isolated: the reading after it (``y_next``, band ``low_next ..
+    high_next``) does not follow it within ``limit``, and lies nearer where the prediction
+    leads than where ``y`` leads (a spike jumps and returns; a load that moved where the
+    model did not say stays there)."""
+    from_y = abs(y_next - _step(y, low, high, low_next, high_next))
+    from_predicted = abs(y_next - _step(predicted, low, high, low_next, high_next))
+    return from_y > limit and from_predicted < from_y
 
 
 class StreamHealth:
@@ -746,8 +756,13 @@ class StreamHealth:
             part = slice(first, first + step)
             j = first + step  # the reading after the step, its neighbour
             after = None
-            if j < n and not fresh[j] and (resumed is None or not resumed[j]):
-                after = (float(ys[j]), float(low[j]), float(high[j]))
+            if j < n and not fresh[j]:
+                after = (
+                    float(ys[j]),
+                    float(low[j]),
+                    float(high[j]),
+                    resumed is None or not bool(resumed[j]),
+                )
             found = self._screen_step(
                 times[part],
                 ys[part],
@@ -790,18 +805,21 @@ class StreamHealth:
         est: Estimate,
         model: GeneralBacklash,
         resumed: np.ndarray | None = None,
-        after: tuple[float, float, float] | None = None,
+        after: tuple[float, float, float, bool] | None = None,
     ) -> Screening:
         """:meth:`screen` of one step: the samples (``times``, readings ``ys``, the band
         ``low .. high`` of their commands under ``model``, the estimate's, ``fresh``: after
         a gap, ``resumed``: after the servo settled), sample by sample; ``after``: the
-        reading after the step and its band (None: none yet, or not consecutive).
+        reading after the step, its band and whether it follows on (not ``resumed``; None:
+        none yet, or after a gap).
 
         A reading far from its prediction is a spike only when it is isolated: the reading
         after it does not follow it (:func:`_follows`). When it does, the readings moved
         where the model did not say (a band that lags the drivetrain's wear, a slip): both
         are fed, and a reading just before them judged by the band alone (``resumed``) that
-        neither follows is the isolated one."""
+        neither follows is the isolated one. A reading right before samples taken out while
+        the servo settled has only the value of the reading after them to go by: a reading
+        that lies between the readings before and after it did not jump."""
         y_prev, band_prev = self._fed_y, self._band_before()
         trusted = self._trusted(est)
         limit = self._limit(trusted)
@@ -824,10 +842,11 @@ class StreamHealth:
         held: list[int] = []  # after a gap, until a sample follows from the one before it
         worst = (0.0, 0.0, 0.0)
         x, (x_low, x_high), x_at = y_prev, band_prev, -1  # the last reading fed (or its stand-in)
+        move: float | None = None  # how far the readings moved at the last one fed
         again = [False] * ys.size if resumed is None else resumed.tolist()
         # each reading's neighbour: the next one of the step, or ``after`` (None: none)
-        later: list[tuple[float, float, float] | None] = [
-            None if new or res else (y, lo, hi)
+        later: list[tuple[float, float, float, bool] | None] = [
+            None if new else (y, lo, hi, not res)
             for y, lo, hi, new, res in zip(
                 ys[1:].tolist(),
                 low[1:].tolist(),
@@ -839,7 +858,7 @@ class StreamHealth:
         ]
         if after is not None:
             shifted = self._shifted(np.array([after[1]]), np.array([after[2]]))
-            after = (after[0], float(shifted[0][0]), float(shifted[1][0]))
+            after = (after[0], float(shifted[0][0]), float(shifted[1][0]), after[3])
         later.append(after)
         by_band: int | None = None  # the last reading judged by the band alone and fed
         for i, (t, y, lo, hi, new, res) in enumerate(
@@ -854,7 +873,7 @@ class StreamHealth:
             )
         ):
             if x is None or (new and not trusted):
-                x, x_low, x_high, x_at = y, lo, hi, i
+                x, x_low, x_high, x_at, move = y, lo, hi, i, None
                 continue
             if res:  # the band alone judges it (see _one_step_errors)
                 inside, carry = y, 0.0
@@ -868,22 +887,38 @@ class StreamHealth:
             if resync is not None:
                 if abs(error) <= limit or t - resync >= RESYNC_NS:
                     resync = None  # consistent with the sample before the gap
-                    x, x_low, x_high, x_at = y, lo, hi, i
+                    x, x_low, x_high, x_at, move = y, lo, hi, i, None
                 else:
                     held.append(i)
                 continue
             if abs(error) > limit:
-                neighbour = later[i]
-                if neighbour is None or not _follows(y, lo, hi, *neighbour, limit):
-                    bad.append(i)
-                    x, x_low, x_high, x_at = predicted, lo, hi, i  # the prediction stands in
-                    if abs(error) > abs(worst[1]):
-                        worst = (y, error, predicted)
-                    continue
-                # not isolated: fed; a reading just before it judged by the band alone
-                # (the commands before it unknown) that it does not follow is the spike
-                if by_band == i - 1:
-                    bad.append(by_band)
+                # a load still moving as it moved one reading before (coasting, ringing)
+                # is no spike; nor is a reading the one after it sides with
+                if move is None or res or abs(y - x - move) > limit:
+                    neighbour = later[i]
+                    if neighbour is None:
+                        isolated = True
+                    elif not neighbour[3]:  # after a settling gap: between its neighbours?
+                        isolated = not min(x, neighbour[0]) <= y <= max(x, neighbour[0])
+                    else:
+                        isolated = _isolated(y, predicted, lo, hi, *neighbour[:3], limit)
+                    if isolated:
+                        bad.append(i)
+                        x, x_low, x_high, x_at = predicted, lo, hi, i  # stands in for it
+                        move = None
+                        if abs(error) > abs(worst[1]):
+                            worst = (y, error, predicted)
+                        continue
+                    # a reading just before it judged by the band alone (the commands
+                    # before it unknown) that neither follows, nor their motion leads back
+                    # to, is the isolated one
+                    if (
+                        neighbour is not None
+                        and neighbour[3]
+                        and by_band == i - 1
+                        and abs(x - (2.0 * y - neighbour[0])) > limit
+                    ):
+                        bad.append(by_band)
             else:
                 errors.append(abs(error))
             by_band = i if res and abs(error) <= limit else None
@@ -891,6 +926,7 @@ class StreamHealth:
                 pushed[0].append(y - float(edges[0][i]))
             elif inside >= hi:
                 pushed[1].append(y - float(edges[1][i]))
+            move = y - x if x_at == i - 1 and not res else None
             x, x_low, x_high, x_at = y, lo, hi, i
         self._resync_since = resync
         self._track_scale(np.array(errors), ys)
