@@ -55,11 +55,14 @@ to be reset, so compensation resumes at once with the current estimate.
   operation bag lost 7 readings so). Such readings are fed, and the screen learns where the
   readings put each edge of the band (a running median of the pushed readings' offsets
   from it, weight 0.3 per step, at most ``SHIFT_PLAY_SHARE`` (25 %) of the play; kept
-  against the truth when the estimate moves its band) and judges against that band. A
-  reading after samples taken out while the servo settled is judged by the band alone;
-  when the reading after it jumps and the next one follows that, it was the isolated one.
-  The last reading of a feed has no neighbour yet and is judged by its prediction alone.
-  A feed is judged in steps of
+  against the truth when the estimate moves its band) and judges against that band. Nor
+  is a reading that continues the last reading's motion (a load that coasts or rings
+  inside the play), nor one the reading after it sides with rather than with the
+  prediction, nor, right before samples taken out while the servo settled, one that lies
+  between the readings before and after it. A reading after such samples is judged by the
+  band alone; when the reading after it jumps, the next one follows that, and their motion
+  does not lead back to it, it was the isolated one. The last reading of a feed has no
+  neighbour yet and is judged without one. A feed is judged in steps of
   ``SCREEN_SAMPLES`` (64) samples, whatever its size; the scale is a running average
   (weight 0.2 per step) of the steps' upper quartile of the absolute prediction errors /
   1.15 (a normal sigma, robust to a quarter of outliers; at least 1e-3 of the readings'
