@@ -177,10 +177,10 @@ def main(argv: list[str] | None = None) -> None:
         outcomes = list(pool.map(_task, jobs))
     print(
         "| scenario | seeds | clean: false spike drops (bags with any) | spiked: injected "
-        "| caught | missed | caught share | false drops |"
+        "| judged | caught | caught / judged | caught / injected | false drops |"
     )
-    print("|---|---|---|---|---|---|---|---|")
-    total_false = total_inj = total_caught = 0
+    print("|---|---|---|---|---|---|---|---|---|")
+    total_false = total_inj = total_caught = total_seen = 0
     for kind in kinds:
         clean = [o for o in outcomes if o.kind == kind and not o.spiked]
         spiked = [o for o in outcomes if o.kind == kind and o.spiked]
@@ -194,9 +194,14 @@ def main(argv: list[str] | None = None) -> None:
             total_inj += inj
             total_caught += got
             sfalse = sum(o.false for o in spiked)
-            row += f" {inj} | {got} | {inj - got} | {got / max(inj, 1):.1%} | {sfalse} |"
+            seen = sum(o.screened for o in spiked)
+            total_seen += seen
+            row += (
+                f" {inj} | {seen} | {got} | {got / max(seen, 1):.1%} | {got / max(inj, 1):.1%} "
+                f"| {sfalse} |"
+            )
         else:
-            row += " - | - | - | - | - |"
+            row += " - | - | - | - | - | - |"
         print(row)
         for o in clean:
             if o.false:
@@ -204,7 +209,8 @@ def main(argv: list[str] | None = None) -> None:
     share = total_caught / max(total_inj, 1)
     print(
         f"\ntotal: {total_false} false spike drops on clean records; "
-        f"{total_caught} of {total_inj} injected spikes caught ({share:.2%}); "
+        f"{total_caught} of {total_inj} injected spikes caught ({share:.2%}), of the "
+        f"{total_seen} judged with a trusted estimate {total_caught / max(total_seen, 1):.2%}; "
         f"{time.perf_counter() - started:.0f} s"
     )
 
