@@ -45,9 +45,24 @@ to be reset, so compensation resumes at once with the current estimate.
 * **Encoder spikes** -- once the estimate of a general backlash has converged (it stays
   trusted while it converges again or lacks excitation, until the identifier restarts or
   diverges), each sample is predicted one step ahead from the previous accepted reading and
-  its command (the clamp of eq. 20); a reading more than ``SPIKE_SIGMAS`` (8) residual
-  scales from its prediction is not fed to the identifier (``encoder_spike`` drops), the
-  prediction standing in for it in the next prediction. A feed is judged in steps of
+  its command (the clamp of eq. 20, which moves the part of the reading inside its band and
+  keeps its offset outside it); a reading more than ``SPIKE_SIGMAS`` (8) residual scales
+  from its prediction, and *isolated* -- the reading after it does not follow it -- is not
+  fed to the identifier (``encoder_spike`` drops), the prediction standing in for it in
+  the next prediction. A spike is a reading that jumps and returns; a model that lags the
+  drivetrain is not: while the play grows, the estimate lags it and the readings pushed by
+  a flank sit a few counts outside the model's band, one after another (the bundled
+  operation bag lost 7 readings so). Such readings are fed, and the screen learns where the
+  readings put each edge of the band (a running median of the pushed readings' offsets
+  from it, weight 0.3 per step, at most ``SHIFT_PLAY_SHARE`` (25 %) of the play; kept
+  against the truth when the estimate moves its band) and judges against that band. Nor
+  is a reading that continues the last reading's motion (a load that coasts or rings
+  inside the play), nor one the reading after it sides with rather than with the
+  prediction, nor, right before samples taken out while the servo settled, one that lies
+  between the readings before and after it. A reading after such samples is judged by the
+  band alone; when the reading after it jumps, the next one follows that, and their motion
+  does not lead back to it, it was the isolated one. The last reading of a feed has no
+  neighbour yet and is judged without one. A feed is judged in steps of
   ``SCREEN_SAMPLES`` (64) samples, whatever its size; the scale is a running average
   (weight 0.2 per step) of the steps' upper quartile of the absolute prediction errors /
   1.15 (a normal sigma, robust to a quarter of outliers; at least 1e-3 of the readings'
@@ -121,6 +136,7 @@ __all__ = [
     "REANCHOR_COUNT",
     "RESYNC_NS",
     "SATURATION_NS",
+    "SHIFT_PLAY_SHARE",
     "SILENCE_MIN_NS",
     "SILENCE_PERIODS",
     "SILENCE_UNKNOWN_NS",
@@ -164,6 +180,11 @@ STILL_HOLD_NS = 1_000_000_000  # equal readings wait this long at most before be
 STUCK_INPUT_NS = 20_000_000
 SATURATION_NS = 200_000_000  # commands at or beyond a limit this long: saturated
 _SCALE_SMOOTHING = 0.2  # weight of a new step in the residual scale
+# the band's edges as the readings show them (see StreamHealth.screen): a step's median offset
+# of the readings pushed by an edge is blended in with this weight, from this many readings
+_SHIFT_SMOOTHING = 0.3
+_SHIFT_MIN_READINGS = 3
+SHIFT_PLAY_SHARE = 0.25  # an edge is moved by at most this share of the play c_L + c_R
 
 
 @dataclass(frozen=True, slots=True)
@@ -253,21 +274,62 @@ def _held_input(stamp: int, commands: list[int], inputs: list[float]) -> float |
 
 def _one_step_errors(
     y_prev: float,
+    band_prev: tuple[float, float],
     ys: np.ndarray,
     low: np.ndarray,
     high: np.ndarray,
     resumed: np.ndarray | None = None,
-) -> np.ndarray:
-    """``|y - clamp(y before, low, high)|`` of each reading ``ys`` predicted from the one
-    before it (the first from ``y_prev``): the one-step errors of eq. (20)'s clamp. A
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The one-step errors of eq. (20)'s clamp: each reading ``ys`` (band ``low .. high``)
+    predicted from the one before it (the first from ``y_prev``, its band ``band_prev``),
+    the clamp moving the part of it inside its band and keeping the offset outside it (a
+    band that lags the drivetrain by an offset lags it by as much one reading later). A
     ``resumed`` reading (after samples taken out while the servo settled: the commands
-    between may have reversed) is judged by the band alone, ``|y - clamp(y, low, high)|``."""
+    between may have reversed) is judged by the band alone, ``|y - clamp(y, low, high)|``.
+
+    Returns the errors and which readings the clamp put on the band's lower and upper edge
+    (the load pushed by a flank)."""
     previous = np.concatenate(([y_prev], ys[:-1]))
-    if resumed is not None:
-        previous[resumed] = ys[resumed]
+    low_prev = np.concatenate(([band_prev[0]], low[:-1]))
+    high_prev = np.concatenate(([band_prev[1]], high[:-1]))
     with np.errstate(all="ignore"):
-        errors: np.ndarray = np.abs(ys - np.minimum(np.maximum(previous, low), high))
-    return errors
+        inside = np.minimum(np.maximum(previous, low_prev), high_prev)
+        carry = previous - inside
+        if resumed is not None:
+            inside[resumed] = ys[resumed]
+            carry[resumed] = 0.0
+        errors: np.ndarray = np.abs(ys - (np.minimum(np.maximum(inside, low), high) + carry))
+        on_low: np.ndarray = inside <= low
+        on_high: np.ndarray = inside >= high
+    return errors, on_low, on_high
+
+
+def _step(value: float, low: float, high: float, low_next: float, high_next: float) -> float:
+    """The clamp of eq. (20) one reading on from ``value`` (band ``low .. high``) into the
+    band ``low_next .. high_next``: the part inside the band moves, the offset outside it
+    stays (a band that lags the drivetrain by an offset lags it as much one reading later)."""
+    inside = min(max(value, low), high)
+    return min(max(inside, low_next), high_next) + (value - inside)
+
+
+def _isolated(
+    y: float,
+    predicted: float,
+    low: float,
+    high: float,
+    y_next: float,
+    low_next: float,
+    high_next: float,
+    limit: float,
+) -> bool:
+    """Whether the reading ``y`` (band ``low .. high``), far from its prediction
+    ``predicted``, is isolated: the reading after it (``y_next``, band ``low_next ..
+    high_next``) does not follow it within ``limit``, and lies nearer where the prediction
+    leads than where ``y`` leads (a spike jumps and returns; a load that moved where the
+    model did not say stays there)."""
+    from_y = abs(y_next - _step(y, low, high, low_next, high_next))
+    from_predicted = abs(y_next - _step(predicted, low, high, low_next, high_next))
+    return from_y > limit and from_predicted < from_y
 
 
 class StreamHealth:
@@ -292,6 +354,7 @@ class StreamHealth:
         "_enc_rejects",
         "_events",
         "_fault_texts",
+        "_fed_band",
         "_fed_t",
         "_fed_y",
         "_gaps",
@@ -301,6 +364,8 @@ class StreamHealth:
         "_resync_since",
         "_sat_since",
         "_scale",
+        "_shift",
+        "_shift_model",
         "_silence",
         "_still_since",
         "_stuck",
@@ -338,7 +403,12 @@ class StreamHealth:
         self._sat_since: int | None = None  # time of the first of saturated commands
         self._fed_t: int | None = None  # the last sample fed (spike prediction)
         self._fed_y: float | None = None
+        self._fed_band: tuple[float, float] | None = None  # its band's edges (unshifted)
         self._scale: float | None = None  # robust scale of the one-step prediction errors
+        # where the readings put the band's lower and upper edge, against the estimate's
+        # band (the edges of the model self._shift_model; see screen)
+        self._shift = (0.0, 0.0)
+        self._shift_model: GeneralBacklash | None = None
         self._quantum = math.inf  # the smallest change between consecutive readings fed
         self._resync_since: int | None = None  # time of the first sample after a gap
         self._converged = False  # the estimate has converged since the identifier started
@@ -639,11 +709,12 @@ class StreamHealth:
         each one taken out (:func:`~genbacklash_ros.node.sample_rule.keep_breaks`)."""
         model = est.model
         if not isinstance(model, GeneralBacklash):
-            self._fed_t, self._fed_y = int(times[-1]), float(ys[-1])
+            self._fed_t, self._fed_y, self._fed_band = int(times[-1]), float(ys[-1]), None
             return Screening(None, [])
         self._track_quantum(ys)
         left, right = model.branches(us)
         low, high = np.minimum(left, right), np.maximum(left, right)
+        self._follow_model(model, float(us[0]))
         t_prev, y_prev = self._fed_t, self._fed_y
         # a gap before a sample (or no sample before it): not predicted from the one before
         fresh = np.empty(times.size, dtype=bool)
@@ -652,24 +723,49 @@ class StreamHealth:
         n, step = int(ys.size), SCREEN_SAMPLES
         start = 0
         if self._resync_since is None and y_prev is not None and not fresh.any():
-            # the usual case at once: each reading predicted from the one before it
-            errs = _one_step_errors(y_prev, ys, low, high, resumed)
+            # the usual case, a step at once: each reading predicted from the one before it
             trusted = self._trusted(est)
+            previous, band = y_prev, self._band_before()
             while start < n:
                 part = slice(start, start + step)
-                if np.any(errs[part] > self._limit(trusted)):
+                lows, highs = self._shifted(low[part], high[part])
+                errs, on_low, on_high = _one_step_errors(
+                    previous,
+                    band,
+                    ys[part],
+                    lows,
+                    highs,
+                    None if resumed is None else resumed[part],
+                )
+                if np.any(errs > self._limit(trusted)):
                     break  # a spike: this step and those after it sample by sample
-                self._track_scale(errs[part], ys[part])
+                self._track_scale(errs, ys[part])
+                y_part = ys[part]
+                self._track_shift(
+                    y_part[on_low] - low[part][on_low], y_part[on_high] - high[part][on_high], model
+                )
+                previous, band = float(y_part[-1]), (float(lows[-1]), float(highs[-1]))
                 start += step
             if start >= n:
                 self._fed_t, self._fed_y = int(times[-1]), float(ys[-1])
+                self._fed_band = (float(low[-1]), float(high[-1]))
                 return Screening(None, [])
             if start:
                 self._fed_t, self._fed_y = int(times[start - 1]), float(ys[start - 1])
+                self._fed_band = (float(low[start - 1]), float(high[start - 1]))
         keeps: list[np.ndarray | None] = [None] if start else []
         events: list[HealthEvent] = []
         for first in range(start, n, step):
             part = slice(first, first + step)
+            j = first + step  # the reading after the step, its neighbour
+            after = None
+            if j < n and not fresh[j]:
+                after = (
+                    float(ys[j]),
+                    float(low[j]),
+                    float(high[j]),
+                    resumed is None or not bool(resumed[j]),
+                )
             found = self._screen_step(
                 times[part],
                 ys[part],
@@ -677,7 +773,9 @@ class StreamHealth:
                 high[part],
                 fresh[part],
                 est,
+                model,
                 None if resumed is None else resumed[part],
+                after,
             )
             keeps.append(found.keep)
             events += found.events
@@ -708,27 +806,64 @@ class StreamHealth:
         high: np.ndarray,
         fresh: np.ndarray,
         est: Estimate,
+        model: GeneralBacklash,
         resumed: np.ndarray | None = None,
+        after: tuple[float, float, float, bool] | None = None,
     ) -> Screening:
         """:meth:`screen` of one step: the samples (``times``, readings ``ys``, the band
-        ``low .. high`` of their commands, ``fresh``: after a gap, ``resumed``: after the
-        servo settled), sample by sample."""
-        y_prev = self._fed_y
-        self._fed_t, self._fed_y = int(times[-1]), float(ys[-1])
+        ``low .. high`` of their commands under ``model``, the estimate's, ``fresh``: after
+        a gap, ``resumed``: after the servo settled), sample by sample; ``after``: the
+        reading after the step, its band and whether it follows on (not ``resumed``; None:
+        none yet, or after a gap).
+
+        A reading far from its prediction is a spike only when it is isolated: the reading
+        after it does not follow it (:func:`_follows`). When it does, the readings moved
+        where the model did not say (a band that lags the drivetrain's wear, a slip): both
+        are fed, and a reading just before them judged by the band alone (``resumed``) that
+        neither follows is the isolated one. A reading right before samples taken out while
+        the servo settled has only the value of the reading after them to go by: a reading
+        that lies between the readings before and after it did not jump."""
+        y_prev, band_prev = self._fed_y, self._band_before()
         trusted = self._trusted(est)
         limit = self._limit(trusted)
         resync = self._resync_since
+        edges = (low, high)
+        low, high = self._shifted(low, high)
+        self._fed_t, self._fed_y = int(times[-1]), float(ys[-1])
+        self._fed_band = (float(edges[0][-1]), float(edges[1][-1]))
         if resync is None and y_prev is not None and not fresh.any():
-            errs = _one_step_errors(y_prev, ys, low, high, resumed)
+            errs, on_low, on_high = _one_step_errors(y_prev, band_prev, ys, low, high, resumed)
             if not np.any(errs > limit):
                 self._track_scale(errs, ys)
+                self._track_shift(
+                    ys[on_low] - edges[0][on_low], ys[on_high] - edges[1][on_high], model
+                )
                 return Screening(None, [])
+        pushed: tuple[list[float], list[float]] = ([], [])  # offsets from the edges
         errors: list[float] = []
         bad: list[int] = []  # spikes
         held: list[int] = []  # after a gap, until a sample follows from the one before it
         worst = (0.0, 0.0, 0.0)
-        x = y_prev
+        x, (x_low, x_high), x_at = y_prev, band_prev, -1  # the last reading fed (or its stand-in)
+        move: float | None = None  # how far the readings moved at the last one fed
         again = [False] * ys.size if resumed is None else resumed.tolist()
+        # each reading's neighbour: the next one of the step, or ``after`` (None: none)
+        later: list[tuple[float, float, float, bool] | None] = [
+            None if new else (y, lo, hi, not res)
+            for y, lo, hi, new, res in zip(
+                ys[1:].tolist(),
+                low[1:].tolist(),
+                high[1:].tolist(),
+                fresh[1:].tolist(),
+                again[1:],
+                strict=True,
+            )
+        ]
+        if after is not None:
+            shifted = self._shifted(np.array([after[1]]), np.array([after[2]]))
+            after = (after[0], float(shifted[0][0]), float(shifted[1][0]), after[3])
+        later.append(after)
+        by_band: int | None = None  # the last reading judged by the band alone and fed
         for i, (t, y, lo, hi, new, res) in enumerate(
             zip(
                 times.tolist(),
@@ -741,29 +876,64 @@ class StreamHealth:
             )
         ):
             if x is None or (new and not trusted):
-                x = y
+                x, x_low, x_high, x_at, move = y, lo, hi, i, None
                 continue
-            if res:
-                x = y  # the band alone judges it (see _one_step_errors)
+            if res:  # the band alone judges it (see _one_step_errors)
+                inside, carry = y, 0.0
+            else:
+                inside = min(max(x, x_low), x_high)
+                carry = x - inside
             if new:
                 resync = t
-            predicted = min(max(x, lo), hi)  # the clamp of eq. (20)
+            predicted = min(max(inside, lo), hi) + carry  # the clamp of eq. (20)
             error = y - predicted
             if resync is not None:
                 if abs(error) <= limit or t - resync >= RESYNC_NS:
-                    resync, x = None, y  # consistent with the sample before the gap
+                    resync = None  # consistent with the sample before the gap
+                    x, x_low, x_high, x_at, move = y, lo, hi, i, None
                 else:
                     held.append(i)
-            elif abs(error) > limit:
-                bad.append(i)
-                x = predicted  # the prediction stands in for the spike
-                if abs(error) > abs(worst[1]):
-                    worst = (y, error, predicted)
+                continue
+            if abs(error) > limit:
+                # a load still moving as it moved one reading before (coasting, ringing)
+                # is no spike; nor is a reading the one after it sides with
+                if move is None or res or abs(y - x - move) > limit:
+                    neighbour = later[i]
+                    if neighbour is None:
+                        isolated = True
+                    elif not neighbour[3]:  # after a settling gap: between its neighbours?
+                        isolated = not min(x, neighbour[0]) <= y <= max(x, neighbour[0])
+                    else:
+                        isolated = _isolated(y, predicted, lo, hi, *neighbour[:3], limit)
+                    if isolated:
+                        bad.append(i)
+                        x, x_low, x_high, x_at = predicted, lo, hi, i  # stands in for it
+                        move = None
+                        if abs(error) > abs(worst[1]):
+                            worst = (y, error, predicted)
+                        continue
+                    # a reading just before it judged by the band alone (the commands
+                    # before it unknown) that neither follows, nor their motion leads back
+                    # to, is the isolated one
+                    if (
+                        neighbour is not None
+                        and neighbour[3]
+                        and by_band == i - 1
+                        and abs(x - (2.0 * y - neighbour[0])) > limit
+                    ):
+                        bad.append(by_band)
             else:
                 errors.append(abs(error))
-                x = y
+            by_band = i if res and abs(error) <= limit else None
+            if inside <= lo:
+                pushed[0].append(y - float(edges[0][i]))
+            elif inside >= hi:
+                pushed[1].append(y - float(edges[1][i]))
+            move = y - x if x_at == i - 1 and not res else None
+            x, x_low, x_high, x_at = y, lo, hi, i
         self._resync_since = resync
         self._track_scale(np.array(errors), ys)
+        self._track_shift(np.array(pushed[0]), np.array(pushed[1]), model)
         if len(bad) > SPIKE_MAX_SHARE * ys.size:
             bad = []  # the model is off rather than the encoder: feed them
         elif bad:
@@ -780,6 +950,8 @@ class StreamHealth:
             return Screening(None, self._found())
         if x is not None:
             self._fed_y = x
+            if x_at >= 0:
+                self._fed_band = (float(edges[0][x_at]), float(edges[1][x_at]))
         keep = np.ones(ys.size, dtype=bool)
         keep[bad] = False
         keep[held] = False
@@ -880,6 +1052,7 @@ class StreamHealth:
             self._converged = True
         elif state in (EstimatorState.WARMING_UP, EstimatorState.DIVERGED):
             self._converged = False
+            self._shift = (0.0, 0.0)
         return self._converged and self._scale is not None
 
     def _stuck_reason(self, value: float, held: float | None, est: Estimate) -> str:
@@ -907,6 +1080,62 @@ class StreamHealth:
         if not (math.isfinite(move) and move > max(STUCK_SIGMAS * scale, 1e-3 * abs(value), floor)):
             return ""
         return f" although the model moves the load by {move:.3g} at the command {u:.6g}"
+
+    def _band_before(self) -> tuple[float, float]:
+        """The band (shifted) of the last reading fed; unbounded when not known."""
+        band = self._fed_band
+        if band is None:
+            return (-math.inf, math.inf)
+        low, high = self._shifted(np.array([band[0]]), np.array([band[1]]))
+        return (float(low[0]), float(high[0]))
+
+    def _shifted(self, low: np.ndarray, high: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The band ``low .. high`` with its edges where the readings put them."""
+        shift_low, shift_high = self._shift
+        if shift_low == 0.0 and shift_high == 0.0:
+            return low, high
+        return low + shift_low, np.maximum(high + shift_high, low + shift_low)
+
+    def _follow_model(self, model: GeneralBacklash, u: float) -> None:
+        """Keep the edges where the readings put them when the estimate moves its band:
+        the shifts change by what the new model moves each edge at the command ``u``."""
+        old = self._shift_model
+        if old is model:
+            return
+        self._shift_model = model
+        if old is None or self._shift == (0.0, 0.0):
+            return
+        left0, right0 = old.branches_at(u)
+        left1, right1 = model.branches_at(u)
+        moved = (
+            self._shift[0] + min(left0, right0) - min(left1, right1),
+            self._shift[1] + max(left0, right0) - max(left1, right1),
+        )
+        self._shift = self._bounded(moved, model)
+
+    def _track_shift(
+        self, off_low: np.ndarray, off_high: np.ndarray, model: GeneralBacklash
+    ) -> None:
+        """Blend a step's offsets of the readings pushed by the band's lower and upper edge
+        (``y - edge``, the estimate's edges) into the edges' shifts: their median, from
+        ``_SHIFT_MIN_READINGS`` readings on, while the estimate may judge."""
+        if not self._converged:
+            return
+        shift = list(self._shift)
+        for side, offsets in enumerate((off_low, off_high)):
+            offsets = offsets[np.isfinite(offsets)]
+            if offsets.size >= _SHIFT_MIN_READINGS:
+                shift[side] += _SHIFT_SMOOTHING * (float(np.median(offsets)) - shift[side])
+        self._shift = self._bounded((shift[0], shift[1]), model)
+
+    @staticmethod
+    def _bounded(shift: tuple[float, float], model: GeneralBacklash) -> tuple[float, float]:
+        """``shift`` within ``SHIFT_PLAY_SHARE`` of the play of ``model`` (0 where not finite)."""
+        bound = SHIFT_PLAY_SHARE * abs(model.c_left + model.c_right)
+        if not math.isfinite(bound):
+            return (0.0, 0.0)
+        low, high = (min(max(v, -bound), bound) if math.isfinite(v) else 0.0 for v in shift)
+        return (low, high)
 
     def _track_quantum(self, ys: np.ndarray) -> None:
         """Lower the encoder count to the smallest change between consecutive readings of

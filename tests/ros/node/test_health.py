@@ -211,3 +211,77 @@ def test_a_feed_is_screened_in_steps_whatever_its_size() -> None:
         == ["encoder_spike"]
     )
     assert one._scale == many._scale  # the scale followed each step alike
+
+
+COUNT = 2 * np.pi / 4096  # one count of a 4096 counts/rev encoder
+
+
+def _jogs(steps: int, lag: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A load nudged up by short jogs, read by a quantised encoder: (times, u, y, resumed)
+    in steps of 64 samples, each 30 samples of a command inside the play, 10 of a jog that
+    pushes the right flank, 24 inside the play again. The drivetrain's right dead zone is
+    ``lag`` wider than the model's (0.05): the model's band lags its wear. The samples
+    after a command change are marked resumed, as the settling rule marks them (the
+    samples it took out are not there: the servo is ideal)."""
+    u = np.empty(64 * steps)
+    resumed = np.zeros(u.size, dtype=bool)
+    for k in range(steps):
+        jog = 0.07 + 0.01 * k
+        u[64 * k : 64 * k + 64] = jog - 0.03
+        u[64 * k + 30 : 64 * k + 40] = jog
+        resumed[[64 * k, 64 * k + 30, 64 * k + 40]] = True
+    x = np.empty_like(u)
+    previous = 0.0
+    for k, value in enumerate(u):  # the play operator (eq. 20), c_L 0.05, c_R 0.05 + lag
+        previous = x[k] = min(max(previous, value - 0.05 - lag), value + 0.05)
+    times = np.arange(u.size, dtype=np.int64) * MS
+    y = np.round(x / COUNT) * COUNT
+    y[10:12] += COUNT  # a flicker of one count at first: the screen learns the count
+    return times, u, y, resumed
+
+
+def _screen_steps(
+    health: StreamHealth, times: np.ndarray, u: np.ndarray, y: np.ndarray, resumed: np.ndarray
+) -> list[int]:
+    """Feed (times, u, y, resumed) in steps of 64 with a converged estimate of the model
+    the jogs lag (c_L = c_R = 0.05); the indices of the samples taken out."""
+    est = _converged(GeneralBacklash((1.0,), 0.05, (1.0,), 0.05))
+    out: list[int] = []
+    for k in range(0, u.size, 64):
+        part = slice(k, k + 64)
+        screening = health.screen(times[part], u[part], y[part], est, resumed[part])
+        if screening.keep is not None:
+            out += (k + np.flatnonzero(~screening.keep)).tolist()
+    return out
+
+
+def test_a_band_that_lags_the_wear_is_no_spike() -> None:
+    """While the play grows the estimate lags it: the readings pushed by a flank sit a few
+    counts outside the model's band (here 4 counts, above the limit of a screen whose
+    errors are mostly those of a resting load). They are no spike: each reading follows
+    the one before it (the issue 22 regression: the bundled operation bag lost 7 readings
+    so, with the settling rule on)."""
+    times, u, y, resumed = _jogs(20, 4 * COUNT)
+    health = StreamHealth()
+    assert _screen_steps(health, times, u, y, resumed) == []
+    assert health._shift[0] < -2 * COUNT  # the screen learnt where the lower edge is
+
+
+def test_spikes_are_still_caught_on_a_lagging_band() -> None:
+    """Isolated readings 10-40 counts off, pushed or resting, are taken out, and only
+    they."""
+    times, u, y, resumed = _jogs(20, 4 * COUNT)
+    spikes = {200: 20, 420: -10, 675: 40, 995: -25, 1100: 15}  # in jogs and at rest
+    for k, counts in spikes.items():
+        y[k] += counts * COUNT
+    assert _screen_steps(StreamHealth(), times, u, y, resumed) == sorted(spikes)
+
+
+def test_a_spike_judged_by_the_band_alone_does_not_take_the_readings_after_it() -> None:
+    """A reading after samples taken out while the servo settled is judged by the band
+    alone: a spike that stays inside the band passes that test. The readings after it do
+    not follow it, and follow each other: it is the isolated one, and they are fed."""
+    times, u, y, resumed = _jogs(12, 0.0)
+    spike = 64 * 8 + 40  # resting inside the play, the first sample after a jog
+    y[spike] += 12 * COUNT
+    assert _screen_steps(StreamHealth(), times, u, y, resumed) == [spike]
