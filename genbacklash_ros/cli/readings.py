@@ -24,6 +24,7 @@ import numpy as np
 from genbacklash_core import GenBacklashError
 from genbacklash_ros.bags.bagio import AlignedSeries, read_aligned
 from genbacklash_ros.bags.csvio import Series, read_series_csv, write_readings_csv
+from genbacklash_ros.cli.joints import per_joint
 from genbacklash_ros.cli.replay import (
     add_bag_input_options,
     add_node_parameter_options,
@@ -119,5 +120,6 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     add_node_parameter_options(
         parser, used="readings uses joint, command_index and settle_time (for the check)."
     )
-    parser.set_defaults(func=cmd_readings)
+    # several joints: one CSV each, the output name holding {joint}
+    parser.set_defaults(func=per_joint(cmd_readings, data="bag", files=("output",)))
     return parser
