@@ -83,6 +83,7 @@ from .data import as_float_array, count_reversals
 from .errors import GenBacklashError
 from .estimate import EstimatorState
 from .identify import nrmse
+from .online.windowed import WindowedIdentifier, WindowedSettings
 from .samples import sample_breaks
 from .scenarios import (
     OPERATION_BACKLASH,
@@ -92,7 +93,6 @@ from .scenarios import (
     trapezoid,
 )
 from .simulate import simulate_backlash
-from .windowed import WindowedIdentifier, WindowedSettings
 
 __all__ = [
     "CommissioningCheck",

@@ -1,0 +1,359 @@
+"""Memory measured in information: what the data taught about each branch, by input region.
+
+An identifier that remembers the last ``W`` samples forgets a drivetrain as soon as it rests:
+at 1 kHz a dwell of 1.5 s pushes every move out of a 1500-sample window, and a joint that
+runs one way for a minute forgets the other branch. What carries information about the
+general backlash is a *row* of the paper's regression, eq. (24): a pair of consecutive
+readings ``(x(t-1), x(t))`` with the input ``u(t-1) -> u(t)`` that moved in between. A held
+command (the servo holds a 100 Hz command for ten 1 kHz readings) or a dwell repeats the
+previous row's state and adds nothing.
+
+:class:`RowMemory` keeps such rows, and only such rows: pairs that are consecutive on the
+encoder's clock (:mod:`genbacklash_core.samples`) and whose input moved. It files them by
+the direction of the move (up: the right branch, eq. 19; down: the left branch, eq. 18) and
+by where the input was, in ``bins`` equal parts of the input range seen so far, and holds
+``capacity`` rows in all. When it is full, rows are forgotten from the fullest bins only,
+oldest first, down to a common level (water filling): a new row pushes out the oldest row
+*of its own bin* once that bin holds its share, and a bin the data rarely reach keeps all it
+has. So old information is forgotten only where newer data cover the same region. A wearing
+gap is tracked wherever the drivetrain works; the regions it stopped visiting keep what they
+knew.
+
+Examples
+--------
+>>> import numpy as np
+>>> mem = RowMemory(capacity=64, bins=4)
+>>> u = np.array([0.0, 0.1, 0.1, 0.1, 0.3, 0.2])  # a move, a dwell, a move, a reversal
+>>> y = u - 0.05
+>>> mem.add_series(u, y, np.array([True, False, False, False, False, False]))
+3
+>>> len(mem), mem.per_bin  # not full: every row is kept, no bin is cut yet
+(3, 64)
+>>> series_u, series_y, breaks = mem.series()
+>>> series_u.tolist(), breaks.tolist()
+([0.0, 0.1, 0.1, 0.3, 0.3, 0.2], [True, False, True, False, True, False])
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from genbacklash_core._typing import BoolArray, FloatArray, IntArray
+from genbacklash_core.errors import GenBacklashError
+
+__all__ = ["BranchCoverage", "RowMemory", "coverage_of", "excitation_advice", "pair_series"]
+
+_PENDING_LIMIT = 256  # rows collected before they are filed into their bins
+
+
+def pair_series(
+    u0: FloatArray, u1: FloatArray, y0: FloatArray, y1: FloatArray
+) -> tuple[FloatArray, FloatArray, BoolArray]:
+    """Rows ``(u(t-1), u(t), x(t-1), x(t))`` as a series of pairs, ``(u, y, breaks)`` with
+    a break before each pair: what the batch iteration
+    (:func:`~genbacklash_core.identify.identify_backlash`) and the window fits take,
+    forming exactly one row of eq. (24) per pair."""
+    m = u1.size
+    u = np.empty(2 * m)
+    y = np.empty(2 * m)
+    u[0::2], u[1::2] = u0, u1
+    y[0::2], y[1::2] = y0, y1
+    breaks = np.zeros(2 * m, dtype=bool)
+    breaks[0::2] = True
+    return u, y, breaks
+
+
+def _level(counts: IntArray, capacity: int) -> int:
+    """The largest ``level`` with ``sum(min(counts, level)) <= capacity`` (water filling):
+    bins above it are cut to it, the others keep every row."""
+    if int(counts.sum()) <= capacity:
+        return capacity
+    ordered = np.sort(counts)
+    below = np.concatenate([[0], np.cumsum(ordered)[:-1]])  # rows in the smaller bins
+    # with the level at ordered[k], the bins from k on hold ordered[k] each
+    fits = below + ordered * (ordered.size - np.arange(ordered.size)) <= capacity
+    k = int(np.argmin(fits)) if not fits.all() else ordered.size
+    # the level lies between ordered[k-1] (fits) and ordered[k] (does not)
+    rest = ordered.size - k
+    base = int(below[k]) if k < ordered.size else int(ordered.sum())
+    return max(1, (capacity - base) // max(rest, 1))
+
+
+class BranchCoverage:
+    """How much of the input range each branch's rows cover (a snapshot).
+
+    Attributes
+    ----------
+    edges : ndarray, shape (bins + 1,)
+        Bin edges over the input range seen.
+    up, down : ndarray of int, shape (bins,)
+        Rows per bin for moves up (right branch) and down (left branch).
+    per_bin : int
+        The level the fullest bins are cut to (the capacity while the memory is not full).
+    """
+
+    def __init__(self, edges: FloatArray, up: IntArray, down: IntArray, per_bin: int) -> None:
+        self.edges = edges
+        self.up = up
+        self.down = down
+        self.per_bin = per_bin
+
+    def empty_regions(self, branch: str) -> list[tuple[float, float]]:
+        """Input intervals where ``branch`` ("left" or "right") has no rows, merged."""
+        counts = self.down if branch == "left" else self.up
+        out: list[tuple[float, float]] = []
+        for k in np.flatnonzero(counts == 0):
+            lo, hi = float(self.edges[k]), float(self.edges[k + 1])
+            if out and math.isclose(out[-1][1], lo):
+                out[-1] = (out[-1][0], hi)
+            else:
+                out.append((lo, hi))
+        return out
+
+    def share(self, branch: str) -> float:
+        """Share of the bins that hold at least one row of ``branch``."""
+        counts = self.down if branch == "left" else self.up
+        return float(np.count_nonzero(counts) / counts.size) if counts.size else 0.0
+
+
+def coverage_of(u0: FloatArray, u1: FloatArray, bins: int, per_bin: int) -> BranchCoverage:
+    """The coverage of rows whose inputs moved ``u0 -> u1``: rows per direction (up: right
+    branch; down: left) in ``bins`` equal regions of the range of ``u1``.
+
+    >>> cover = coverage_of(np.array([0.0, 1.0, 0.5]), np.array([1.0, 0.5, 0.6]), 2, 10)
+    >>> cover.up.tolist(), cover.down.tolist()
+    ([1, 1], [1, 0])
+    """
+    if u1.size == 0:
+        zeros = np.zeros(bins, dtype=np.intp)
+        return BranchCoverage(np.zeros(bins + 1), zeros, zeros.copy(), per_bin)
+    lo, hi = float(u1.min()), float(u1.max())
+    span = hi - lo
+    if span > 0.0:
+        region = np.floor((u1 - lo) / span * bins).astype(np.intp)
+        np.clip(region, 0, bins - 1, out=region)
+    else:
+        region = np.zeros(u1.size, dtype=np.intp)
+    up = u1 > u0
+    return BranchCoverage(
+        np.linspace(lo, hi, bins + 1),
+        np.asarray(np.bincount(region[up], minlength=bins), dtype=np.intp),
+        np.asarray(np.bincount(region[~up], minlength=bins), dtype=np.intp),
+        per_bin,
+    )
+
+
+def excitation_advice(cover: BranchCoverage, *, moved: bool, rows_needed: int = 0) -> str:
+    """What the rows have not shown yet, and what motion would show it ("" when the rows
+    cover both branches over the input range seen and no more are needed).
+
+    Parameters
+    ----------
+    cover : BranchCoverage
+        The rows' coverage.
+    moved : bool
+        Whether any sample so far moved the input (False: the input is constant, or every
+        sample was lost).
+    rows_needed : int
+        Moves still needed before the first fit (0: none, or an estimate exists).
+
+    Examples
+    --------
+    >>> cover = coverage_of(np.array([0.0, 0.2]), np.array([0.2, 0.4]), 2, 10)
+    >>> excitation_advice(cover, moved=True)
+    'the left branch is not covered yet: move the joint down'
+    """
+    if not moved:
+        return (
+            "the input is constant (or every sample was lost): move the joint back and "
+            "forth over its working range"
+        )
+    missing = []
+    for branch, move in (("left", "down"), ("right", "up")):
+        if cover.share(branch) == 0.0:
+            missing.append(f"the {branch} branch is not covered yet: move the joint {move}")
+        else:
+            holes = cover.empty_regions(branch)
+            if holes and cover.share(branch) < 0.75:
+                where = ", ".join(f"[{lo:.3g}, {hi:.3g}]" for lo, hi in holes[:3])
+                missing.append(f"the {branch} branch has no data over {where}: move {move} there")
+    if not missing and rows_needed > 0:
+        missing.append(
+            f"{rows_needed} more moves between readings needed before the first fit (moves "
+            "that reverse direction across the gap teach the most)"
+        )
+    return "; ".join(missing)
+
+
+class RowMemory:
+    """Regression rows filed by branch direction and input region (see the module notes).
+
+    Parameters
+    ----------
+    capacity : int
+        How many rows the memory holds in all.
+    bins : int
+        Regions of the input range per direction.
+    """
+
+    def __init__(self, capacity: int, bins: int = 16) -> None:
+        if isinstance(capacity, bool) or not isinstance(capacity, int) or capacity < 2:
+            raise GenBacklashError(f"capacity must be a whole number >= 2, got {capacity!r}")
+        if isinstance(bins, bool) or not isinstance(bins, int) or bins < 1:
+            raise GenBacklashError(f"bins must be a whole number >= 1, got {bins!r}")
+        self.capacity = capacity
+        self.bins = bins
+        self.per_bin = capacity  # the level the fullest bins are cut to (see _file)
+        empty = np.empty(0)
+        self._u0, self._u1, self._y0, self._y1 = empty, empty, empty, empty
+        self._order: IntArray = np.empty(0, dtype=np.intp)
+        self._pending: list[tuple[FloatArray, FloatArray, FloatArray, FloatArray]] = []
+        self._singles: list[tuple[float, float, float, float]] = []
+        self._pending_count = 0
+        self._lo = math.inf
+        self._hi = -math.inf
+        self.added = 0  # rows ever taken
+
+    def __len__(self) -> int:
+        self._file()
+        return int(self._u1.size)
+
+    def input_range(self) -> tuple[float, float]:
+        """The input range of the rows taken so far (``(inf, -inf)`` when none)."""
+        return self._lo, self._hi
+
+    def add_series(self, u: FloatArray, y: FloatArray, breaks: BoolArray) -> int:
+        """Take the rows of a series: each pair of consecutive samples (``breaks`` False at
+        the second) whose input moved. Returns how many rows were taken."""
+        if u.size < 2:
+            return 0
+        follows = ~breaks[1:]
+        moved = u[1:] != u[:-1]  # a held command or a dwell repeats the previous state
+        keep = follows & moved
+        count = int(np.count_nonzero(keep))
+        if count:
+            self.add(u[:-1][keep], u[1:][keep], y[:-1][keep], y[1:][keep])
+        return count
+
+    def add(self, u0: FloatArray, u1: FloatArray, y0: FloatArray, y1: FloatArray) -> None:
+        """Take rows ``(u(t-1), u(t), x(t-1), x(t))`` (consecutive, input moved)."""
+        if u1.size == 0:
+            return
+        self._pending.append((u0.copy(), u1.copy(), y0.copy(), y1.copy()))
+        self._pending_count += u1.size
+        self._lo = min(self._lo, float(u1.min()))
+        self._hi = max(self._hi, float(u1.max()))
+        if self._pending_count >= _PENDING_LIMIT:
+            self._file()
+
+    def add_one(self, u0: float, u1: float, y0: float, y1: float) -> None:
+        """Take one row (as :meth:`add`, without arrays)."""
+        self._singles.append((u0, u1, y0, y1))
+        self._pending_count += 1
+        if u1 < self._lo:
+            self._lo = u1
+        if u1 > self._hi:
+            self._hi = u1
+        if self._pending_count >= _PENDING_LIMIT:
+            self._file()
+
+    def _keys(self, u0: FloatArray, u1: FloatArray) -> IntArray:
+        """Bin key per row: direction (0 down, 1 up) times ``bins`` plus the region."""
+        span = self._hi - self._lo
+        if span > 0.0:
+            region = np.floor((u1 - self._lo) / span * self.bins).astype(np.intp)
+            np.clip(region, 0, self.bins - 1, out=region)
+        else:
+            region = np.zeros(u1.size, dtype=np.intp)
+        up = (u1 > u0).astype(np.intp)
+        return np.asarray(up * self.bins + region, dtype=np.intp)
+
+    def _file(self) -> None:
+        """File the pending rows: every bin keeps its newest ``per_bin`` rows."""
+        if self._singles:
+            block = np.array(self._singles, dtype=np.float64)
+            self._pending.append((block[:, 0], block[:, 1], block[:, 2], block[:, 3]))
+            self._singles = []
+        if not self._pending:
+            return
+        start = self.added
+        parts = [
+            (self._u0, self._u1, self._y0, self._y1),
+            *self._pending,
+        ]
+        u0 = np.concatenate([p[0] for p in parts])
+        u1 = np.concatenate([p[1] for p in parts])
+        y0 = np.concatenate([p[2] for p in parts])
+        y1 = np.concatenate([p[3] for p in parts])
+        order = np.concatenate(
+            [self._order, np.arange(start, start + self._pending_count, dtype=np.intp)]
+        )
+        self.added += self._pending_count
+        self._pending = []
+        self._pending_count = 0
+        keys = self._keys(u0, u1)
+        newest_first = np.lexsort((-order, keys))  # by bin, newest first within a bin
+        sorted_keys = keys[newest_first]
+        first_of_bin = np.concatenate([[True], sorted_keys[1:] != sorted_keys[:-1]])
+        position = np.arange(sorted_keys.size)
+        bin_start = np.maximum.accumulate(np.where(first_of_bin, position, 0))
+        rank = position - bin_start
+        counts = np.bincount(keys, minlength=2 * self.bins)
+        self.per_bin = _level(counts, self.capacity)
+        kept = np.sort(newest_first[rank < self.per_bin])  # back in time order
+        self._u0, self._u1, self._y0, self._y1 = u0[kept], u1[kept], y0[kept], y1[kept]
+        self._order = order[kept]
+
+    def series(self) -> tuple[FloatArray, FloatArray, BoolArray]:
+        """The rows as a series of pairs, ``(u, y, breaks)`` with a break before each pair:
+        what the batch iteration (:func:`~genbacklash_core.identify.identify_backlash`) and
+        the window fits take, forming exactly one row of eq. (24) per pair."""
+        self._file()
+        return pair_series(self._u0, self._u1, self._y0, self._y1)
+
+    def rows(self) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """The filed rows ``(u(t-1), u(t), x(t-1), x(t))``, in time order (views)."""
+        self._file()
+        return self._u0, self._u1, self._y0, self._y1
+
+    @property
+    def taken(self) -> int:
+        """Rows taken so far, filed or not: the memory's clock (a row's ``order`` is the
+        clock when it was taken)."""
+        return self.added + self._pending_count + len(self._singles)
+
+    def stamps(self) -> tuple[IntArray, BoolArray]:
+        """Per filed row (time order, as :meth:`rows`): its order among the rows taken, and
+        whether the input moved up (the right branch, eq. 19) rather than down (eq. 18)."""
+        self._file()
+        return self._order, self._u1 > self._u0
+
+    def discard(self, drop: BoolArray) -> int:
+        """Forget the filed rows flagged in ``drop`` (time order, as :meth:`rows`); how many."""
+        self._file()
+        count = int(np.count_nonzero(drop))
+        if count:
+            keep = ~drop
+            self._u0, self._u1 = self._u0[keep], self._u1[keep]
+            self._y0, self._y1 = self._y0[keep], self._y1[keep]
+            self._order = self._order[keep]
+        return count
+
+    def coverage(self) -> BranchCoverage:
+        """Rows per direction and region (for diagnostics and reports)."""
+        self._file()
+        if not self._u1.size:
+            edges = np.zeros(self.bins + 1)
+            zeros = np.zeros(self.bins, dtype=np.intp)
+            return BranchCoverage(edges, zeros, zeros.copy(), self.per_bin)
+        keys = self._keys(self._u0, self._u1)
+        counts = np.bincount(keys, minlength=2 * self.bins)
+        edges = np.linspace(self._lo, self._hi, self.bins + 1)
+        return BranchCoverage(
+            edges,
+            np.asarray(counts[self.bins :], dtype=np.intp),
+            np.asarray(counts[: self.bins], dtype=np.intp),
+            self.per_bin,
+        )

@@ -1,0 +1,148 @@
+"""How far an online estimate trails a drivetrain that changes: the tracking term of its bands.
+
+An online identifier fits the rows it remembers. While the drivetrain changes under it (a
+gap that wears wider), those rows describe it as it was over the memory's span, and the
+least-squares estimate of eq. (29) is close to the drivetrain's value at the rows' mean age,
+not now. That is a bias, not noise: the statistical covariance of eq. (23) does not see it,
+and while the gap moves its 2-sigma band sits beside the truth (the bundled operation bag read
+``0.1034 +/- 0.0005`` rad against a true 0.1139).
+
+:func:`dead_zone_drift` fits the remembered rows again with the dead zones ``c_L``, ``c_R``
+drifting linearly with the rows' age: it gives how far the drivetrain has moved past the
+estimate (``p_now - p``) and the drift rates. When a rate stands out of its noise
+(:attr:`DeadZoneDrift.drifting`), the identifiers add ``b b^T`` (``b`` that distance) to the
+covariance they publish: the estimate's mean squared error is ``cov + b b^T``. The estimate
+itself is left as it was (what the compensator and the state use).
+
+A backlash alone only: the cascade's bands are the statistical ones.
+
+Examples
+--------
+>>> from genbacklash_core.backlash import GeneralBacklash
+>>> rng = np.random.default_rng(0)
+>>> u0 = rng.uniform(-1, 1, 400); u1 = u0 + rng.choice([-0.2, 0.2], 400)
+>>> age = np.arange(400.0)[::-1]  # rows in time order: the first is the oldest
+>>> c = 0.05 + 1e-4 * (399 - age)  # both dead zones grew by 0.04 over the rows
+>>> y1 = np.where(u1 > u0, u1 - c, u1 + c)  # every row engages a branch
+>>> p = np.array([1.0, 0.07, 1.0, 0.07])  # m_left_1, c_left, m_right_1, c_right: the mean
+>>> fit = dead_zone_drift(Structure(1), p, (u0, u1, u0.copy(), y1), age)
+>>> fit.drifting, np.round(fit.correction, 4).tolist()  # c is 0.0899 now, 0.0199 past p
+(True, [0.0, 0.0199, 0.0, 0.0199])
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from genbacklash_core._typing import ArrayLike, FloatArray
+from genbacklash_core.refine import simulation_jacobian
+from genbacklash_core.structure import Structure
+
+from .memory import pair_series
+
+__all__ = ["DRIFT_Z", "DeadZoneDrift", "dead_zone_drift"]
+
+DRIFT_Z = 3.0  # a dead zone drifts when its rate is this many standard deviations from 0
+
+
+@dataclass(frozen=True)
+class DeadZoneDrift:
+    """What a joint fit of the remembered rows with dead zones that drift says.
+
+    Attributes
+    ----------
+    estimate : ndarray, shape (P,)
+        The estimate ``p`` the rows were fitted around.
+    correction : ndarray, shape (P,)
+        ``p_now - p``: how far the drivetrain has moved past the estimate ``p`` (natural
+        parameters); the estimate trails by ``-correction``.
+    covariance : ndarray, shape (P, P)
+        Covariance of ``correction`` (the joint fit's, drift rates included).
+    rate : ndarray, shape (2,)
+        Growth of ``c_left`` and ``c_right`` per clock tick.
+    rate_std : ndarray, shape (2,)
+        Standard deviations of ``rate``.
+    rows : int
+        Rows that engaged a branch (those the fit used).
+    """
+
+    estimate: FloatArray
+    correction: FloatArray
+    covariance: FloatArray
+    rate: FloatArray
+    rate_std: FloatArray
+    rows: int
+
+    @property
+    def drifting(self) -> bool:
+        """Whether either dead zone drifts beyond doubt: a rate more than ``DRIFT_Z``
+        standard deviations from zero. On a drivetrain that does not change the correction
+        is noise (of the order of the estimate's own standard deviation), and a band that
+        added it everywhere would be wider where it was right already."""
+        return bool(np.any(np.abs(self.rate) > DRIFT_Z * self.rate_std))
+
+    def tracking_covariance(self, current: FloatArray | None = None) -> FloatArray:
+        """``b b^T`` when :attr:`drifting`, else zeros: the term the bands add to the
+        covariance of the estimate ``current`` (default :attr:`estimate`), where ``b`` is
+        how far the drivetrain has moved past it: ``estimate + correction - current``."""
+        size = self.correction.size
+        if not self.drifting:
+            return np.zeros((size, size))
+        b = self.correction if current is None else self.estimate + self.correction - current
+        return np.asarray(np.outer(b, b), dtype=np.float64)
+
+
+def dead_zone_drift(
+    structure: Structure,
+    p: FloatArray,
+    rows: tuple[FloatArray, FloatArray, FloatArray, FloatArray],
+    age: ArrayLike,
+) -> DeadZoneDrift | None:
+    """Fit the remembered rows with the dead zones drifting linearly in time.
+
+    A row ``(u(t-1), u(t), x(t-1), x(t))`` of age ``a`` read the drivetrain as it was then.
+    With ``c_L``, ``c_R`` growing at ``rho`` per tick, its one-step prediction error at the
+    estimate ``p`` (the play operator of eqs. 20-21 from the measured ``x(t-1)``) is, to first
+    order, ``J (p_now - p) - a J_c rho``, where ``J`` is the prediction's sensitivity to the
+    parameters (:func:`~genbacklash_core.refine.simulation_jacobian`) and ``J_c`` its columns
+    of the dead zones. Least squares over the rows that engage a branch give
+    ``p_now - p`` and ``rho`` together, with their covariance. None when the rows cannot
+    tell (a branch without rows, fewer rows than unknowns) or for a cascade.
+
+    """
+    if structure.cascade:
+        return None
+    u0, u1, y0, y1 = rows
+    if u1.size == 0:
+        return None
+    u, y, breaks = pair_series(u0, u1, y0, y1)
+    y_sim, jac = simulation_jacobian(structure, p, u, y, float(y[0]), breaks)
+    residual = (y - y_sim)[1::2]
+    sens = jac[1::2]
+    names = structure.names()
+    dead = [names.index("c_left"), names.index("c_right")]
+    engaged = np.any(sens != 0.0, axis=1) & np.isfinite(residual)
+    size = p.size + 2
+    if np.count_nonzero(engaged) <= size or not np.all(np.any(sens[engaged][:, dead], axis=0)):
+        return None
+    a = np.asarray(age, dtype=np.float64)[engaged]
+    design = np.hstack([sens[engaged], -a[:, None] * sens[engaged][:, dead]])
+    target = residual[engaged]
+    coef, _, rank, _ = np.linalg.lstsq(design, target, rcond=None)
+    if rank < size:
+        return None
+    left = target - design @ coef
+    dof = max(target.size - size, 1)
+    s2 = float(left @ left) / dof
+    cov = s2 * np.linalg.pinv(design.T @ design)
+    rate_std = np.sqrt(np.maximum(np.diag(cov)[p.size :], 0.0))
+    return DeadZoneDrift(
+        np.array(p, dtype=np.float64),
+        np.asarray(coef[: p.size], dtype=np.float64),
+        np.asarray(cov[: p.size, : p.size], dtype=np.float64),
+        np.asarray(coef[p.size :], dtype=np.float64),
+        np.asarray(rate_std, dtype=np.float64),
+        int(target.size),
+    )
