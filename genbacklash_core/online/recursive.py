@@ -71,7 +71,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from genbacklash_core._typing import ArrayLike, BoolArray, FloatArray, IntArray
-from genbacklash_core.data import NonFinitePolicy, scale_limits
+from genbacklash_core.data import scale_limits
 from genbacklash_core.errors import GenBacklashError, NonFiniteInputError
 from genbacklash_core.estimate import (
     Estimate,
@@ -79,7 +79,6 @@ from genbacklash_core.estimate import (
     aged_confidence,
     as_sample,
     as_series,
-    check_setting,
     confidence_of,
     relative_std_of,
 )
@@ -90,6 +89,7 @@ from genbacklash_core.simulate import play_bounds
 from genbacklash_core.structure import Structure
 
 from .memory import BranchCoverage, coverage_of, excitation_advice, pair_series
+from .settings import RecursiveSettings
 from .tracking import DeadZoneDrift, dead_zone_drift
 from .windowed import (
     SampleRing,
@@ -113,149 +113,8 @@ _INIT_TOL = 1e-6  # they stop when no parameter moves more than this (relative)
 _MAX_REJECTIONS = 8  # restarts that may be rejected for a poor fit before any fit is taken
 _MAX_INVALID = 8  # consecutive invalid iterates before a re-initialisation
 _DRIFT_EVERY = 1000  # samples between two fits of the bands' tracking term
-_MAX_MEMORY = 1 << 16  # rows per branch when nothing is forgotten (forgetting = 1)
 
 _WARMING, _RUNNING, _HELD, _STOPPED = "warming", "running", "held", "stopped"
-
-
-@dataclass(frozen=True)
-class RecursiveSettings:
-    """Settings of :class:`RecursiveIdentifier` (validated on construction).
-
-    Attributes
-    ----------
-    forgetting : float
-        ``lambda`` in ``[0.5, 1]``: each branch remembers its newest ``M = 1 / (1 - lambda)``
-        rows (moves between consecutive readings; ``M = 65536`` for 1), and each of its input
-        regions at least ``ceil(M / (2 bins))`` however old. A drifting parameter is tracked
-        about ``M / 2`` rows of its branch behind (on the paper's random input, one row per
-        sample: ~``M`` samples); larger ``M`` is more accurate (std ~ ``1/sqrt(M)``) and
-        costs more per iteration. Rows, not samples: a dwell or a held command adds none.
-    bins : int
-        Input regions per branch of the memory (1 to 1000).
-    initial_samples : int
-        Samples before the first batch fit (>= 20); the cascade's first fit takes its
-        recent ``buffer`` samples, a backlash alone every informative row seen.
-    buffer : int
-        Recent samples kept for the cascade's batch fits (>= ``initial_samples``).
-    block : int
-        Samples between two iterations over the memory (1 to 4096); blocks without new
-        rows cost nothing.
-    covariance_bound : float
-        The pull towards the current estimate is ``R_init / covariance_bound`` (``R_init``
-        the information at the (re)initialisation), so the covariance never exceeds this
-        multiple of its value then.
-    input_deadband : float
-        A row is informative only when the input step exceeds this fraction of the input
-        span seen so far (a repeated command never counts).
-    excitation_memory : int
-        Memory, in samples, of the informative share reported as ``excitation``.
-    min_excitation : float
-        Kept for compatibility; no effect (the state follows ``idle_samples``).
-    idle_samples : int
-        Samples without a new informative row after which the state is ``no_excitation``
-        (the estimate held).
-    confidence_half_life : float
-        Samples over which the confidence halves while no new row confirms a branch
-        (600000: ten minutes at 1 kHz); the age is that of the branch whose newest row is
-        oldest.
-    min_conditioning, min_linear_conditioning : float
-        Kept for compatibility; no effect: the binned memory keeps every region a branch
-        was seen in, so a narrow sweep no longer bends the polynomial.
-    divergence_ratio : float
-        The one-step error has blown up when its short-term RMS exceeds this multiple of
-        its long-term value.
-    check_every : int
-        Samples between updates of the cascade's settling horizon (the linear block's
-        memory of a change of ``x``).
-    converged_std : float
-        ``converged`` needs every parameter's standard deviation below
-        ``converged_std * max(1, max|p|)``; also the confidence scale.
-    nonfinite : {"raise", "drop"}
-        NaN/inf samples, and samples too large for the regression (beyond
-        :func:`~genbacklash_core.data.scale_limits`), raise, or are skipped (a skipped
-        sample breaks the chain of consecutive samples).
-
-    Notes
-    -----
-    Measured with the defaults. Simulated drivetrain operation
-    (:func:`~genbacklash_core.scenarios.operation_record`: moves, dwells, jogs, 100 Hz
-    commands read at 1 kHz, quantised, 2 % of the readings lost), seeds 0-4: first estimate
-    after 1.4-3.9 s, free-run NRMSE ~1e-4 after 60 s; gaps widening by 50 % over ten minutes
-    tracked ~8 s behind; two minutes of one-way motion move no parameter by more than 1e-4.
-    The paper's Example 1 (random input, SNR 25): a linearly growing gap is tracked ~500
-    samples behind; up to 30 % of the readings lost at random leave the final error as it
-    is without loss. ``update_many`` costs 2-5 us per sample, ``update`` ~10 us.
-
-    Examples
-    --------
-    >>> RecursiveSettings(forgetting=0.999).block
-    64
-    >>> RecursiveSettings(forgetting=1.5)
-    Traceback (most recent call last):
-    ...
-    genbacklash_core.errors.GenBacklashError: forgetting must lie in [0.5, 1], got 1.5
-    """
-
-    forgetting: float = 0.998
-    bins: int = 16
-    initial_samples: int = 300
-    buffer: int = 1000
-    block: int = 64
-    covariance_bound: float = 20.0
-    input_deadband: float = 1e-4
-    excitation_memory: int = 200
-    min_excitation: float = 0.02
-    idle_samples: int = 1000
-    confidence_half_life: float = 600_000.0
-    min_conditioning: float = 0.03
-    min_linear_conditioning: float = 0.3
-    divergence_ratio: float = 5.0
-    check_every: int = 100
-    converged_std: float = 0.02
-    nonfinite: NonFinitePolicy = "raise"
-
-    def __post_init__(self) -> None:
-        check_setting("forgetting", self.forgetting, 0.5, 1.0, whole=False)
-        check_setting("bins", self.bins, 1, 1000, whole=True)
-        check_setting("initial_samples", self.initial_samples, 20, 10_000_000, whole=True)
-        check_setting("buffer", self.buffer, self.initial_samples, 100_000_000, whole=True)
-        check_setting("block", self.block, 1, 4096, whole=True)
-        check_setting("covariance_bound", self.covariance_bound, 1.0, math.inf, whole=False)
-        check_setting("input_deadband", self.input_deadband, 0.0, 1.0, whole=False)
-        check_setting("excitation_memory", self.excitation_memory, 1, 10_000_000, whole=True)
-        check_setting("min_excitation", self.min_excitation, 0.0, 1.0, whole=False)
-        check_setting("idle_samples", self.idle_samples, 1, 10_000_000_000, whole=True)
-        check_setting("confidence_half_life", self.confidence_half_life, 1.0, math.inf, whole=False)
-        check_setting("min_conditioning", self.min_conditioning, 0.0, 1.0, whole=False)
-        check_setting(
-            "min_linear_conditioning", self.min_linear_conditioning, 0.0, 1.0, whole=False
-        )
-        check_setting("divergence_ratio", self.divergence_ratio, 1.0, math.inf, whole=False)
-        check_setting("check_every", self.check_every, 1, 10_000_000, whole=True)
-        check_setting("converged_std", self.converged_std, 1e-12, math.inf, whole=False)
-        if self.nonfinite not in ("raise", "drop"):
-            raise GenBacklashError(f"nonfinite must be 'raise' or 'drop', got {self.nonfinite!r}")
-
-    @property
-    def branch_memory(self) -> int:
-        """``M``: rows (moves) each branch remembers, ``1 / (1 - forgetting)``.
-
-        >>> RecursiveSettings().branch_memory, RecursiveSettings(forgetting=1.0).branch_memory
-        (500, 65536)
-        """
-        if self.forgetting >= 1.0:
-            return _MAX_MEMORY
-        return min(max(round(1.0 / (1.0 - self.forgetting)), 2), _MAX_MEMORY)
-
-    @property
-    def region_floor(self) -> int:
-        """Rows each input region of a branch keeps however old: ``ceil(M / (2 bins))``.
-
-        >>> RecursiveSettings().region_floor
-        16
-        """
-        return max(math.ceil(self.branch_memory / (2 * self.bins)), 1)
 
 
 # --------------------------------------------------------------------------- the memory

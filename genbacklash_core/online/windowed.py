@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from genbacklash_core._typing import ArrayLike, BoolArray, FloatArray
-from genbacklash_core.data import NonFinitePolicy, scale_limits
+from genbacklash_core.data import scale_limits
 from genbacklash_core.errors import GenBacklashError, NonFiniteInputError
 from genbacklash_core.estimate import (
     Estimate,
@@ -35,7 +35,6 @@ from genbacklash_core.estimate import (
     aged_confidence,
     as_sample,
     as_series,
-    check_setting,
     confidence_of,
     relative_std,
 )
@@ -52,158 +51,10 @@ from genbacklash_core.simulate import play_bounds
 from genbacklash_core.structure import Structure
 
 from .memory import BranchCoverage, RowMemory, excitation_advice
+from .settings import WindowedSettings
 from .tracking import DeadZoneDrift, dead_zone_drift
 
 __all__ = ["WindowedIdentifier", "WindowedSettings"]
-
-
-# --------------------------------------------------------------------------- settings
-
-
-@dataclass(frozen=True)
-class WindowedSettings:
-    """Settings of :class:`WindowedIdentifier` (validated on construction).
-
-    Attributes
-    ----------
-    window : int
-        ``W``, how much the fits remember (>= 20). For a backlash alone: regression rows
-        (pairs of consecutive readings whose input moved), filed by branch and input region
-        (:class:`~genbacklash_core.memory.RowMemory`): old rows are forgotten only where
-        new ones cover the same region, and dwells, held commands and lost readings add
-        nothing. For the cascade: the most recent ``W`` samples, where a dwell counts only
-        up to twice the linear block's settling horizon (its later samples repeat a steady
-        state: a joint at rest does not push the moves out). Larger: more accurate
-        (std ~ 1/sqrt(W)); smaller: tracks drift with less lag (~ W/2 rows).
-    bins : int
-        Input regions per branch of the row memory (backlash alone).
-    idle_samples : int
-        Samples without a new informative row after which the estimate is reported as held
-        (state ``no_excitation``, the estimate unchanged).
-    confidence_half_life : float
-        Samples over which the confidence of a held estimate halves (600000: ten minutes at
-        1 kHz): an estimate no new data confirm is trusted less and less, never dropped.
-    refit_every : int
-        Smallest number of new samples between two fits (>= 1).
-    refit_fraction : float
-        ``K = max(refit_every, ceil(refit_fraction * len(window)))``: fits get rarer as the
-        window grows, which bounds the amortised cost per sample. 0 refits every
-        ``refit_every`` samples whatever the window length.
-    iterations : int
-        Warm-started iterations of the paper's method per fit (>= 1).
-    tol, settle : float
-        The iteration has settled when no parameter moves more than ``tol * max(1, max|p|)``
-        or more than ``settle`` times its standard deviation; it stops there.
-    refine : bool
-        Follow each fit by output-error refinement (Levenberg-Marquardt) on the window: the
-        maximum-likelihood estimate, free of the equation error's noise bias, at extra cost.
-    refine_iterations : int
-        Levenberg-Marquardt steps per fit, warm-started from the previous refined estimate.
-    min_samples : int or None
-        Samples before the first (cold) fit; default ``max(40, 6 * n_parameters)``.
-    min_excitation : float
-        A fit runs only when at least this share of the new samples since the last fit was
-        informative (a branch engaged while the input moved); otherwise the estimate is
-        frozen and the state is ``no_excitation``.
-    min_conditioning : float
-        A fit is accepted only when the latest ``excitation_window`` samples excite every
-        block of parameters (left branch, right branch, linear block): the smallest
-        eigenvalue of the block's normalised information matrix over those samples must
-        reach this fraction of the best seen so far. An input that sweeps only a narrow part
-        of a branch fails this, and fitting it would bend the whole polynomial to that part;
-        the estimate is then frozen (``no_excitation``).
-    min_linear_conditioning : float
-        The same for the linear block of a cascade. Higher, because a slow input makes
-        ``x`` and ``y`` nearly collinear and the noisy ``y`` in the regressors then biases
-        the equation error strongly; random input keeps it above ~0.8 of its reference.
-    excitation_window : int
-        Samples of the coverage test above (>= 20).
-    input_deadband : float
-        The input counts as moving when a step exceeds this fraction of the widest input
-        span fitted so far.
-    converged_std : float
-        ``converged`` needs every parameter's standard deviation below
-        ``converged_std * max(1, max|p|)``; also the confidence scale.
-    max_failures : int
-        Consecutive fits that leave the valid set (crossing branches, flipped slope, unstable
-        linear block) before the state is ``diverged`` and a cold restart is tried.
-    nonfinite : {"raise", "drop"}
-        NaN/inf samples, and samples too large for the regression (beyond
-        :func:`~genbacklash_core.data.scale_limits`, ~1e30 for a cubic), raise
-        :class:`~genbacklash_core.errors.NonFiniteInputError`, or are skipped.
-
-    Notes
-    -----
-    The window trades accuracy for tracking. Measured on the paper's Example 1 (random
-    input, SNR 25), all from a cold start:
-
-    * default (``W = 1500``): max parameter error ~0.01-0.02 at 300 samples; a gap growing
-      linearly is tracked ~800 samples behind;
-    * ``window=2000``: tracking lag ~1100 samples;
-    * ``window=5000, refine=True, iterations=1``: after 5000 samples as accurate as the
-      batch fit (with refinement) on all of them; tracking lag ~2800 samples.
-
-    The coverage test (``min_conditioning``) freezes the estimate while the latest
-    ``excitation_window`` samples sweep too little of a branch; an input that scans the
-    range more slowly than that is not trusted: raise ``excitation_window`` for it.
-
-    Examples
-    --------
-    >>> WindowedSettings(window=5000, refine=True).window
-    5000
-    >>> WindowedSettings(window=5)
-    Traceback (most recent call last):
-    ...
-    genbacklash_core.errors.GenBacklashError: window must lie in [20, inf], got 5
-    """
-
-    window: int = 1500
-    bins: int = 16
-    idle_samples: int = 1000
-    confidence_half_life: float = 600_000.0
-    refit_every: int = 25
-    refit_fraction: float = 0.15
-    iterations: int = 3
-    tol: float = 1e-4
-    settle: float = 0.2
-    refine: bool = False
-    refine_iterations: int = 2
-    min_samples: int | None = None
-    min_excitation: float = 0.05
-    min_conditioning: float = 0.03
-    min_linear_conditioning: float = 0.3
-    excitation_window: int = 500
-    input_deadband: float = 1e-4
-    converged_std: float = 0.02
-    max_failures: int = 3
-    nonfinite: NonFinitePolicy = "raise"
-
-    def __post_init__(self) -> None:
-        check_setting("window", self.window, 20, math.inf, whole=True)
-        check_setting("bins", self.bins, 1, 1000, whole=True)
-        check_setting("idle_samples", self.idle_samples, 1, math.inf, whole=True)
-        check_setting("confidence_half_life", self.confidence_half_life, 1.0, math.inf, whole=False)
-        check_setting("refit_every", self.refit_every, 1, self.window, whole=True)
-        check_setting("refit_fraction", self.refit_fraction, 0.0, 1.0, whole=False)
-        check_setting("iterations", self.iterations, 1, 1000, whole=True)
-        check_setting("tol", self.tol, 0.0, 1.0, whole=False)
-        check_setting("settle", self.settle, 0.0, 100.0, whole=False)
-        if not isinstance(self.refine, bool):
-            raise GenBacklashError(f"refine must be True or False, got {self.refine!r}")
-        check_setting("refine_iterations", self.refine_iterations, 1, 1000, whole=True)
-        if self.min_samples is not None:
-            check_setting("min_samples", self.min_samples, 20, self.window, whole=True)
-        check_setting("min_excitation", self.min_excitation, 0.0, 1.0, whole=False)
-        check_setting("min_conditioning", self.min_conditioning, 0.0, 1.0, whole=False)
-        check_setting(
-            "min_linear_conditioning", self.min_linear_conditioning, 0.0, 1.0, whole=False
-        )
-        check_setting("excitation_window", self.excitation_window, 20, math.inf, whole=True)
-        check_setting("input_deadband", self.input_deadband, 0.0, 1.0, whole=False)
-        check_setting("converged_std", self.converged_std, 1e-12, math.inf, whole=False)
-        check_setting("max_failures", self.max_failures, 1, 1_000_000, whole=True)
-        if self.nonfinite not in ("raise", "drop"):
-            raise GenBacklashError(f"nonfinite must be 'raise' or 'drop', got {self.nonfinite!r}")
 
 
 # --------------------------------------------------------------------------- ring buffer
