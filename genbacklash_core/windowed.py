@@ -6,11 +6,11 @@ new code imports from :mod:`genbacklash_core.online.windowed` (or :mod:`genbackl
 
 from __future__ import annotations
 
+from .online.covariance import natural_covariance
 from .online.windowed import (
     SampleRing,
     WindowedIdentifier,
     WindowedSettings,
-    natural_covariance,
     solve_normal,
     window_rows,
 )

@@ -88,18 +88,15 @@ from genbacklash_core.samples import as_breaks, run_lengths
 from genbacklash_core.simulate import play_bounds
 from genbacklash_core.structure import Structure
 
+from .covariance import natural_covariance, natural_from_theta, natural_variances, scaled_inverse
 from .memory import BranchCoverage, coverage_of, excitation_advice, pair_series
 from .settings import RecursiveSettings
-from .tracking import DeadZoneDrift, dead_zone_drift
+from .tracking import DeadZoneDrift, dead_zone_drift, with_tracking
 from .windowed import (
     SampleRing,
     SeedPrior,
     cold_fit,
-    natural_covariance,
-    natural_from_theta,
-    natural_variances,
     samples_since_change,
-    scaled_inverse,
     seed_prior,
     settling_samples,
 )
@@ -329,14 +326,6 @@ class _Solution:
     unit_covariance: FloatArray  # (Phi^T Phi + R_0 + prior)^-1
     sigma2: float  # residual variance of the memory's rows (NaN when too few)
     rows: int  # rows used
-
-
-def _with_tracking(
-    covariance: FloatArray, drift: DeadZoneDrift | None, p: FloatArray
-) -> FloatArray:
-    """``covariance`` of the estimate ``p`` plus the bands' tracking term
-    (:mod:`genbacklash_core.tracking`)."""
-    return covariance if drift is None else covariance + drift.tracking_covariance(p)
 
 
 def _ewma(values: FloatArray, alpha: float, start: float) -> float:
@@ -1406,7 +1395,7 @@ class RecursiveIdentifier:
         est = Estimate.trusted(
             structure,
             p_now,
-            lambda: _with_tracking(
+            lambda: with_tracking(
                 natural_covariance(structure, theta_copy, cov_theta), drift, p_now
             ),
             math.sqrt(residual),

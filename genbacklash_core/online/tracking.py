@@ -42,7 +42,7 @@ from genbacklash_core.structure import Structure
 
 from .memory import pair_series
 
-__all__ = ["DRIFT_Z", "DeadZoneDrift", "dead_zone_drift"]
+__all__ = ["DRIFT_Z", "DeadZoneDrift", "dead_zone_drift", "with_tracking"]
 
 DRIFT_Z = 3.0  # a dead zone drifts when its rate is this many standard deviations from 0
 
@@ -146,3 +146,19 @@ def dead_zone_drift(
         np.asarray(rate_std, dtype=np.float64),
         int(target.size),
     )
+
+
+def with_tracking(
+    covariance: FloatArray, drift: DeadZoneDrift | None, current: FloatArray | None = None
+) -> FloatArray:
+    """The bands both identifiers publish: ``covariance`` of the estimate ``current`` plus
+    the tracking term of ``drift`` (:meth:`DeadZoneDrift.tracking_covariance`; ``current``
+    None: the estimate the drift was fitted around). Always a new array, also
+    when there is no drift fit (the cascade, a seed): a copy of ``covariance``.
+
+    >>> with_tracking(np.eye(2), None).tolist()
+    [[1.0, 0.0], [0.0, 1.0]]
+    """
+    if drift is None:
+        return covariance.copy()
+    return covariance + drift.tracking_covariance(current)

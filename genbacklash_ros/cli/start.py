@@ -26,9 +26,9 @@ import numpy as np
 
 from genbacklash_core import Estimate, GenBacklashError, IdentificationResult, Structure
 from genbacklash_core.estimate import EstimatorState, confidence_of, relative_std
+from genbacklash_core.online.covariance import natural_covariance
 from genbacklash_core.online.windowed import (
     WindowedSettings,
-    natural_covariance,
     solve_normal,
     window_rows,
 )
