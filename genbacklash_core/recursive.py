@@ -6,11 +6,8 @@ new code imports from :mod:`genbacklash_core.online.recursive` (or :mod:`genback
 
 from __future__ import annotations
 
-from .online.recursive import (
-    BinnedRows,
-    RecursiveIdentifier,
-    RecursiveSettings,
-    memory_regression,
-)
+from .online.memory import BinnedRows
+from .online.recursive import RecursiveIdentifier, RecursiveSettings
+from .online.rows import memory_regression
 
 __all__ = ["BinnedRows", "RecursiveIdentifier", "RecursiveSettings", "memory_regression"]

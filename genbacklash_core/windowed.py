@@ -7,13 +7,8 @@ new code imports from :mod:`genbacklash_core.online.windowed` (or :mod:`genbackl
 from __future__ import annotations
 
 from .online.covariance import natural_covariance
-from .online.windowed import (
-    SampleRing,
-    WindowedIdentifier,
-    WindowedSettings,
-    solve_normal,
-    window_rows,
-)
+from .online.rows import SampleRing, window_rows
+from .online.windowed import WindowedIdentifier, WindowedSettings, solve_normal
 
 __all__ = [
     "SampleRing",

@@ -13,8 +13,16 @@ The modules below them hold one concept each.
 
 from __future__ import annotations
 
-from .memory import BranchCoverage, RowMemory, coverage_of, excitation_advice, pair_series
-from .recursive import BinnedRows, RecursiveIdentifier, RecursiveSettings, memory_regression
+from .memory import (
+    BinnedRows,
+    BranchCoverage,
+    RowMemory,
+    coverage_of,
+    excitation_advice,
+    pair_series,
+)
+from .recursive import RecursiveIdentifier, RecursiveSettings
+from .rows import memory_regression
 from .tracking import DRIFT_Z, DeadZoneDrift, dead_zone_drift
 from .windowed import WindowedIdentifier, WindowedSettings
 

@@ -19,6 +19,14 @@ has. So old information is forgotten only where newer data cover the same region
 gap is tracked wherever the drivetrain works; the regions it stopped visiting keep what they
 knew.
 
+Two memories stand here because the identifiers remember differently on purpose:
+:class:`RowMemory` (the windowed identifier, a backlash alone) holds ``capacity`` rows in all
+and levels the bins by water filling; :class:`BinnedRows` (the recursive identifier, both
+structures) holds rows of any width (:func:`~genbacklash_core.online.rows.row_width`), keeps
+``per_direction`` rows per direction of the move (``1 / (1 - forgetting)``, the branch
+memory) and a floor per region however old, and stamps each row with its sample so the
+divergence test and the tracking term can age it.
+
 Examples
 --------
 >>> import numpy as np
@@ -43,7 +51,14 @@ import numpy as np
 from genbacklash_core._typing import BoolArray, FloatArray, IntArray
 from genbacklash_core.errors import GenBacklashError
 
-__all__ = ["BranchCoverage", "RowMemory", "coverage_of", "excitation_advice", "pair_series"]
+__all__ = [
+    "BinnedRows",
+    "BranchCoverage",
+    "RowMemory",
+    "coverage_of",
+    "excitation_advice",
+    "pair_series",
+]
 
 _PENDING_LIMIT = 256  # rows collected before they are filed into their bins
 
@@ -357,3 +372,112 @@ class RowMemory:
             np.asarray(counts[: self.bins], dtype=np.intp),
             self.per_bin,
         )
+
+
+# --------------------------------------------------------------------------- per direction
+
+
+class BinnedRows:
+    """Regression rows filed by direction of motion and input region (see the module notes).
+
+    A row is a vector of ``width`` fields whose first two are the input before and at the
+    row (``u(t-1), u(t)`` for a backlash; ``u(t-2), u(t-1)`` for the cascade): a move up
+    files it with the right branch, a move down with the left one, in one of ``bins`` equal
+    regions of the input range of the rows seen so far. Each direction keeps its newest
+    ``per_direction`` rows, except that every region keeps its newest ``floor`` rows however
+    old: new rows push out the oldest rows of regions that hold more than that.
+
+    Parameters
+    ----------
+    width : int
+        Fields per row.
+    bins : int
+        Regions per direction.
+    per_direction : int
+        Rows per direction (the branch memory ``M``).
+    floor : int
+        Rows each region keeps however old.
+
+    Examples
+    --------
+    >>> mem = BinnedRows(width=4, bins=2, per_direction=3, floor=1)
+    >>> up = np.array([[0.0, 0.1, 0, 0], [0.8, 0.9, 0, 0], [0.1, 0.2, 0, 0],
+    ...                [0.2, 0.3, 0, 0], [0.3, 0.4, 0, 0]])  # moves up, one high, four low
+    >>> mem.insert(up, np.arange(5))
+    >>> len(mem), mem.direction_counts()  # the two oldest low rows went, not the high one
+    (3, (0, 3))
+    >>> mem.rows()[1].tolist()
+    [1, 3, 4]
+    """
+
+    def __init__(self, width: int, bins: int, per_direction: int, floor: int) -> None:
+        self.width = width
+        self.bins = bins
+        self.per_direction = per_direction
+        self.floor = floor
+        self._data = np.empty((0, width))
+        self._stamp = np.empty(0, dtype=np.intp)  # sample index of each row, increasing
+        self.low = math.inf  # the input range of the rows seen
+        self.high = -math.inf
+
+    def __len__(self) -> int:
+        return int(self._stamp.size)
+
+    @property
+    def capacity(self) -> int:
+        """Rows the memory holds at most."""
+        return 2 * self.per_direction
+
+    def direction_counts(self) -> tuple[int, int]:
+        """Rows of moves down (left branch) and up (right branch)."""
+        up = int(np.count_nonzero(self._data[:, 1] > self._data[:, 0]))
+        return len(self) - up, up
+
+    def rows(self) -> tuple[FloatArray, IntArray]:
+        """The rows, oldest first, and the sample index each was taken at."""
+        return self._data, self._stamp
+
+    def insert(self, rows: FloatArray, stamps: IntArray) -> None:
+        """File ``rows`` (taken at sample indices ``stamps``, in time order)."""
+        if rows.shape[0] == 0:
+            return
+        self.low = min(self.low, float(rows[:, 1].min()))
+        self.high = max(self.high, float(rows[:, 1].max()))
+        data = np.concatenate([self._data, rows])
+        stamp = np.concatenate([self._stamp, stamps])
+        up = data[:, 1] > data[:, 0]
+        drop = np.zeros(stamp.size, dtype=bool)
+        for direction in (~up, up):
+            excess = int(np.count_nonzero(direction)) - self.per_direction
+            if excess > 0:
+                drop[self._oldest(data[:, 1], direction, excess)] = True
+        if drop.any():
+            data, stamp = data[~drop], stamp[~drop]
+        self._data, self._stamp = data, stamp
+
+    def _oldest(self, where: FloatArray, direction: BoolArray, excess: int) -> IntArray:
+        """The ``excess`` rows of one direction to forget: the oldest of those beyond their
+        region's newest ``floor`` (the oldest of all, should those not be enough)."""
+        at = np.flatnonzero(direction)  # time order
+        span = self.high - self.low
+        if span > 0.0:
+            region = ((where[at] - self.low) * (self.bins / span)).astype(np.intp)
+            np.clip(region, 0, self.bins - 1, out=region)
+        else:
+            region = np.zeros(at.size, dtype=np.intp)
+        # a row may go when at least ``floor`` newer rows of its region stay: scan the
+        # oldest rows, a few more than needed, counting each region's rows from the oldest
+        allowed = np.bincount(region, minlength=self.bins) - self.floor
+        look = min(at.size, 2 * excess + self.bins)
+        while True:
+            head = region[:look]
+            onehot = head[:, None] == np.arange(self.bins)
+            seen = np.cumsum(onehot, axis=0)[np.arange(look), head]  # 1-based, per region
+            spare = np.flatnonzero(seen <= allowed[head])
+            if spare.size >= excess or look == at.size:
+                break
+            look = min(at.size, 2 * look)
+        if spare.size >= excess:
+            return np.asarray(at[spare[:excess]], dtype=np.intp)
+        kept = np.setdiff1d(np.arange(at.size), spare)  # not enough: the oldest of all
+        return np.asarray(at[np.concatenate([spare, kept[: excess - spare.size]])], dtype=np.intp)

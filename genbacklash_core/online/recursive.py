@@ -29,7 +29,7 @@ A drivetrain delivers its information in moves and reversals separated by long d
 * **Holds read their anchor.** A row inside the gap holds the state the last engaged
   branch left (eqs. 20-21); it carries nothing in eq. (29), but the hold just after an
   engaged row is one more reading of that branch at the engaged row's input, and is used as
-  such (:func:`memory_regression`).
+  such (:func:`~genbacklash_core.online.rows.memory_regression`).
 * **One iteration per block.** Every ``block`` samples with new rows, one warm-started
   iteration of the paper's method runs over the whole memory: the rows are re-evaluated at
   the current estimate (eqs. 25-28) and the least squares of eq. (29) / (37) is solved, with
@@ -82,26 +82,29 @@ from genbacklash_core.estimate import (
     confidence_of,
     relative_std_of,
 )
-from genbacklash_core.identify import _backlash_columns, _switching
-from genbacklash_core.play import play_operator
+from genbacklash_core.identify import _switching
 from genbacklash_core.samples import as_breaks, run_lengths
-from genbacklash_core.simulate import play_bounds
 from genbacklash_core.structure import Structure
 
 from .covariance import natural_covariance, natural_from_theta, natural_variances, scaled_inverse
-from .memory import BranchCoverage, coverage_of, excitation_advice, pair_series
+from .memory import BinnedRows, BranchCoverage, coverage_of, excitation_advice, pair_series
+from .rows import (
+    CascadeLags,
+    SampleRing,
+    cascade_memory_rows,
+    memory_regression,
+    row_width,
+    settling_samples,
+)
 from .settings import RecursiveSettings
 from .tracking import DeadZoneDrift, dead_zone_drift, with_tracking
 from .windowed import (
-    SampleRing,
     SeedPrior,
     cold_fit,
-    samples_since_change,
     seed_prior,
-    settling_samples,
 )
 
-__all__ = ["BinnedRows", "RecursiveIdentifier", "RecursiveSettings", "memory_regression"]
+__all__ = ["RecursiveIdentifier", "RecursiveSettings"]
 
 _SHORT_MEMORY = 20.0  # informative rows in the short error average (divergence test)
 _LONG_MEMORY = 1000.0  # informative rows in the long error average (its scale)
@@ -112,210 +115,6 @@ _MAX_INVALID = 8  # consecutive invalid iterates before a re-initialisation
 _DRIFT_EVERY = 1000  # samples between two fits of the bands' tracking term
 
 _WARMING, _RUNNING, _HELD, _STOPPED = "warming", "running", "held", "stopped"
-
-
-# --------------------------------------------------------------------------- the memory
-
-
-class BinnedRows:
-    """Regression rows filed by direction of motion and input region (see the module notes).
-
-    A row is a vector of ``width`` fields whose first two are the input before and at the
-    row (``u(t-1), u(t)`` for a backlash; ``u(t-2), u(t-1)`` for the cascade): a move up
-    files it with the right branch, a move down with the left one, in one of ``bins`` equal
-    regions of the input range of the rows seen so far. Each direction keeps its newest
-    ``per_direction`` rows, except that every region keeps its newest ``floor`` rows however
-    old: new rows push out the oldest rows of regions that hold more than that.
-
-    Parameters
-    ----------
-    width : int
-        Fields per row.
-    bins : int
-        Regions per direction.
-    per_direction : int
-        Rows per direction (the branch memory ``M``).
-    floor : int
-        Rows each region keeps however old.
-
-    Examples
-    --------
-    >>> mem = BinnedRows(width=4, bins=2, per_direction=3, floor=1)
-    >>> up = np.array([[0.0, 0.1, 0, 0], [0.8, 0.9, 0, 0], [0.1, 0.2, 0, 0],
-    ...                [0.2, 0.3, 0, 0], [0.3, 0.4, 0, 0]])  # moves up, one high, four low
-    >>> mem.insert(up, np.arange(5))
-    >>> len(mem), mem.direction_counts()  # the two oldest low rows went, not the high one
-    (3, (0, 3))
-    >>> mem.rows()[1].tolist()
-    [1, 3, 4]
-    """
-
-    def __init__(self, width: int, bins: int, per_direction: int, floor: int) -> None:
-        self.width = width
-        self.bins = bins
-        self.per_direction = per_direction
-        self.floor = floor
-        self._data = np.empty((0, width))
-        self._stamp = np.empty(0, dtype=np.intp)  # sample index of each row, increasing
-        self.low = math.inf  # the input range of the rows seen
-        self.high = -math.inf
-
-    def __len__(self) -> int:
-        return int(self._stamp.size)
-
-    @property
-    def capacity(self) -> int:
-        """Rows the memory holds at most."""
-        return 2 * self.per_direction
-
-    def direction_counts(self) -> tuple[int, int]:
-        """Rows of moves down (left branch) and up (right branch)."""
-        up = int(np.count_nonzero(self._data[:, 1] > self._data[:, 0]))
-        return len(self) - up, up
-
-    def rows(self) -> tuple[FloatArray, IntArray]:
-        """The rows, oldest first, and the sample index each was taken at."""
-        return self._data, self._stamp
-
-    def insert(self, rows: FloatArray, stamps: IntArray) -> None:
-        """File ``rows`` (taken at sample indices ``stamps``, in time order)."""
-        if rows.shape[0] == 0:
-            return
-        self.low = min(self.low, float(rows[:, 1].min()))
-        self.high = max(self.high, float(rows[:, 1].max()))
-        data = np.concatenate([self._data, rows])
-        stamp = np.concatenate([self._stamp, stamps])
-        up = data[:, 1] > data[:, 0]
-        drop = np.zeros(stamp.size, dtype=bool)
-        for direction in (~up, up):
-            excess = int(np.count_nonzero(direction)) - self.per_direction
-            if excess > 0:
-                drop[self._oldest(data[:, 1], direction, excess)] = True
-        if drop.any():
-            data, stamp = data[~drop], stamp[~drop]
-        self._data, self._stamp = data, stamp
-
-    def _oldest(self, where: FloatArray, direction: BoolArray, excess: int) -> IntArray:
-        """The ``excess`` rows of one direction to forget: the oldest of those beyond their
-        region's newest ``floor`` (the oldest of all, should those not be enough)."""
-        at = np.flatnonzero(direction)  # time order
-        span = self.high - self.low
-        if span > 0.0:
-            region = ((where[at] - self.low) * (self.bins / span)).astype(np.intp)
-            np.clip(region, 0, self.bins - 1, out=region)
-        else:
-            region = np.zeros(at.size, dtype=np.intp)
-        # a row may go when at least ``floor`` newer rows of its region stay: scan the
-        # oldest rows, a few more than needed, counting each region's rows from the oldest
-        allowed = np.bincount(region, minlength=self.bins) - self.floor
-        look = min(at.size, 2 * excess + self.bins)
-        while True:
-            head = region[:look]
-            onehot = head[:, None] == np.arange(self.bins)
-            seen = np.cumsum(onehot, axis=0)[np.arange(look), head]  # 1-based, per region
-            spare = np.flatnonzero(seen <= allowed[head])
-            if spare.size >= excess or look == at.size:
-                break
-            look = min(at.size, 2 * look)
-        if spare.size >= excess:
-            return np.asarray(at[spare[:excess]], dtype=np.intp)
-        kept = np.setdiff1d(np.arange(at.size), spare)  # not enough: the oldest of all
-        return np.asarray(at[np.concatenate([spare, kept[: excess - spare.size]])], dtype=np.intp)
-
-
-def memory_regression(
-    structure: Structure, p: FloatArray, rows: FloatArray, *, holds: bool = True
-) -> tuple[FloatArray, FloatArray, BoolArray, BoolArray, BoolArray]:
-    """The regression of eq. (24) (backlash) or eq. (35) (cascade) over memory rows at ``p``.
-
-    Backlash rows are ``[u(t-1), u(t), x(t-1), x(t), u_a, d_a]``: the switching functions
-    (eqs. 27-28) use the measured ``x(t-1)``, and on the rows that engage a branch the target
-    is ``x(t)`` (the hold term of eq. 24 vanishes). A row with neither branch engaged holds
-    the state (eqs. 20-21); eq. (29) leaves it out, but when the row knows its *anchor* --
-    the input ``u_a`` of the row just before it, when that row engaged the left
-    (``d_a = -1``) or right (``+1``) branch with no reading lost between them -- its ``x(t)``
-    is one more reading of that branch at ``u_a`` (the play operator holds the value the
-    branch left), and with ``holds`` it enters as such (``d_a = 0``: no anchor). Output-error
-    fits use those readings too; without them the recursive identifier's default estimate
-    on the paper's Example 1 was 12 % less accurate (parameter RMSE 0.0049 against 0.0043)
-    and tracked a drifting gap 2x later.
-
-    Cascade rows are ``[u(t-2), u(t-1), x(t-2), .., x(t-m), y(t-1), .., y(t-nb), y(t)]``
-    with ``m = max(na, 2)`` and ``x`` the internal output of eq. (36).
-
-    Returns
-    -------
-    phi, target : ndarray
-        Regressors (eq. 22 / 32) and targets of the rows used.
-    used : ndarray of bool
-        Which rows were used.
-    left, right : ndarray of bool
-        Per used row: the left (f1) or right (f2) branch is engaged.
-
-    Examples
-    --------
-    >>> from genbacklash_core import paper_example
-    >>> truth = paper_example(1).model
-    >>> x_r = float(truth.right([1.5])[0])
-    >>> rows = np.array([[0.0, 1.5, 0.0, x_r, 0.0, 0.0],  # engages R
-    ...                  [0.0, 0.1, 0.0, 0.0, 0.0, 0.0],  # inside the gap, no anchor
-    ...                  [1.5, 1.4, x_r, x_r, 1.5, 1.0]])  # holds what R left at u = 1.5
-    >>> phi, target, used, left, right = memory_regression(Structure(3), truth.parameters(),
-    ...                                                    rows)
-    >>> used.tolist(), right.tolist(), bool(np.allclose(phi @ truth.theta(), target))
-    ([True, False, True], [True, True], True)
-    >>> memory_regression(Structure(3), truth.parameters(), rows, holds=False)[2].tolist()
-    [True, False, False]
-    """
-    if structure.cascade:
-        na, nb = structure.na, structure.nb
-        m = max(na, 2)
-        u1, x2 = rows[:, 1], rows[:, 2]
-        f1, f2 = _switching(structure, p, u1, x2)  # f(t-1), eqs. (27)-(28), internal x(t-2)
-        phi = np.empty((rows.shape[0], structure.n_parameters), order="F")
-        n_bl = structure.n_backlash
-        phi[:, :n_bl] = _backlash_columns(structure, p, u1, f1, f2)  # eq. (32)
-        phi[:, n_bl : n_bl + na - 1] = rows[:, 2 : 1 + na]  # x(t-2) .. x(t-r), eq. (32)
-        phi[:, n_bl + na - 1 :] = -rows[:, 1 + m : 1 + m + nb]  # -y(t-1) .. -y(t-p)
-        target = rows[:, -1] - x2 * (1.0 - f1) * (1.0 - f2)  # eq. (35)
-        used = np.ones(rows.shape[0], dtype=bool)
-        return phi, target, used, f1 > 0.0, f2 > 0.0
-    u, x_prev = rows[:, 1], rows[:, 2]
-    f1, f2 = _switching(structure, p, u, x_prev)  # eqs. (27)-(28), measured x(t-1)
-    used = (f1 + f2) > 0.0  # eq. (29): other rows carry no information of their own
-    if holds:
-        held = ~used & (rows[:, 5] != 0.0)  # a hold with its anchor: x(t) = branch(u_a)
-        if held.any():
-            u = np.where(held, rows[:, 4], u)
-            f1 = np.where(held, (rows[:, 5] < 0.0).astype(np.float64), f1)
-            f2 = np.where(held, (rows[:, 5] > 0.0).astype(np.float64), f2)
-            used = used | held
-    f1, f2 = f1[used], f2[used]
-    phi = _backlash_columns(structure, p, u[used], f1, f2)  # eq. (22)
-    return phi, rows[used, 3], used, f1 > 0.0, f2 > 0.0  # target x(t), eq. (24)
-
-
-@dataclass
-class _Lags:
-    """The signals the next cascade row needs, relative to the next sample ``t``.
-
-    The internal ``x`` is carried as bounds: the play operator (eq. 36) run from the lowest
-    and from the highest state any lost reading may have left. Where they agree ``x`` is
-    known; after a break they part, and meet again at the next engagement of a branch.
-    """
-
-    u1: float  # u(t-1)
-    u2: float  # u(t-2)
-    x_low: list[float]  # internal x(t-2), .., x(t-m), m = max(na, 2): lower bound
-    x_high: list[float]  # the same, upper bound
-    y: list[float]  # y(t-1), .., y(t-nb)
-    resting: int  # samples since x last changed, up to x(t-2)
-
-    @classmethod
-    def unknown(cls, structure: Structure, u1: float = 0.0, u2: float = 0.0) -> _Lags:
-        """Lags with an internal ``x`` not known yet (after a seed, at a window's start)."""
-        m = max(structure.na, 2)
-        return cls(u1, u2, [-math.inf] * (m - 1), [math.inf] * (m - 1), [0.0] * structure.nb, 0)
 
 
 @dataclass
@@ -345,83 +144,6 @@ def _ewma(values: FloatArray, alpha: float, start: float) -> float:
         return float(out[-1])
     weights = alpha * decay ** np.arange(n - 1, -1, -1, dtype=np.float64)
     return float(start * decay**n + weights @ values)
-
-
-def _row_width(structure: Structure) -> int:
-    """Fields per memory row (see :func:`memory_regression`)."""
-    if structure.cascade:
-        return max(structure.na, 2) + structure.nb + 2
-    return 6
-
-
-def _cascade_rows(
-    structure: Structure,
-    p: FloatArray,
-    lags: _Lags,
-    u: FloatArray,
-    y: FloatArray,
-    run: IntArray,
-    run_before: int,
-    deadband: FloatArray,
-    settling: int,
-) -> tuple[FloatArray, IntArray, _Lags]:
-    """Memory rows of eq. (32) for a stretch of samples, the internal ``x`` by eq. (36).
-
-    A row at ``t`` needs samples ``t - max(m, nb) .. t`` consecutive (``run``: consecutive
-    samples ending at each, ``run_before`` at the sample before the stretch), the internal
-    ``x(t-2) .. x(t-m)`` known (after a break the state a lost reading left is not: the
-    bounds of :class:`_Lags` restart there), an input that moved from ``u(t-2)`` to
-    ``u(t-1)``, and a branch engaged or an ``x`` that changed within the linear block's
-    ``settling`` horizon (otherwise its regressors are constants plus noise). Returns the
-    rows, their positions in the stretch and the lags after it.
-    """
-    na, nb, size = structure.na, structure.nb, u.size
-    m = max(na, 2)
-    u_lag1 = np.concatenate([[lags.u1], u[:-1]])  # u(t-1) per row
-    u_lag2 = np.concatenate([[lags.u2], u_lag1[:-1]])  # u(t-2)
-    lo, hi = play_bounds(*structure.branches(p, u_lag1))
-    # x(t-1) per row, eq. (36); where sample t-1 broke the chain its prior state is unknown:
-    # the lower bound restarts from -inf (clamped to lo), the upper one from +inf (to hi)
-    restart = np.concatenate([[run_before <= 1], run[:-1] <= 1])
-    low = play_operator(lo, np.where(restart, lo, hi), lags.x_low[0])
-    high = play_operator(np.where(restart, hi, lo), hi, lags.x_high[0])
-    x_seq = np.concatenate([lags.x_low[::-1], low])  # x(T-m) .. x(T-2), x(T-1) .. x(T+n-2)
-    known_seq = np.concatenate(
-        [np.equal(lags.x_low, lags.x_high)[::-1], low == high]
-    )  # x determined (both bounds agree)
-    x2 = x_seq[m - 2 : m - 2 + size]  # x(t-2) per row
-    f1, f2 = _switching(structure, p, u_lag1, x2)  # f(t-1), eqs. (27)-(28)
-    moving = np.abs(u_lag1 - u_lag2) > deadband
-    resting = np.empty(size)  # samples since x last changed, up to x(t-2)
-    resting[0] = lags.resting
-    if size > 1:
-        since = samples_since_change(np.concatenate([[x_seq[m - 2]], low[:-1]]))[1:]
-        resting[1:] = np.minimum(since, lags.resting + np.arange(1, size))
-    changed_last = low[-1] != (low[-2] if size > 1 else x_seq[m - 2])
-    known = np.ones(size, dtype=bool)
-    for i in range(2, m + 1):
-        known &= known_seq[m - i : m - i + size]  # x(t-i) determined
-    complete = run >= max(m, nb) + 1  # every lag consecutive (the sample rule)
-    live = complete & known & moving & (((f1 + f2) > 0.0) | (resting <= settling))
-    at = np.flatnonzero(live)
-    rows = np.empty((at.size, m + nb + 2))
-    rows[:, 0], rows[:, 1] = u_lag2[at], u_lag1[at]
-    for i in range(2, m + 1):
-        rows[:, i] = x_seq[m - i + at]  # x(t-i)
-    y_seq = np.concatenate([lags.y[::-1], y])  # y(T-nb) .. y(T-1), y(T) ..
-    for j in range(1, nb + 1):
-        rows[:, m + j] = y_seq[nb - j + at]  # y(t-j)
-    rows[:, -1] = y[at]  # y(t)
-    high_seq = np.concatenate([lags.x_high[::-1], high])
-    after = _Lags(
-        u1=float(u[-1]),
-        u2=float(u_lag1[-1]),
-        x_low=[float(v) for v in x_seq[-(m - 1) :][::-1]],
-        x_high=[float(v) for v in high_seq[-(m - 1) :][::-1]],
-        y=[float(v) for v in y_seq[-nb:][::-1]] if nb else [],
-        resting=0 if changed_last else int(min(resting[-1] + 1, 1e9)),
-    )
-    return rows, at, after
 
 
 class RecursiveIdentifier:
@@ -580,7 +302,7 @@ class RecursiveIdentifier:
         self._version = 0  # bumped whenever the estimate changes
         self._summary: tuple[int, list[float], float] | None = None
         # the memory, the rows held back while the errors are blown up, the recent samples
-        self._memory = self._new_memory(_row_width(structure))
+        self._memory = self._new_memory(row_width(structure))
         self._held_back: BinnedRows | None = None
         self._recent = SampleRing(s.buffer)
         self._pending: list[tuple[FloatArray, IntArray]] = []  # rows of the current block
@@ -594,7 +316,7 @@ class RecursiveIdentifier:
         self._run = 0  # consecutive samples ending at the latest one
         self._u1 = self._y1 = 0.0  # the latest sample (backlash)
         self._anchor = (0.0, 0.0)  # u_a, d_a of the latest engaged row (backlash)
-        self._lags = _Lags.unknown(structure)  # cascade
+        self._lags = CascadeLags.unknown(structure)  # cascade
         self._drift: DeadZoneDrift | None = None  # the tracking term of the bands
         self._next_drift = 0  # the sample from which the next iterate refits it
         self._settling = 0
@@ -884,7 +606,7 @@ class RecursiveIdentifier:
         if self._mode not in (_RUNNING, _HELD):
             return np.zeros(n)  # the next batch fit takes the recent samples
         p = self._structure.from_theta(self._theta)
-        rows, at, self._lags = _cascade_rows(
+        rows, at, self._lags = cascade_memory_rows(
             self._structure, p, self._lags, u, y, run, run_before, deadband, self._settling
         )
         if at.size == 0:
@@ -1131,14 +853,14 @@ class RecursiveIdentifier:
         y: FloatArray,
         b: BoolArray,
         memory: BinnedRows,
-    ) -> _Lags:
+    ) -> CascadeLags:
         """File a window's cascade rows at ``p`` (from the first sample on which the internal
         ``x`` of eq. 36 is determined); the lags after the window."""
         deadband = self.settings.input_deadband * float(np.ptp(u))
-        rows, at, lags = _cascade_rows(
+        rows, at, lags = cascade_memory_rows(
             structure,
             p,
-            _Lags.unknown(structure),
+            CascadeLags.unknown(structure),
             u,
             y,
             run_lengths(b, 0),

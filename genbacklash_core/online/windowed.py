@@ -38,242 +38,29 @@ from genbacklash_core.estimate import (
     relative_std,
 )
 from genbacklash_core.identify import (
-    _backlash_columns,
-    _switching,
     identify_backlash,
     identify_cascade,
 )
-from genbacklash_core.play import play_operator
 from genbacklash_core.refine import refine_parameters
-from genbacklash_core.samples import as_breaks, breaks_to_rows, run_lengths
+from genbacklash_core.samples import as_breaks, run_lengths
 from genbacklash_core.simulate import play_bounds
 from genbacklash_core.structure import Structure
 
 from .covariance import natural_covariance, scaled_inverse, theta_jacobian
 from .memory import BranchCoverage, RowMemory, excitation_advice
+from .rows import (
+    SampleRing,
+    WindowRows,
+    settling_samples,
+    window_rows,
+)
 from .settings import WindowedSettings
 from .tracking import DeadZoneDrift, dead_zone_drift, with_tracking
 
 __all__ = ["WindowedIdentifier", "WindowedSettings"]
 
 
-# --------------------------------------------------------------------------- ring buffer
-
-
-class SampleRing:
-    """Last ``size`` samples of ``(u, y)`` in preallocated arrays, readable as one view.
-
-    Each sample is written twice, at ``k`` and ``k + size``, so the latest ``size`` samples
-    are always the contiguous slice ``[k, k + size)``: reading the window copies nothing.
-    """
-
-    def __init__(self, size: int) -> None:
-        self.size = size
-        self.u = np.zeros(2 * size)
-        self.y = np.zeros(2 * size)
-        self.b = np.ones(2 * size, dtype=bool)  # the sample rule: a break before the sample
-        self.count = 0
-
-    def push(self, u: float, y: float, brk: bool = False) -> None:
-        k = self.count % self.size
-        self.u[k] = self.u[k + self.size] = u
-        self.y[k] = self.y[k + self.size] = y
-        self.b[k] = self.b[k + self.size] = brk or self.count == 0
-        self.count += 1
-
-    def extend(self, u: FloatArray, y: FloatArray, breaks: BoolArray | None = None) -> None:
-        n = u.size
-        b = np.zeros(n, dtype=bool) if breaks is None else breaks.copy()
-        if self.count == 0 and n:
-            b[0] = True
-        if n > self.size:  # only the last `size` samples survive
-            self.count += n - self.size
-            u, y, b, n = u[-self.size :], y[-self.size :], b[-self.size :], self.size
-        k = (self.count + np.arange(n)) % self.size
-        self.u[k] = u
-        self.u[k + self.size] = u
-        self.y[k] = y
-        self.y[k + self.size] = y
-        self.b[k] = b
-        self.b[k + self.size] = b
-        self.count += n
-
-    def __len__(self) -> int:
-        return min(self.count, self.size)
-
-    def window(self, last: int | None = None) -> tuple[FloatArray, FloatArray]:
-        """The latest ``last`` (default all held) samples, oldest first (views)."""
-        held = len(self)
-        n = held if last is None else min(last, held)
-        end = held if self.count <= self.size else self.count % self.size + self.size
-        return self.u[end - n : end], self.y[end - n : end]
-
-    def breaks(self, last: int | None = None) -> BoolArray:
-        """The sample rule's breaks of :meth:`window` (the oldest sample always breaks)."""
-        held = len(self)
-        n = held if last is None else min(last, held)
-        end = held if self.count <= self.size else self.count % self.size + self.size
-        out = self.b[end - n : end].copy()
-        if n:
-            out[0] = True
-        return out
-
-
-@dataclass
-class _Rows:
-    """One regression over a window (internal).
-
-    ``informative`` flags, for the latest samples (end-aligned with the series), the rows that
-    carry information: for a backlash alone a branch engaged while the input moved; for the
-    cascade the input moved (every such row informs the linear part).
-    """
-
-    phi: FloatArray
-    target: FloatArray
-    informative: BoolArray
-    x: FloatArray | None = None  # cascade: internal x (eq. 36), valid from index `first`
-    first: int = 0
-
-
-def _backlash_rows(
-    structure: Structure,
-    p: FloatArray,
-    u: FloatArray,
-    y: FloatArray,
-    deadband: float,
-    breaks: BoolArray | None = None,
-) -> _Rows:
-    """Rows of eq. (24) for the measured backlash output ``y`` (the informative ones); never
-    across a break of the sample rule (:mod:`genbacklash_core.samples`)."""
-    u_t = u[1:]
-    f1, f2 = _switching(structure, p, u_t, y[:-1])  # eqs. (27)-(28), x(t-1) measured
-    moving = np.abs(np.diff(u)) > deadband
-    informative = ((f1 + f2) > 0.0) & moving  # other rows carry no information (eq. 29)
-    if breaks is not None:
-        informative &= ~breaks[1:]  # x(t-1) must be the reading just before x(t)
-    phi = _backlash_columns(structure, p, u_t[informative], f1[informative], f2[informative])
-    return _Rows(phi, y[1:][informative], informative)  # target x(t): the hold term vanishes
-
-
-def _merge_index(lo: FloatArray, hi: FloatArray, x_low: FloatArray) -> int:
-    """First sample from which the play operator no longer depends on its start, or -1.
-
-    ``x_low`` is the play operator started from ``-inf``; from ``+inf`` it is the same from
-    the first sample on which they agree (the first engagement any start would see). That
-    is almost always early, so the ``+inf`` run is tried on a short prefix first.
-    """
-    for length in (min(64, lo.size), lo.size):
-        x_high = play_operator(lo[:length], hi[:length], math.inf)
-        merged = x_high == x_low[:length]
-        if merged.any():
-            return int(np.argmax(merged))
-    return -1
-
-
-_MAX_SETTLING = 1000  # cap of the linear block's settling horizon, in samples
 _OUTLIER_SIGMAS = 10.0  # rows this far off the accepted model are forgotten (memory mode)
-
-
-def settling_samples(structure: Structure, p: FloatArray) -> int:
-    """Samples the linear block takes to settle to 1 % (from its slowest pole), at least
-    ``max(na, nb, 2) + 2``: rows further than that from the last change of ``x`` carry only
-    noise about the linear block."""
-    floor = max(structure.na, structure.nb, 2) + 2
-    _, b = structure.linear_part(p)
-    if b.size == 0:
-        return floor
-    rho = float(np.max(np.abs(np.roots(np.concatenate([[1.0], b])))))
-    if not 0.0 < rho < 1.0:
-        return floor if rho == 0.0 else _MAX_SETTLING
-    return int(min(max(math.ceil(math.log(0.01) / math.log(rho)), floor), _MAX_SETTLING))
-
-
-def samples_since_change(x: FloatArray) -> FloatArray:
-    """For each sample, how many samples ago ``x`` last changed (inf before any change)."""
-    index = np.arange(x.size, dtype=np.float64)
-    changed = np.empty(x.size, dtype=bool)
-    changed[0] = False
-    np.not_equal(x[1:], x[:-1], out=changed[1:])
-    last = np.where(changed, index, -np.inf)
-    np.maximum.accumulate(last, out=last)
-    return np.asarray(index - last, dtype=np.float64)
-
-
-def _cascade_rows(
-    structure: Structure,
-    p: FloatArray,
-    u: FloatArray,
-    y: FloatArray,
-    deadband: float,
-    settling: int | None = None,
-    breaks: BoolArray | None = None,
-) -> _Rows:
-    """Rows of eq. (35) with the internal ``x`` of eq. (36), for a window taken mid-stream.
-
-    The state before the window is unknown: ``x`` is only known from the sample on which the
-    play operator started from ``-inf`` and from ``+inf`` agree (the first engagement that
-    any start would see); rows that need an earlier ``x`` are dropped. So are rows whose
-    input did not move, and rows where no branch is engaged and ``x`` has rested for longer
-    than the linear block takes to settle: their regressors are constants plus output noise,
-    which carries no information and biases the equation error (errors in variables).
-    """
-    left, right = structure.branches(p, u)
-    lo, hi = play_bounds(left, right)
-    x = play_operator(lo, hi, -math.inf)  # eq. (36)
-    size = structure.n_parameters
-    first = _merge_index(lo, hi, x)
-    if first < 0:
-        return _Rows(np.empty((0, size)), np.empty(0), np.zeros(0, dtype=bool), x, u.size)
-    na, nb = structure.na, structure.nb
-    t0 = max(first + max(2, na), nb, 1)  # rows t = t0 .. N-1
-    count = u.size
-    if t0 >= count:
-        return _Rows(np.empty((0, size)), np.empty(0), np.zeros(0, dtype=bool), x, first)
-    u_prev = u[t0 - 1 : count - 1]  # u(t-1)
-    x_prev2 = x[t0 - 2 : count - 2]  # x(t-2)
-    f1, f2 = _switching(structure, p, u_prev, x_prev2)  # f(t-1), eqs. (27)-(28)
-    moving = np.abs(u_prev - u[t0 - 2 : count - 2]) > deadband
-    resting = samples_since_change(x)[t0 - 2 : count - 2]  # up to x(t-2)
-    horizon = settling_samples(structure, p) if settling is None else settling
-    live = ((f1 + f2) > 0.0) | (resting <= horizon)
-    informative = moving & live  # such rows inform the linear part too (eq. 35)
-    if breaks is not None:  # the measured lags y(t-1) .. y(t-nb) must be consecutive
-        lags = max(nb, 1)
-        informative &= breaks_to_rows(breaks, lags)[t0 - lags :]
-    use = informative
-    m = int(np.count_nonzero(use))
-    n_bl = structure.n_backlash
-    phi = np.empty((m, size), order="F")
-    phi[:, :n_bl] = _backlash_columns(structure, p, u_prev[use], f1[use], f2[use])
-    col = n_bl
-    for i in range(2, na + 1):
-        phi[:, col] = x[t0 - i : count - i][use]  # x(t-i), eq. (32)
-        col += 1
-    for j in range(1, nb + 1):
-        phi[:, col] = -y[t0 - j : count - j][use]  # -y(t-j), eq. (32)
-        col += 1
-    hold = x_prev2 * (1.0 - f1) * (1.0 - f2)  # x(t-2)[1-f1(t-1)][1-f2(t-1)]
-    target = (y[t0:] - hold)[use]  # eq. (37)
-    return _Rows(phi, target, informative, x, first)
-
-
-def window_rows(
-    structure: Structure,
-    p: FloatArray,
-    u: FloatArray,
-    y: FloatArray,
-    deadband: float,
-    settling: int | None = None,
-    breaks: BoolArray | None = None,
-) -> _Rows:
-    """The regression of eq. (24) or (35) over a window, at parameters ``p``.
-
-    ``settling`` (cascade only) is the linear block's settling horizon; default from ``p``.
-    ``breaks``: the sample rule; no row reaches across a break.
-    """
-    if structure.cascade:
-        return _cascade_rows(structure, p, u, y, deadband, settling, breaks)
-    return _backlash_rows(structure, p, u, y, deadband, breaks)
 
 
 @dataclass
@@ -287,7 +74,7 @@ class WindowFit:
     sigma2: float  # residual variance, RSS / (m - P)
     residual: float  # RMS equation error
     settled: bool
-    rows: _Rows
+    rows: WindowRows
     excitation: float
     reason: str
 
@@ -299,7 +86,7 @@ class FitFailure:
     reason: str
     excitation: float
     no_information: bool  # True: the data lack information; False: the fit left the valid set
-    rows: _Rows | None = None  # the first regression (at the start estimate), when it ran
+    rows: WindowRows | None = None  # the first regression (at the start estimate), when it ran
 
 
 def parameter_blocks(structure: Structure) -> list[tuple[str, slice]]:
@@ -501,7 +288,7 @@ def fit_window(
     accepted: WindowFit | None = None
     excitation = 0.0
     reason = ""
-    first: _Rows | None = None
+    first: WindowRows | None = None
     settling = settling_samples(structure, p) if structure.cascade else None
     for k in range(iterations):
         rows = window_rows(structure, p, u, y, deadband, settling, breaks)
@@ -1299,7 +1086,7 @@ class WindowedIdentifier:
         if self._memory.discard(np.abs(error) > limit):
             self._next_fit = min(self._next_fit, self._rows + self.settings.refit_every)
 
-    def _recent_conditioning(self, rows: _Rows) -> FloatArray:
+    def _recent_conditioning(self, rows: WindowRows) -> FloatArray:
         """Block conditioning of the rows from the latest ``excitation_window`` samples; in
         memory mode of all the rows (the memory keeps every region it has seen)."""
         if self._memory is not None:
