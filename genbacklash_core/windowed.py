@@ -7,8 +7,9 @@ new code imports from :mod:`genbacklash_core.online.windowed` (or :mod:`genbackl
 from __future__ import annotations
 
 from .online.covariance import natural_covariance
+from .online.fits import solve_normal
 from .online.rows import SampleRing, window_rows
-from .online.windowed import WindowedIdentifier, WindowedSettings, solve_normal
+from .online.windowed import WindowedIdentifier, WindowedSettings
 
 __all__ = [
     "SampleRing",

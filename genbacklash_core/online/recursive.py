@@ -87,6 +87,7 @@ from genbacklash_core.samples import as_breaks, run_lengths
 from genbacklash_core.structure import Structure
 
 from .covariance import natural_covariance, natural_from_theta, natural_variances, scaled_inverse
+from .fits import cold_fit
 from .memory import BinnedRows, BranchCoverage, coverage_of, excitation_advice, pair_series
 from .rows import (
     CascadeLags,
@@ -96,13 +97,9 @@ from .rows import (
     row_width,
     settling_samples,
 )
+from .seed import SeedPrior, seed_prior
 from .settings import RecursiveSettings
 from .tracking import DeadZoneDrift, dead_zone_drift, with_tracking
-from .windowed import (
-    SeedPrior,
-    cold_fit,
-    seed_prior,
-)
 
 __all__ = ["RecursiveIdentifier", "RecursiveSettings"]
 
