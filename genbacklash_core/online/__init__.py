@@ -13,14 +13,8 @@ The modules below them hold one concept each.
 
 from __future__ import annotations
 
-from .memory import (
-    BinnedRows,
-    BranchCoverage,
-    RowMemory,
-    coverage_of,
-    excitation_advice,
-    pair_series,
-)
+from .advice import BranchCoverage, coverage_of, excitation_advice
+from .memory import BinnedRows, RowMemory, pair_series
 from .recursive import RecursiveIdentifier, RecursiveSettings
 from .rows import memory_regression
 from .tracking import DRIFT_Z, DeadZoneDrift, dead_zone_drift

@@ -51,12 +51,11 @@ import numpy as np
 from genbacklash_core._typing import BoolArray, FloatArray, IntArray
 from genbacklash_core.errors import GenBacklashError
 
+from .advice import BranchCoverage
+
 __all__ = [
     "BinnedRows",
-    "BranchCoverage",
     "RowMemory",
-    "coverage_of",
-    "excitation_advice",
     "pair_series",
 ]
 
@@ -94,112 +93,6 @@ def _level(counts: IntArray, capacity: int) -> int:
     rest = ordered.size - k
     base = int(below[k]) if k < ordered.size else int(ordered.sum())
     return max(1, (capacity - base) // max(rest, 1))
-
-
-class BranchCoverage:
-    """How much of the input range each branch's rows cover (a snapshot).
-
-    Attributes
-    ----------
-    edges : ndarray, shape (bins + 1,)
-        Bin edges over the input range seen.
-    up, down : ndarray of int, shape (bins,)
-        Rows per bin for moves up (right branch) and down (left branch).
-    per_bin : int
-        The level the fullest bins are cut to (the capacity while the memory is not full).
-    """
-
-    def __init__(self, edges: FloatArray, up: IntArray, down: IntArray, per_bin: int) -> None:
-        self.edges = edges
-        self.up = up
-        self.down = down
-        self.per_bin = per_bin
-
-    def empty_regions(self, branch: str) -> list[tuple[float, float]]:
-        """Input intervals where ``branch`` ("left" or "right") has no rows, merged."""
-        counts = self.down if branch == "left" else self.up
-        out: list[tuple[float, float]] = []
-        for k in np.flatnonzero(counts == 0):
-            lo, hi = float(self.edges[k]), float(self.edges[k + 1])
-            if out and math.isclose(out[-1][1], lo):
-                out[-1] = (out[-1][0], hi)
-            else:
-                out.append((lo, hi))
-        return out
-
-    def share(self, branch: str) -> float:
-        """Share of the bins that hold at least one row of ``branch``."""
-        counts = self.down if branch == "left" else self.up
-        return float(np.count_nonzero(counts) / counts.size) if counts.size else 0.0
-
-
-def coverage_of(u0: FloatArray, u1: FloatArray, bins: int, per_bin: int) -> BranchCoverage:
-    """The coverage of rows whose inputs moved ``u0 -> u1``: rows per direction (up: right
-    branch; down: left) in ``bins`` equal regions of the range of ``u1``.
-
-    >>> cover = coverage_of(np.array([0.0, 1.0, 0.5]), np.array([1.0, 0.5, 0.6]), 2, 10)
-    >>> cover.up.tolist(), cover.down.tolist()
-    ([1, 1], [1, 0])
-    """
-    if u1.size == 0:
-        zeros = np.zeros(bins, dtype=np.intp)
-        return BranchCoverage(np.zeros(bins + 1), zeros, zeros.copy(), per_bin)
-    lo, hi = float(u1.min()), float(u1.max())
-    span = hi - lo
-    if span > 0.0:
-        region = np.floor((u1 - lo) / span * bins).astype(np.intp)
-        np.clip(region, 0, bins - 1, out=region)
-    else:
-        region = np.zeros(u1.size, dtype=np.intp)
-    up = u1 > u0
-    return BranchCoverage(
-        np.linspace(lo, hi, bins + 1),
-        np.asarray(np.bincount(region[up], minlength=bins), dtype=np.intp),
-        np.asarray(np.bincount(region[~up], minlength=bins), dtype=np.intp),
-        per_bin,
-    )
-
-
-def excitation_advice(cover: BranchCoverage, *, moved: bool, rows_needed: int = 0) -> str:
-    """What the rows have not shown yet, and what motion would show it ("" when the rows
-    cover both branches over the input range seen and no more are needed).
-
-    Parameters
-    ----------
-    cover : BranchCoverage
-        The rows' coverage.
-    moved : bool
-        Whether any sample so far moved the input (False: the input is constant, or every
-        sample was lost).
-    rows_needed : int
-        Moves still needed before the first fit (0: none, or an estimate exists).
-
-    Examples
-    --------
-    >>> cover = coverage_of(np.array([0.0, 0.2]), np.array([0.2, 0.4]), 2, 10)
-    >>> excitation_advice(cover, moved=True)
-    'the left branch is not covered yet: move the joint down'
-    """
-    if not moved:
-        return (
-            "the input is constant (or every sample was lost): move the joint back and "
-            "forth over its working range"
-        )
-    missing = []
-    for branch, move in (("left", "down"), ("right", "up")):
-        if cover.share(branch) == 0.0:
-            missing.append(f"the {branch} branch is not covered yet: move the joint {move}")
-        else:
-            holes = cover.empty_regions(branch)
-            if holes and cover.share(branch) < 0.75:
-                where = ", ".join(f"[{lo:.3g}, {hi:.3g}]" for lo, hi in holes[:3])
-                missing.append(f"the {branch} branch has no data over {where}: move {move} there")
-    if not missing and rows_needed > 0:
-        missing.append(
-            f"{rows_needed} more moves between readings needed before the first fit (moves "
-            "that reverse direction across the gap teach the most)"
-        )
-    return "; ".join(missing)
 
 
 class RowMemory:

@@ -86,9 +86,10 @@ from genbacklash_core.identify import _switching
 from genbacklash_core.samples import as_breaks, run_lengths
 from genbacklash_core.structure import Structure
 
+from .advice import AdviceCache, BranchCoverage, coverage_of, excitation_advice
 from .covariance import natural_covariance, natural_from_theta, natural_variances, scaled_inverse
 from .fits import cold_fit
-from .memory import BinnedRows, BranchCoverage, coverage_of, excitation_advice, pair_series
+from .memory import BinnedRows, pair_series
 from .rows import (
     CascadeLags,
     SampleRing,
@@ -307,8 +308,7 @@ class RecursiveIdentifier:
         self._queued = 0
         self._events = 0  # queue flushes (the estimate's excitation and ages change there)
         self._published: tuple[tuple[object, ...], Estimate] | None = None
-        self._advice_key: tuple[int, int, int] | None = None  # what the advice was made for
-        self._advice = ""
+        self._advice = AdviceCache()  # made again when an event changed the rows
         # carried signals
         self._run = 0  # consecutive samples ending at the latest one
         self._u1 = self._y1 = 0.0  # the latest sample (backlash)
@@ -1054,11 +1054,8 @@ class RecursiveIdentifier:
             reason = self._reason
             if not structure.cascade:
                 rows = sum(r.shape[0] for r, _ in self._pending)
-                advice_key = (self._events, len(self._memory), rows)
-                if advice_key != self._advice_key:  # rows come at events: one advice per change
-                    self._advice_key, self._advice = advice_key, self.excitation_advice()
-                if self._advice:
-                    reason = f"{reason}: {self._advice}"
+                advice_key = (self._events, len(self._memory), rows)  # rows come at events
+                reason = self._advice.reason(reason, advice_key, self.excitation_advice)
             return Estimate.empty(
                 structure, self._samples, excitation, EstimatorState.WARMING_UP, reason
             )

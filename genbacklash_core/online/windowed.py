@@ -40,6 +40,7 @@ from genbacklash_core.samples import as_breaks, run_lengths
 from genbacklash_core.simulate import play_bounds
 from genbacklash_core.structure import Structure
 
+from .advice import AdviceCache, BranchCoverage, excitation_advice
 from .fits import (
     FitFailure,
     WindowFit,
@@ -51,7 +52,7 @@ from .fits import (
     poorly_excited,
     refine_window,
 )
-from .memory import BranchCoverage, RowMemory, excitation_advice
+from .memory import RowMemory
 from .rows import (
     SampleRing,
     WindowRows,
@@ -154,8 +155,7 @@ class WindowedIdentifier:
         self._last: tuple[float, float] | None = None  # the latest sample (memory mode)
         self._break_next = False  # a dropped sample ended the previous call
         self._base_confidence = 0.0  # confidence of the last fit, before ageing
-        self._advice_key: tuple[int, bool, str] | None = None  # what the advice was made for
-        self._advice = ""
+        self._advice = AdviceCache()  # made again when rows, samples or reason change
         self._rows = 0  # rows taken (memory mode)
         self._idle = 0  # samples since the last informative row (cascade: stored sample)
         self._structure = self._template
@@ -497,11 +497,8 @@ class WindowedIdentifier:
     def _publish(self) -> Estimate:
         est = self._estimate
         if self._memory is not None and self._reported is None:
-            key = (self._rows, self._samples > 1, self._reason)
-            if key != self._advice_key:  # the memory changes only when rows come
-                self._advice_key, self._advice = key, self.excitation_advice()
-            advice = self._advice
-            reason = self._reason if not advice else f"{self._reason}: {advice}"
+            key = (self._rows, self._samples > 1, self._reason)  # the memory changes with rows
+            reason = self._advice.reason(self._reason, key, self.excitation_advice)
             if reason != est.reason:
                 self._estimate = est = Estimate.empty(
                     self._structure, self._samples, self._excitation, self._state, reason

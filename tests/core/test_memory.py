@@ -73,7 +73,7 @@ def test_bad_arguments() -> None:
 
 
 def test_excitation_advice_names_what_is_missing_and_the_motion() -> None:
-    from genbacklash_core.online.memory import coverage_of, excitation_advice
+    from genbacklash_core.online.advice import coverage_of, excitation_advice
 
     up = np.linspace(0.0, 1.0, 101)
     down = up[::-1]
