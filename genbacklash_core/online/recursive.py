@@ -71,24 +71,30 @@ from dataclasses import dataclass
 import numpy as np
 
 from genbacklash_core._typing import ArrayLike, BoolArray, FloatArray, IntArray
-from genbacklash_core.data import scale_limits
-from genbacklash_core.errors import GenBacklashError, NonFiniteInputError
+from genbacklash_core.errors import GenBacklashError
 from genbacklash_core.estimate import (
     Estimate,
     EstimatorState,
     aged_confidence,
     as_sample,
-    as_series,
     confidence_of,
     relative_std_of,
 )
 from genbacklash_core.identify import _switching
-from genbacklash_core.samples import as_breaks, run_lengths
+from genbacklash_core.samples import run_lengths
 from genbacklash_core.structure import Structure
 
 from .advice import AdviceCache, BranchCoverage, coverage_of, excitation_advice
 from .covariance import natural_covariance, natural_from_theta, natural_variances, scaled_inverse
 from .fits import cold_fit
+from .inputs import (
+    InputLimits,
+    accept_sample,
+    checked_series,
+    deadband,
+    settings_or_default,
+    template,
+)
 from .memory import BinnedRows, pair_series
 from .rows import (
     CascadeLags,
@@ -199,20 +205,12 @@ class RecursiveIdentifier:
         sign: float | None = None,
         settings: RecursiveSettings | None = None,
     ) -> None:
-        if sign is not None and sign not in (1, -1):
-            raise GenBacklashError(f"sign must be +1, -1 or None (detect), got {sign!r}")
-        self._template = Structure(degree, na, nb, 1.0 if sign is None else float(sign))
-        self._sign_known = sign is not None
-        if settings is None:
-            settings = RecursiveSettings()
-        if not isinstance(settings, RecursiveSettings):
-            raise GenBacklashError(f"settings must be RecursiveSettings, got {settings!r}")
-        self.settings = settings
+        self._template, self._sign_known = template(degree, na, nb, sign)
+        self.settings = settings = settings_or_default(settings, RecursiveSettings)
         held = 2 * settings.branch_memory
-        # larger samples would overflow the regression: treated like NaN (``nonfinite``)
-        self._u_limit, self._y_limit = scale_limits(
-            self._template.degree, max(settings.buffer, held)
-        )
+        # larger samples would overflow the regression: treated like NaN (``nonfinite``);
+        # the longest regression here is the cascade's buffer or both branches' memories
+        self._limits = InputLimits.of(self._template.degree, max(settings.buffer, held))
         self._estimate: Estimate | None = None
         self.reset()
 
@@ -415,15 +413,9 @@ class RecursiveIdentifier:
         uf, yf = as_sample(u, y)
         if not isinstance(follows, (bool, np.bool_)):
             raise GenBacklashError(f"follows must be True or False, got {follows!r}")
-        if not (abs(uf) <= self._u_limit and abs(yf) <= self._y_limit):  # NaN fails too
-            if self.settings.nonfinite == "drop":
-                self._break_next = True
-                return self.estimate
-            raise NonFiniteInputError(
-                f"sample {self._samples} is not finite (u={uf!r}, y={yf!r}) or beyond "
-                f"|u| <= {self._u_limit:.3g}, |y| <= {self._y_limit:.3g}; pass "
-                "nonfinite='drop' in the settings to skip such samples"
-            )
+        if not accept_sample(uf, yf, self._limits, self.settings.nonfinite, self._samples):
+            self._break_next = True  # dropped: the next sample does not follow the last
+            return self.estimate
         self._take(np.array([uf]), np.array([yf]), np.array([not follows]))
         return self.estimate
 
@@ -435,23 +427,11 @@ class RecursiveIdentifier:
         pairs them; ``breaks[0]`` refers to the previous call's last sample. Default: every
         sample follows its predecessor.
         """
-        uu, yy = as_series(u, y)
-        bb = np.zeros(uu.size, dtype=bool) if breaks is None else as_breaks(breaks, uu.size)
-        bad = ~((np.abs(uu) <= self._u_limit) & (np.abs(yy) <= self._y_limit))  # NaN too
-        if bad.any():
-            if self.settings.nonfinite == "drop":
-                after = np.concatenate([[False], bad[:-1]])  # a dropped sample breaks the chain
-                bb = (bb | after)[~bad]
-                uu, yy = uu[~bad], yy[~bad]
-                if bad[-1]:
-                    self._break_next = True
-            else:
-                where = int(np.argmax(bad))
-                raise NonFiniteInputError(
-                    f"{int(bad.sum())} of {uu.size} samples are not finite or beyond |u| <= "
-                    f"{self._u_limit:.3g}, |y| <= {self._y_limit:.3g} (first at index "
-                    f"{where}); pass nonfinite='drop' in the settings to skip such samples"
-                )
+        uu, yy, bb, dropped_last = checked_series(
+            u, y, breaks, self._limits, self.settings.nonfinite
+        )
+        if dropped_last:
+            self._break_next = True
         self._take(uu, yy, bb)
         return self.estimate
 
@@ -531,14 +511,14 @@ class RecursiveIdentifier:
         low = np.minimum(np.minimum.accumulate(u), self._input_low)
         high = np.maximum(np.maximum.accumulate(u), self._input_high)
         self._input_low, self._input_high = float(low[-1]), float(high[-1])
-        deadband = s.input_deadband * (high - low)  # per sample: the span seen so far
+        band = deadband(s.input_deadband, high - low)  # per sample: the span seen so far
         run_before = self._run
         run = run_lengths(b, run_before)
         self._run = int(min(run[-1], 1 << 40))
         if self._structure.cascade:
-            informative = self._piece_cascade(u, y, run, run_before, deadband, first)
+            informative = self._piece_cascade(u, y, run, run_before, band, first)
         else:
-            informative = self._piece_backlash(u, y, run, deadband, first)
+            informative = self._piece_backlash(u, y, run, band, first)
         self._excitation = _ewma(informative, 1.0 / s.excitation_memory, self._excitation)
 
     def _piece_backlash(
@@ -853,7 +833,7 @@ class RecursiveIdentifier:
     ) -> CascadeLags:
         """File a window's cascade rows at ``p`` (from the first sample on which the internal
         ``x`` of eq. 36 is determined); the lags after the window."""
-        deadband = self.settings.input_deadband * float(np.ptp(u))
+        band = deadband(self.settings.input_deadband, float(np.ptp(u)))
         rows, at, lags = cascade_memory_rows(
             structure,
             p,
@@ -862,7 +842,7 @@ class RecursiveIdentifier:
             y,
             run_lengths(b, 0),
             0,
-            np.full(u.size, deadband),
+            np.full(u.size, band),
             settling_samples(structure, p),
         )
         first = self._samples - self._queued - u.size  # the window ends at the last seen

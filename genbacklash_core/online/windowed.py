@@ -25,18 +25,15 @@ import math
 import numpy as np
 
 from genbacklash_core._typing import ArrayLike, BoolArray, FloatArray
-from genbacklash_core.data import scale_limits
-from genbacklash_core.errors import GenBacklashError, NonFiniteInputError
 from genbacklash_core.estimate import (
     Estimate,
     EstimatorState,
     aged_confidence,
     as_sample,
-    as_series,
     confidence_of,
     relative_std,
 )
-from genbacklash_core.samples import as_breaks, run_lengths
+from genbacklash_core.samples import run_lengths
 from genbacklash_core.simulate import play_bounds
 from genbacklash_core.structure import Structure
 
@@ -51,6 +48,14 @@ from .fits import (
     parameter_blocks,
     poorly_excited,
     refine_window,
+)
+from .inputs import (
+    InputLimits,
+    accept_sample,
+    checked_series,
+    deadband,
+    settings_or_default,
+    template,
 )
 from .memory import RowMemory
 from .rows import (
@@ -115,17 +120,11 @@ class WindowedIdentifier:
         sign: float | None = None,
         settings: WindowedSettings | None = None,
     ) -> None:
-        if sign is not None and sign not in (1, -1):
-            raise GenBacklashError(f"sign must be +1, -1 or None (detect), got {sign!r}")
-        self._template = Structure(degree, na, nb, 1.0 if sign is None else float(sign))
-        self._sign_known = sign is not None
-        if settings is None:
-            settings = WindowedSettings()
-        if not isinstance(settings, WindowedSettings):
-            raise GenBacklashError(f"settings must be WindowedSettings, got {settings!r}")
-        self.settings = settings
-        # larger samples would overflow the regression: treated like NaN (``nonfinite``)
-        self._u_limit, self._y_limit = scale_limits(self._template.degree, settings.window)
+        self._template, self._sign_known = template(degree, na, nb, sign)
+        self.settings = settings = settings_or_default(settings, WindowedSettings)
+        # larger samples would overflow the regression: treated like NaN (``nonfinite``);
+        # the longest regression here is the window's (the recursive memory's is longer)
+        self._limits = InputLimits.of(self._template.degree, settings.window)
         self.reset()
 
     # ---- public interface
@@ -324,15 +323,9 @@ class WindowedIdentifier:
         clock (a lost reading in between): no regression row pairs the two.
         """
         uf, yf = as_sample(u, y)
-        if not (abs(uf) <= self._u_limit and abs(yf) <= self._y_limit):  # NaN fails too
-            if self.settings.nonfinite == "drop":
-                self._break_next = True
-                return self._estimate
-            raise NonFiniteInputError(
-                f"sample {self._samples} is not finite (u={uf!r}, y={yf!r}) or beyond "
-                f"|u| <= {self._u_limit:.3g}, |y| <= {self._y_limit:.3g}; pass "
-                "nonfinite='drop' in the settings to skip such samples"
-            )
+        if not accept_sample(uf, yf, self._limits, self.settings.nonfinite, self._samples):
+            self._break_next = True  # dropped: the next sample does not follow the last
+            return self._estimate
         if self._memory is None:
             return self._take(np.array([uf]), np.array([yf]), np.array([not follows]))
         # one sample, without arrays (the per-sample path of a hand-written loop)
@@ -358,23 +351,11 @@ class WindowedIdentifier:
         previous call's last sample) on the encoder's clock; see
         :mod:`genbacklash_core.samples`. Default: every sample follows its predecessor.
         """
-        uu, yy = as_series(u, y)
-        bb = np.zeros(uu.size, dtype=bool) if breaks is None else as_breaks(breaks, uu.size)
-        bad = ~((np.abs(uu) <= self._u_limit) & (np.abs(yy) <= self._y_limit))  # NaN too
-        if bad.any():
-            if self.settings.nonfinite == "drop":
-                after = np.concatenate([[False], bad[:-1]])  # a dropped sample breaks the chain
-                bb = (bb | after)[~bad]
-                uu, yy = uu[~bad], yy[~bad]
-                if bad[-1]:
-                    self._break_next = True
-            else:
-                where = int(np.argmax(bad))
-                raise NonFiniteInputError(
-                    f"{int(bad.sum())} of {uu.size} samples are not finite or beyond |u| <= "
-                    f"{self._u_limit:.3g}, |y| <= {self._y_limit:.3g} (first at index "
-                    f"{where}); pass nonfinite='drop' in the settings to skip such samples"
-                )
+        uu, yy, bb, dropped_last = checked_series(
+            u, y, breaks, self._limits, self.settings.nonfinite
+        )
+        if dropped_last:
+            self._break_next = True
         return self._take(uu, yy, bb)
 
     def _take(self, uu: FloatArray, yy: FloatArray, bb: BoolArray) -> Estimate:
@@ -557,9 +538,10 @@ class WindowedIdentifier:
 
     def _deadband(self, u: FloatArray) -> float:
         """Input step below which the input counts as resting (of the widest span fitted)."""
-        return self.settings.input_deadband * max(
-            self._span_ref, float(np.ptp(u)) * self._needs_cold
-        )
+        # the widest span of an accepted fit (before the first fit: this window's), so a
+        # narrow window after wide motion does not take small jitter for moves
+        span = max(self._span_ref, float(np.ptp(u)) * self._needs_cold)
+        return deadband(self.settings.input_deadband, span)
 
     def _start_fit(
         self, u: FloatArray, y: FloatArray, b: BoolArray
