@@ -106,6 +106,7 @@ from .rows import (
 )
 from .seed import SeedPrior, seed_prior
 from .settings import RecursiveSettings
+from .state import confidence_moved, held, settled_state
 from .tracking import DeadZoneDrift, dead_zone_drift, with_tracking
 
 __all__ = ["RecursiveIdentifier", "RecursiveSettings"]
@@ -207,10 +208,10 @@ class RecursiveIdentifier:
     ) -> None:
         self._template, self._sign_known = template(degree, na, nb, sign)
         self.settings = settings = settings_or_default(settings, RecursiveSettings)
-        held = 2 * settings.branch_memory
+        both_branches = 2 * settings.branch_memory
         # larger samples would overflow the regression: treated like NaN (``nonfinite``);
         # the longest regression here is the cascade's buffer or both branches' memories
-        self._limits = InputLimits.of(self._template.degree, max(settings.buffer, held))
+        self._limits = InputLimits.of(self._template.degree, max(settings.buffer, both_branches))
         self._estimate: Estimate | None = None
         self.reset()
 
@@ -1051,19 +1052,17 @@ class RecursiveIdentifier:
         age = self._samples - min(self._last_row)  # of the branch whose newest row is oldest
         if self._mode in (_HELD, _STOPPED):
             state = EstimatorState.DIVERGED
-        elif idle >= s.idle_samples:
+        elif held(idle, s.idle_samples):
             state = EstimatorState.NO_EXCITATION
-        elif rel <= s.converged_std:
-            state = EstimatorState.CONVERGED
-        else:
-            state = EstimatorState.CONVERGING
+        else:  # one iteration per block: the estimate is as settled as its memory
+            state = settled_state(True, rel, s.converged_std)
         confidence = aged_confidence(
             confidence_of(state, rel, s.converged_std), float(age), s.confidence_half_life
         )
         key = (self._version, self._events, state, self._reason, self._note, self._restarts)
         if self._published is not None and self._published[0] == key:
             last = self._published[1]
-            if abs(confidence - last.confidence) <= 1e-3 * last.confidence:
+            if not confidence_moved(confidence, last.confidence, floor=0.0):
                 return last.with_samples(self._samples)
         if state is EstimatorState.DIVERGED:
             reason = f"diverged: {self._why}"

@@ -65,6 +65,7 @@ from .rows import (
 )
 from .seed import SeedPrior, seed_prior
 from .settings import WindowedSettings
+from .state import FITTED_STATES, confidence_moved, held, settled_state
 from .tracking import DeadZoneDrift, dead_zone_drift, with_tracking
 
 __all__ = ["WindowedIdentifier", "WindowedSettings"]
@@ -286,8 +287,7 @@ class WindowedIdentifier:
         self._excitation = estimate.excitation
         rel = relative_std(prior.p, self._covariance)
         settled = estimate.state in (EstimatorState.CONVERGED, EstimatorState.NO_EXCITATION)
-        converged = settled and rel <= s.converged_std
-        self._state = EstimatorState.CONVERGED if converged else EstimatorState.CONVERGING
+        self._state = settled_state(settled, rel, s.converged_std)
         self._reason = (
             f"seeded from a saved estimate ({estimate.state.value}); relative std {rel:.3g}"
         )
@@ -443,13 +443,9 @@ class WindowedIdentifier:
             return state, reason, 0.0
         s = self.settings
         confidence = self._base_confidence
-        if state not in (
-            EstimatorState.CONVERGED,
-            EstimatorState.CONVERGING,
-            EstimatorState.NO_EXCITATION,
-        ):
+        if state not in FITTED_STATES:
             return state, reason, confidence
-        if self._idle >= s.idle_samples:
+        if held(self._idle, s.idle_samples):
             state = EstimatorState.NO_EXCITATION
             reason = (
                 f"estimate held: no information for {self._idle} samples (the input rests "
@@ -485,15 +481,13 @@ class WindowedIdentifier:
                     self._structure, self._samples, self._excitation, self._state, reason
                 )
         if self._reported is not None:  # held and aged by the samples without information
-            held = self._idle >= self.settings.idle_samples
+            is_held = held(self._idle, self.settings.idle_samples)
             was_held = est.state is EstimatorState.NO_EXCITATION and self._state in (
                 EstimatorState.CONVERGED,
                 EstimatorState.CONVERGING,
             )
             confidence = self._quick_confidence()
-            if held != was_held or abs(confidence - est.confidence) > 1e-3 * max(
-                est.confidence, 1e-12
-            ):
+            if is_held != was_held or confidence_moved(confidence, est.confidence, floor=1e-12):
                 self._rebuild()
                 est = self._estimate
         if est.samples != self._samples:
@@ -736,11 +730,10 @@ class WindowedIdentifier:
         std = np.sqrt(np.maximum(np.diag(fit.covariance), 0.0))
         allowed = 3.0 if self._state is EstimatorState.CONVERGED else 1.0
         steady = previous is not None and bool(np.all(np.abs(reported - previous) <= allowed * std))
-        if (fit.settled or steady) and rel <= s.converged_std:
-            self._state = EstimatorState.CONVERGED
+        self._state = settled_state(fit.settled or steady, rel, s.converged_std)
+        if self._state is EstimatorState.CONVERGED:
             self._reason = f"settled; relative std {rel:.3g}"
         else:
-            self._state = EstimatorState.CONVERGING
             why = "settled" if fit.settled or steady else "still moving"
             self._reason = f"{why}; relative std {rel:.3g}"
             if fit.reason:
