@@ -8,7 +8,27 @@ Both identifiers follow one interface (``update(u, y) -> Estimate``, ``update_ma
 * :class:`~genbacklash_core.online.recursive.RecursiveIdentifier` runs one warm-started
   iteration per block over a binned memory of regression rows.
 
-The modules below them hold one concept each.
+The modules below them hold one concept each, and what the two share stands once:
+
+========================  ==============================================================
+``settings``              the two frozen settings dataclasses
+``inputs``                structure and settings arguments, non-finite samples, the input
+                          deadband
+``rows``                  the sample rule's regression rows (a window's; as they come),
+                          the recent-sample ring, the cascade's lags and settling horizon
+``memory``                the row memories (``RowMemory``, ``BinnedRows``)
+``advice``                branch coverage and excitation advice
+``seed``                  a saved estimate as prior information (``seed``)
+``fits``                  the windowed fits and the batch (re-)initialisation both use
+``covariance``            the delta method of eq. (34): natural parameters and covariance
+``state``                 converged / converging / no_excitation and the confidence
+``tracking``              the bands' tracking term for a drifting gap
+``windowed``              :class:`WindowedIdentifier`
+``recursive``             :class:`RecursiveIdentifier`
+========================  ==============================================================
+
+``genbacklash_core.windowed``, ``.recursive``, ``.memory`` and ``.tracking`` remain as
+compatibility modules re-exporting from here.
 """
 
 from __future__ import annotations

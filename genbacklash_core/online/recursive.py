@@ -61,6 +61,14 @@ A drivetrain delivers its information in moves and reversals separated by long d
 samples and process them at the same fixed sample counts (every ``block`` samples; the batch
 fits' attempts), so they agree to rounding whatever the chunking; between two such events
 only the sample count (and the aged confidence) of the estimate changes.
+
+This module holds the identifier itself (the queue, the blocks, the iteration, divergence
+and re-initialisation, what it publishes); the parts it shares with the windowed identifier
+stand in the sibling modules of :mod:`genbacklash_core.online` (the memory rows and the
+sample rule in ``rows``, :class:`~genbacklash_core.online.memory.BinnedRows` in ``memory``,
+the seed's prior in ``seed``, the batch fit in ``fits``, the covariance in ``covariance``,
+state and confidence in ``state``, excitation advice in ``advice``, the input checks in
+``inputs``, the bands' tracking term in ``tracking``).
 """
 
 from __future__ import annotations
@@ -1003,7 +1011,7 @@ class RecursiveIdentifier:
         self._initialise()
 
     def _track_drift(self) -> None:
-        """The tracking term of the bands (:mod:`genbacklash_core.tracking`): the memory's
+        """The tracking term of the bands (:mod:`genbacklash_core.online.tracking`): the memory's
         rows, aged from this iterate's sample, fitted with dead zones that drift. Once per
         :data:`_DRIFT_EVERY` samples at most (a fit over the memory costs ~1-2 ms), at the
         iterates' own samples, so chunking does not matter. Nothing for the cascade."""

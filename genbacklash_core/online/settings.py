@@ -30,7 +30,7 @@ class WindowedSettings:
     window : int
         ``W``, how much the fits remember (>= 20). For a backlash alone: regression rows
         (pairs of consecutive readings whose input moved), filed by branch and input region
-        (:class:`~genbacklash_core.memory.RowMemory`): old rows are forgotten only where
+        (:class:`~genbacklash_core.online.memory.RowMemory`): old rows are forgotten only where
         new ones cover the same region, and dwells, held commands and lost readings add
         nothing. For the cascade: the most recent ``W`` samples, where a dwell counts only
         up to twice the linear block's settling horizon (its later samples repeat a steady

@@ -16,6 +16,13 @@ per sample however large ``W`` is.
 The window length trades accuracy against tracking: the estimate is a least-squares fit over
 ``W`` samples, so its standard deviation falls like ``1/sqrt(W)``, while a parameter that drifts
 linearly is tracked with a lag of about ``W/2 + K/2`` samples.
+
+This module holds the identifier itself: the schedule, the window or row memory it feeds, and
+what it publishes. The parts it shares with the recursive identifier stand in the sibling
+modules of :mod:`genbacklash_core.online` (rows and the sample rule in ``rows``, the row
+memory in ``memory``, the fits in ``fits``, the seed's prior in ``seed``, the covariance in
+``covariance``, state and confidence in ``state``, excitation advice in ``advice``, the input
+checks in ``inputs``, the bands' tracking term in ``tracking``).
 """
 
 from __future__ import annotations
@@ -741,7 +748,7 @@ class WindowedIdentifier:
 
     def _track_drift(self, reported: FloatArray) -> DeadZoneDrift | None:
         """The memory's rows, each aged by the rows taken since, fitted with dead zones
-        that drift (the tracking term of the bands, :mod:`genbacklash_core.tracking`); on
+        that drift (the tracking term of the bands, :mod:`genbacklash_core.online.tracking`); on
         the rows' own clock, so chunking does not matter. None for the cascade."""
         if self._memory is None:
             return None
@@ -762,7 +769,7 @@ class WindowedIdentifier:
         p = self._reported.copy()
         p.flags.writeable = False
         # the bands: the fit's covariance plus how far a drifting drivetrain has moved past
-        # the rows the fit remembers (genbacklash_core.tracking)
+        # the rows the fit remembers (genbacklash_core.online.tracking)
         # (the drift was fitted around this very estimate: its own correction is the distance)
         cov = with_tracking(self._covariance, self._drift)
         cov.flags.writeable = False
