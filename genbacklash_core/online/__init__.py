@@ -20,6 +20,8 @@ The modules below them hold one concept each, and what the two share stands once
 ``advice``                branch coverage and excitation advice
 ``seed``                  a saved estimate as prior information (``seed``)
 ``fits``                  the windowed fits and the batch (re-)initialisation both use
+``iteration``             the recursive identifier's iteration over its memory
+``divergence``            the recursive identifier's divergence test (error scales)
 ``covariance``            the delta method of eq. (34): natural parameters and covariance
 ``state``                 converged / converging / no_excitation and the confidence
 ``tracking``              the bands' tracking term for a drifting gap

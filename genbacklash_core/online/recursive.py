@@ -62,8 +62,10 @@ samples and process them at the same fixed sample counts (every ``block`` sample
 fits' attempts), so they agree to rounding whatever the chunking; between two such events
 only the sample count (and the aged confidence) of the estimate changes.
 
-This module holds the identifier itself (the queue, the blocks, the iteration, divergence
-and re-initialisation, what it publishes); the parts it shares with the windowed identifier
+This module holds the identifier itself (the queue, the blocks, when to iterate, hold or
+re-initialise, what it publishes); its iteration stands in
+:mod:`~genbacklash_core.online.iteration` and its divergence test in
+:mod:`~genbacklash_core.online.divergence`. The parts it shares with the windowed identifier
 stand in the sibling modules of :mod:`genbacklash_core.online` (the memory rows and the
 sample rule in ``rows``, :class:`~genbacklash_core.online.memory.BinnedRows` in ``memory``,
 the seed's prior in ``seed``, the batch fit in ``fits``, the covariance in ``covariance``,
@@ -74,7 +76,6 @@ state and confidence in ``state``, excitation advice in ``advice``, the input ch
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -94,6 +95,7 @@ from genbacklash_core.structure import Structure
 
 from .advice import AdviceCache, BranchCoverage, coverage_of, excitation_advice
 from .covariance import natural_covariance, natural_from_theta, natural_variances, scaled_inverse
+from .divergence import ErrorScale
 from .fits import cold_fit
 from .inputs import (
     InputLimits,
@@ -103,6 +105,7 @@ from .inputs import (
     settings_or_default,
     template,
 )
+from .iteration import MemorySolution, ewma, settle_memory, solve_memory, theta_problem
 from .memory import BinnedRows, pair_series
 from .rows import (
     CascadeLags,
@@ -112,51 +115,18 @@ from .rows import (
     row_width,
     settling_samples,
 )
-from .seed import SeedPrior, seed_prior
+from .seed import SeedPrior, prior_weights, seed_prior
 from .settings import RecursiveSettings
 from .state import confidence_moved, held, settled_state
 from .tracking import DeadZoneDrift, dead_zone_drift, with_tracking
 
 __all__ = ["RecursiveIdentifier", "RecursiveSettings"]
 
-_SHORT_MEMORY = 20.0  # informative rows in the short error average (divergence test)
-_LONG_MEMORY = 1000.0  # informative rows in the long error average (its scale)
-_INIT_ITERATIONS = 10  # warm iterations over the memory after a batch fit
-_INIT_TOL = 1e-6  # they stop when no parameter moves more than this (relative)
 _MAX_REJECTIONS = 8  # restarts that may be rejected for a poor fit before any fit is taken
 _MAX_INVALID = 8  # consecutive invalid iterates before a re-initialisation
 _DRIFT_EVERY = 1000  # samples between two fits of the bands' tracking term
 
 _WARMING, _RUNNING, _HELD, _STOPPED = "warming", "running", "held", "stopped"
-
-
-@dataclass
-class _Solution:
-    """One iteration over the memory: the new separated vector and its information."""
-
-    theta: FloatArray
-    unit_covariance: FloatArray  # (Phi^T Phi + R_0 + prior)^-1
-    sigma2: float  # residual variance of the memory's rows (NaN when too few)
-    rows: int  # rows used
-
-
-def _ewma(values: FloatArray, alpha: float, start: float) -> float:
-    """The last of ``m(t) = m(t-1) + alpha (v(t) - m(t-1))`` from ``m = start``.
-
-    >>> _ewma(np.array([1.0, 1.0]), 0.5, 0.0)
-    0.75
-    """
-    n = values.size
-    if n == 1:
-        return start + alpha * (float(values[0]) - start)
-    decay = 1.0 - alpha
-    if n > 4096:  # the weights below would underflow long before; filter instead
-        from scipy import signal  # here, not at the top: 0.5 s of import a backlash never needs
-
-        out, _ = signal.lfilter([alpha], [1.0, -decay], values, zi=[decay * start])
-        return float(out[-1])
-    weights = alpha * decay ** np.arange(n - 1, -1, -1, dtype=np.float64)
-    return float(start * decay**n + weights @ values)
 
 
 class RecursiveIdentifier:
@@ -280,7 +250,9 @@ class RecursiveIdentifier:
     def from_seed(self) -> bool:
         """True while the estimate still leans on a seed (:meth:`seed`): the memory has not
         refilled a branch since (and no re-initialisation replaced the seed)."""
-        return self._prior is not None and bool(np.any(self._prior_weights() > 0.0))
+        return self._prior is not None and bool(
+            np.any(prior_weights(self._structure, self._memory) > 0.0)
+        )
 
     def reset(self) -> None:
         """Forget all samples and the estimate."""
@@ -336,9 +308,7 @@ class RecursiveIdentifier:
         self._invalid = 0  # consecutive iterates not taken
         # measures
         self._excitation = 0.0
-        self._short = self._long = math.nan
-        self._recent_sq = math.nan  # running mean of the raw squared one-step errors
-        self._since_start = 0
+        self._errors = ErrorScale()  # the one-step errors' running means (divergence test)
         self._scale_before = math.nan
         blocks = 3 if structure.cascade else 2
         self._last_row = [0] * blocks  # sample count at the newest row of left, right, linear
@@ -399,7 +369,7 @@ class RecursiveIdentifier:
         self._sigma2 = prior.sigma2
         self._pull = prior.information / s.covariance_bound  # R_0: P <= bound * P_seed
         self._prior = prior
-        self._short = self._long = self._recent_sq = prior.sigma2
+        self._errors.restart(prior.sigma2)
         self._excitation = estimate.excitation
         self._samples = estimate.samples
         self._last_row = [self._samples] * len(self._last_row)
@@ -481,7 +451,7 @@ class RecursiveIdentifier:
             b[0] = True
             self._break_next = False
         if self._mode in (_RUNNING, _HELD):
-            why = self._theta_problem()
+            why = theta_problem(self._structure, self._theta)
             if why is not None:  # e.g. a corrupted state: never iterate from it
                 self._stop(why)
         start = 0
@@ -528,7 +498,7 @@ class RecursiveIdentifier:
             informative = self._piece_cascade(u, y, run, run_before, band, first)
         else:
             informative = self._piece_backlash(u, y, run, band, first)
-        self._excitation = _ewma(informative, 1.0 / s.excitation_memory, self._excitation)
+        self._excitation = ewma(informative, 1.0 / s.excitation_memory, self._excitation)
 
     def _piece_backlash(
         self, u: FloatArray, y: FloatArray, run: IntArray, deadband: FloatArray, first: int
@@ -610,7 +580,12 @@ class RecursiveIdentifier:
         # their variance is sigma^2 (1 + phi P phi^T): a row where the memory knows little
         # (a region not seen yet) may miss by more without anything being wrong
         spread = 1.0 + np.einsum("ij,jk,ik->i", phi, self._unit_cov, phi)
-        self._track_errors(errors * errors, errors * errors / spread)
+        self._errors.track(
+            errors * errors,
+            errors * errors / spread,
+            ratio=self.settings.divergence_ratio,
+            running=self._mode == _RUNNING,  # while held, the scale holds
+        )
         self._pending.append((rows, stamps))
         informative = np.zeros(n)
         informative[at[used]] = 1.0
@@ -623,20 +598,6 @@ class RecursiveIdentifier:
             if structure.cascade:
                 self._last_row[2] = int(newest[-1])
         return informative
-
-    def _track_errors(self, raw: FloatArray, squared: FloatArray) -> None:
-        """Running means of the squared one-step errors: ``raw`` for the reported residual;
-        ``squared`` (normalised by their predicted spread) short, for the divergence test,
-        and long, its scale. While the errors are blown up (``held``) the scale holds."""
-        if squared.size == 0:
-            return
-        ratio = self.settings.divergence_ratio
-        self._recent_sq = _ewma(raw, 1.0 / _SHORT_MEMORY, self._recent_sq)
-        self._short = _ewma(squared, 1.0 / _SHORT_MEMORY, self._short)
-        if self._mode == _RUNNING:
-            limit = ratio * ratio * self._long  # (not **: an OverflowError for a huge ratio)
-            self._long = _ewma(np.minimum(squared, limit), 1.0 / _LONG_MEMORY, self._long)
-            self._since_start += squared.size
 
     def _file(self, memory: BinnedRows, rows: FloatArray, stamps: IntArray) -> None:
         """File rows into a memory, counting them for the batch-fit schedule."""
@@ -666,8 +627,7 @@ class RecursiveIdentifier:
 
     def _blown(self) -> bool:
         """The short-term one-step error exceeds ``divergence_ratio`` times its scale."""
-        ratio2 = self.settings.divergence_ratio * self.settings.divergence_ratio
-        return self._since_start > 2 * _SHORT_MEMORY and self._short > ratio2 * self._long
+        return self._errors.blown(self.settings.divergence_ratio)
 
     def _end_block(self) -> None:
         """File the block's rows and iterate over the memory (when it got new rows)."""
@@ -676,7 +636,7 @@ class RecursiveIdentifier:
         rows, stamps = self._pending_rows()
         if self._blown():
             self._mode = _HELD
-            self._scale_before = self._long
+            self._scale_before = self._errors.long
             self._attempts = 0
             self._next_attempt = self._samples + self._attempt_interval()
             if not self._structure.cascade:
@@ -686,9 +646,9 @@ class RecursiveIdentifier:
             if self._held_back is not None:
                 self._file(self._held_back, rows, stamps)
             self._why = (
-                f"the one-step error blew up (RMS {math.sqrt(self._short):.3g} against a "
-                f"running {math.sqrt(self._long):.3g}); the estimate is held and new rows are "
-                "kept out of the memory"
+                f"the one-step error blew up (RMS {math.sqrt(self._errors.short):.3g} against "
+                f"a running {math.sqrt(self._errors.long):.3g}); the estimate is held and new "
+                "rows are kept out of the memory"
             )
             self._reason = ""
             return
@@ -791,7 +751,13 @@ class RecursiveIdentifier:
                 return False
             structure, p = found
             memory = source
-        started = self._settle(structure, p, memory)
+        started = settle_memory(
+            structure,
+            p,
+            memory.rows()[0],
+            s.covariance_bound,
+            (self._input_low, self._input_high),
+        )
         if isinstance(started, str):
             self._reason = f"batch fit failed: {started}"
             return False
@@ -816,8 +782,7 @@ class RecursiveIdentifier:
         self._prior = None
         self._pull = pull
         self._commit(solution)
-        self._short = self._long = self._recent_sq = max(sigma2, 1e-300)
-        self._since_start = 0
+        self._errors.restart(max(sigma2, 1e-300))
         self._scale_before = math.nan
         self._attempts = 0
         self._mode = _RUNNING
@@ -858,95 +823,25 @@ class RecursiveIdentifier:
         memory.insert(rows, np.asarray(first + at, dtype=np.intp))
         return lags
 
-    def _settle(
-        self, structure: Structure, p: FloatArray, memory: BinnedRows
-    ) -> tuple[_Solution, FloatArray] | str:
-        """Iterate from a batch fit over the memory until settled; the solution and its
-        pull ``R_0`` (the information then over ``covariance_bound``)."""
-        rows, _ = memory.rows()
-        if rows.shape[0] == 0:
-            return "no rows in the memory"
-        theta = structure.theta(p)  # eq. (34) inverted
-        phi, _, _, _, _ = memory_regression(structure, p, rows)
-        pull = (phi.T @ phi) / self.settings.covariance_bound
-        found: _Solution | None = None
-        for _ in range(_INIT_ITERATIONS):
-            step = self._solve(structure, theta, rows, pull, None)
-            if isinstance(step, str):
-                if found is None:
-                    return step
-                break
-            change = np.max(np.abs(step.theta - theta))
-            theta, found = step.theta, step
-            if change <= _INIT_TOL * max(1.0, float(np.max(np.abs(theta)))):
-                break
-        assert found is not None
-        if not math.isfinite(found.sigma2):
-            return f"only {found.rows} informative rows for {structure.n_parameters} parameters"
-        return found, pull
-
     # ------------------------------------------------------------------ the iteration
-
-    def _solve(
-        self,
-        structure: Structure,
-        theta: FloatArray,
-        rows: FloatArray,
-        pull: FloatArray,
-        prior: SeedPrior | None,
-    ) -> _Solution | str:
-        """One iteration of the paper's method over the memory, from ``theta``.
-
-        ``(Phi^T Phi + R_0 + W) theta_new = Phi^T z + R_0 theta + W theta_seed`` with the
-        rows of eqs. (22)/(32) evaluated at ``theta`` (eqs. 25-28, 34) and ``W`` the seed's
-        information weighted by what the memory has not refilled. The new iterate must be a
-        valid model on the input range seen; otherwise, why not.
-        """
-        try:
-            p = structure.from_theta(theta)  # eq. (34)
-        except GenBacklashError as err:
-            return str(err)
-        phi, target, _, _, _ = memory_regression(structure, p, rows)
-        info = phi.T @ phi + pull
-        rhs = phi.T @ target + pull @ theta
-        weight = 0.0
-        if prior is not None:
-            w = self._prior_weights()
-            root = np.sqrt(w)
-            seeded = prior.information * np.outer(root, root)
-            info = info + seeded
-            rhs = rhs + seeded @ prior.theta
-            weight = float(np.mean(w))
-        unit = scaled_inverse(info)
-        if unit is None:
-            return "the information matrix is singular"
-        new = np.asarray(unit @ rhs, dtype=np.float64)  # eqs. (23)/(33) by least squares
-        if not np.all(np.isfinite(new)):
-            return "the estimate became non-finite"
-        try:
-            p_new = structure.from_theta(new)  # eq. (34)
-        except GenBacklashError as err:
-            return str(err)
-        problem = structure.problem(p_new, (self._input_low, self._input_high))
-        if problem is not None:
-            return problem
-        error = target - phi @ new  # eqs. (29)/(37)
-        rss = float(error @ error)
-        count = float(target.size)
-        if prior is not None and weight > 0.0:  # pooled with the rows the seed stands for
-            rss += weight * prior.rows * prior.sigma2
-            count += weight * prior.rows
-        size = structure.n_parameters
-        sigma2 = rss / (count - size) if count > size else math.nan
-        return _Solution(new, unit, sigma2, int(target.size))
 
     def _iterate(self) -> None:
         """One iteration over the memory; an invalid iterate is not taken (the estimate
         holds), and ``_MAX_INVALID`` of them in a row re-initialise from the memory."""
         rows, _ = self._memory.rows()
-        if self._prior is not None and not np.any(self._prior_weights() > 0.0):
-            self._prior = None  # the memory has refilled: the seed no longer counts
-        step = self._solve(self._structure, self._theta, rows, self._pull, self._prior)
+        prior = self._prior
+        weights = None if prior is None else prior_weights(self._structure, self._memory)
+        if weights is not None and not np.any(weights > 0.0):
+            self._prior = prior = weights = None  # the memory has refilled: the seed is gone
+        step = solve_memory(
+            self._structure,
+            self._theta,
+            rows,
+            self._pull,
+            prior,
+            weights,
+            (self._input_low, self._input_high),
+        )
         if isinstance(step, str):
             self._invalid += 1
             self._note = f"the last iteration was not taken ({step})"
@@ -955,7 +850,7 @@ class RecursiveIdentifier:
             return
         self._commit(step)
 
-    def _commit(self, solution: _Solution) -> None:
+    def _commit(self, solution: MemorySolution) -> None:
         """Take an iterate as the current estimate."""
         self._theta = solution.theta
         self._unit_cov = solution.unit_covariance
@@ -967,34 +862,7 @@ class RecursiveIdentifier:
         self._version += 1
         self._track_drift()
 
-    def _prior_weights(self) -> FloatArray:
-        """Per parameter, the share of the seed's information still counted: one minus the
-        share of the branch's memory (of the whole memory, for the linear block) refilled."""
-        structure = self._structure
-        n1 = structure.degree + 1
-        down, up = self._memory.direction_counts()
-        per_direction = self._memory.capacity / 2
-        w = np.empty(structure.n_parameters)
-        w[:n1] = max(0.0, 1.0 - down / per_direction)
-        w[n1 : 2 * n1] = max(0.0, 1.0 - up / per_direction)
-        w[2 * n1 :] = max(0.0, 1.0 - (down + up) / self._memory.capacity)
-        return w
-
     # ------------------------------------------------------------------ divergence
-
-    def _theta_problem(self) -> str | None:
-        """The cheap validity checks of the current estimate (finite, slopes, dead zones)."""
-        theta = self._theta
-        n = self._structure.degree
-        s = self._structure.sign
-        if not math.isfinite(float(theta.sum())):
-            return "the estimate became non-finite"
-        m_l1, m_r1 = float(theta[0]), float(theta[n + 1])
-        if m_l1 * s <= 0.0 or m_r1 * s <= 0.0:
-            return f"a branch slope changed sign (m_left_1={m_l1:.3g}, m_right_1={m_r1:.3g})"
-        if theta[1] / m_l1 <= 0.0 or theta[n + 2] / m_r1 <= 0.0:
-            return "a dead-zone constant became negative"
-        return None
 
     def _stop(self, why: str) -> None:
         """The estimate left the valid set: re-initialise at once from the memory (backlash)
@@ -1002,7 +870,7 @@ class RecursiveIdentifier:
         self._mode = _STOPPED
         self._held_back = None
         self._file(self._memory, *self._pending_rows())  # the data are sound: keep them
-        self._scale_before = self._long
+        self._scale_before = self._errors.long
         self._attempts = 0
         self._fresh = self._need = len(self._memory)  # (the memory is due now)
         self._theta = self._valid_theta()
@@ -1026,7 +894,11 @@ class RecursiveIdentifier:
 
     def _valid_theta(self) -> FloatArray:
         """The last valid estimate (the current one unless it was corrupted)."""
-        return self._theta if self._theta_problem() is None else self._last_valid.copy()
+        return (
+            self._theta
+            if theta_problem(self._structure, self._theta) is None
+            else self._last_valid.copy()
+        )
 
     # ------------------------------------------------------------------ the estimate
 
@@ -1049,7 +921,7 @@ class RecursiveIdentifier:
                 structure, self._samples, excitation, EstimatorState.WARMING_UP, reason
             )
         theta = self._theta
-        sigma2 = self._sigma2 if math.isfinite(self._sigma2) else self._long
+        sigma2 = self._sigma2 if math.isfinite(self._sigma2) else self._errors.long
         if self._summary is None or self._summary[0] != self._version:
             theta_list = theta.tolist()
             p_list = natural_from_theta(structure, theta_list)
@@ -1090,7 +962,8 @@ class RecursiveIdentifier:
                 reason += f"; re-initialised {self._restarts} time(s)"
         if self._note and state is not EstimatorState.DIVERGED:
             reason += f"; {self._note}"
-        residual = self._recent_sq if math.isfinite(self._recent_sq) else sigma2
+        recent = self._errors.recent
+        residual = recent if math.isfinite(recent) else sigma2
         theta_copy = theta.copy()
         cov_theta = sigma2 * self._unit_cov  # sigma^2 (Phi^T Phi + R_0 + prior)^-1
         drift = self._drift

@@ -37,8 +37,9 @@ from genbacklash_core.estimate import Estimate
 from genbacklash_core.structure import Structure
 
 from .covariance import scaled_inverse, theta_jacobian
+from .memory import BinnedRows
 
-__all__ = ["SeedPrior", "seed_prior"]
+__all__ = ["SeedPrior", "prior_weights", "seed_prior"]
 
 
 @dataclass(frozen=True)
@@ -116,3 +117,24 @@ def seed_prior(template: Structure, sign_known: bool, estimate: Estimate) -> See
             "too large to use (the information they stand for overflows float64)"
         )
     return SeedPrior(p, theta, information, sigma2, max(rows, 1.0))
+
+
+def prior_weights(structure: Structure, memory: BinnedRows) -> FloatArray:
+    """Per parameter, the share of a seed's information the recursive identifier still
+    counts: one minus the share of the branch's ``memory`` (of the whole memory, for the
+    linear block) refilled since the seed. (The windowed identifier fades its seed as one
+    scalar share of its window instead: it forgets by window, not by branch.)
+
+    >>> from genbacklash_core.online.memory import BinnedRows
+    >>> memory = BinnedRows(width=6, bins=2, per_direction=4, floor=1)
+    >>> prior_weights(Structure(1), memory).tolist()
+    [1.0, 1.0, 1.0, 1.0]
+    """
+    n1 = structure.degree + 1
+    down, up = memory.direction_counts()
+    per_direction = memory.capacity / 2
+    w = np.empty(structure.n_parameters)
+    w[:n1] = max(0.0, 1.0 - down / per_direction)
+    w[n1 : 2 * n1] = max(0.0, 1.0 - up / per_direction)
+    w[2 * n1 :] = max(0.0, 1.0 - (down + up) / memory.capacity)
+    return w
