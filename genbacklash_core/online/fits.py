@@ -8,7 +8,8 @@ window did not excite the parameters enough (:func:`block_conditioning`,
 :func:`poorly_excited`). :func:`cold_fit` runs the batch iteration from the paper's start
 (:func:`~genbacklash_core.identify.identify_backlash`,
 :func:`~genbacklash_core.identify.identify_cascade`); the recursive identifier uses it too,
-for its batch (re-)initialisations. :func:`refine_window` adds a few output-error steps.
+for its batch (re-)initialisations. :func:`refine_window` adds a few output-error steps;
+:func:`outlier_rows` says which remembered rows an accepted fit cannot have produced.
 
 Examples
 --------
@@ -31,6 +32,7 @@ from genbacklash_core._typing import BoolArray, FloatArray
 from genbacklash_core.errors import GenBacklashError
 from genbacklash_core.identify import identify_backlash, identify_cascade
 from genbacklash_core.refine import refine_parameters
+from genbacklash_core.simulate import play_bounds
 from genbacklash_core.structure import Structure
 
 from .covariance import natural_covariance
@@ -44,11 +46,14 @@ __all__ = [
     "cold_fit",
     "conditioning_floor",
     "fit_window",
+    "outlier_rows",
     "parameter_blocks",
     "poorly_excited",
     "refine_window",
     "solve_normal",
 ]
+
+OUTLIER_SIGMAS = 10.0  # rows this far off the accepted model are forgotten (memory mode)
 
 
 @dataclass
@@ -363,3 +368,33 @@ def refine_window(
     except GenBacklashError:
         return None
     return q
+
+
+def outlier_rows(
+    structure: Structure,
+    p: FloatArray,
+    u1: FloatArray,
+    y0: FloatArray,
+    y1: FloatArray,
+    residual: float,
+) -> BoolArray | None:
+    """Which rows ``(u(t), x(t-1), x(t))`` the accepted model ``p`` cannot have produced:
+    one-step prediction errors (eq. 20, one step of the play operator from ``x(t-1)``)
+    beyond :data:`OUTLIER_SIGMAS` robust standard deviations (at least ``residual``). None
+    when there are too few rows (four per parameter) to judge.
+
+    >>> from genbacklash_core import paper_example
+    >>> truth = paper_example(1).model
+    >>> u1 = np.linspace(-1.5, 1.5, 40); y0 = truth.right(u1 - 0.1)
+    >>> y1 = truth.right(u1); y1[7] += 5.0  # one garbage reading
+    >>> np.flatnonzero(outlier_rows(Structure(3), truth.parameters(), u1, y0, y1, 0.01)).tolist()
+    [7]
+    """
+    if u1.size < 4 * structure.n_parameters:
+        return None
+    left, right = structure.branches(p, u1)
+    lo, hi = play_bounds(left, right)
+    error = y1 - np.minimum(np.maximum(y0, lo), hi)  # eq. (20): one step from x(t-1)
+    scale = 1.4826 * float(np.median(np.abs(error)))
+    limit = OUTLIER_SIGMAS * max(scale, residual, 1e-12)
+    return np.asarray(np.abs(error) > limit)

@@ -41,7 +41,6 @@ from genbacklash_core.estimate import (
     relative_std,
 )
 from genbacklash_core.samples import run_lengths
-from genbacklash_core.simulate import play_bounds
 from genbacklash_core.structure import Structure
 
 from .advice import AdviceCache, BranchCoverage, excitation_advice
@@ -52,6 +51,7 @@ from .fits import (
     cold_fit,
     conditioning_floor,
     fit_window,
+    outlier_rows,
     parameter_blocks,
     poorly_excited,
     refine_window,
@@ -76,9 +76,6 @@ from .state import FITTED_STATES, confidence_moved, held, settled_state
 from .tracking import DeadZoneDrift, dead_zone_drift, with_tracking
 
 __all__ = ["WindowedIdentifier", "WindowedSettings"]
-
-
-_OUTLIER_SIGMAS = 10.0  # rows this far off the accepted model are forgotten (memory mode)
 
 
 # --------------------------------------------------------------------------- the identifier
@@ -665,18 +662,12 @@ class WindowedIdentifier:
 
     def _purge_outliers(self, p: FloatArray, residual: float) -> None:
         """Forget the rows the accepted model cannot have produced: one-step prediction
-        errors beyond ``_OUTLIER_SIGMAS`` robust standard deviations (a burst of garbage
+        errors beyond ``OUTLIER_SIGMAS`` robust standard deviations (a burst of garbage
         readings would otherwise stay for good in the regions rarely visited)."""
         assert self._memory is not None
         _, u1, y0, y1 = self._memory.rows()
-        if u1.size < 4 * self._structure.n_parameters:
-            return
-        left, right = self._structure.branches(p, u1)
-        lo, hi = play_bounds(left, right)
-        error = y1 - np.minimum(np.maximum(y0, lo), hi)  # eq. (20): one step from x(t-1)
-        scale = 1.4826 * float(np.median(np.abs(error)))
-        limit = _OUTLIER_SIGMAS * max(scale, residual, 1e-12)
-        if self._memory.discard(np.abs(error) > limit):
+        drop = outlier_rows(self._structure, p, u1, y0, y1, residual)
+        if drop is not None and self._memory.discard(drop):
             self._next_fit = min(self._next_fit, self._rows + self.settings.refit_every)
 
     def _recent_conditioning(self, rows: WindowRows) -> FloatArray:
