@@ -252,6 +252,8 @@ def fit_window(
         rss = float(error @ error)
         count: float = m
         if prior is not None:  # pooled with the rows the prior stands for
+            # (the recursive identifier pools the same way, with a per-branch weight and its
+            # own rounding order: iteration.solve_memory; kept apart to stay bit-identical)
             rss += prior.sigma2 * prior.rows
             count = m + prior.rows
         sigma2 = rss / max(count - size, 1)

@@ -114,6 +114,8 @@ def solve_memory(
     rss = float(error @ error)
     count = float(target.size)
     if prior is not None and weight > 0.0:  # pooled with the rows the seed stands for
+        # (as the windowed fits pool theirs, fits.fit_window; the weight here is the mean of
+        # the per-branch ones, since this memory forgets by branch, not by window)
         rss += weight * prior.rows * prior.sigma2
         count += weight * prior.rows
     size = structure.n_parameters
