@@ -43,8 +43,9 @@ from .inverse import (
     hold_interval,
 )
 from .linear import LinearBlock, simulate_linear
+from .online.recursive import RecursiveIdentifier, RecursiveSettings
+from .online.windowed import WindowedIdentifier, WindowedSettings
 from .play import play_operator, play_operator_loop
-from .recursive import RecursiveIdentifier, RecursiveSettings
 from .refine import RefinementResult, refine_output_error
 from .simulate import (
     CascadeOutput,
@@ -54,7 +55,6 @@ from .simulate import (
     simulate_cascade_loop,
 )
 from .structure import Structure
-from .windowed import WindowedIdentifier, WindowedSettings
 
 __version__ = "0.1.0"
 

@@ -1,7 +1,7 @@
 """What an online identifier reports after each sample: :class:`Estimate` and its state.
 
-Both online identifiers (:class:`~genbacklash_core.windowed.WindowedIdentifier` and
-:class:`~genbacklash_core.recursive.RecursiveIdentifier`) follow one interface,
+Both online identifiers (:class:`~genbacklash_core.online.windowed.WindowedIdentifier` and
+:class:`~genbacklash_core.online.recursive.RecursiveIdentifier`) follow one interface,
 :class:`OnlineIdentifier`: ``update(u, y) -> Estimate`` for one sample,
 ``update_many(u, y) -> Estimate`` for a batch of samples (the same result, vectorised), and
 ``seed(estimate)`` to continue from a saved estimate after a restart. An

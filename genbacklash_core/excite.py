@@ -1,10 +1,10 @@
 """Commissioning motion: a short trajectory after which the online identifier has converged.
 
-The online identifier (:class:`~genbacklash_core.windowed.WindowedIdentifier`, the node's
+The online identifier (:class:`~genbacklash_core.online.windowed.WindowedIdentifier`, the node's
 default method) learns from *rows*: pairs of consecutive encoder readings between which the
 command moved (one per command while the joint moves), filed by branch (moves up: the right
 branch; moves down: the left branch) and by input region (16 per branch over the range seen,
-:class:`~genbacklash_core.memory.RowMemory`). It needs rows over each branch's whole range
+:class:`~genbacklash_core.online.memory.RowMemory`). It needs rows over each branch's whole range
 and reversals that cross the gap. Its first fit, the cold start, needs two reversals; it is
 tried after 48 rows and, while it fails, after 98, 198, 385, 572, ... rows. A cold start
 on a partial view of the branches can settle on a poor estimate that later fits cannot
@@ -32,7 +32,7 @@ the range), so every region gets moves in both directions.
 :func:`verify` runs a trajectory through the drivetrain of :mod:`genbacklash_core.scenarios`
 (commands held by the servo, a 1 kHz encoder quantised to 4096 counts/rev whose stamps
 jitter and whose readings are lost with probability 0.02, the play operator) into a default
-:class:`~genbacklash_core.windowed.WindowedIdentifier` (degree 3) and reports when it
+:class:`~genbacklash_core.online.windowed.WindowedIdentifier` (degree 3) and reports when it
 converged and the free-run NRMSE of its final estimate against the truth.
 
 Measured on the scenario's drivetrain (travel -1.2..1.2 rad, 3 rad/s, 30 rad/s^2, 100 Hz,
@@ -83,6 +83,7 @@ from .data import as_float_array, count_reversals
 from .errors import GenBacklashError
 from .estimate import EstimatorState
 from .identify import nrmse
+from .online.windowed import WindowedIdentifier, WindowedSettings
 from .samples import sample_breaks
 from .scenarios import (
     OPERATION_BACKLASH,
@@ -92,7 +93,6 @@ from .scenarios import (
     trapezoid,
 )
 from .simulate import simulate_backlash
-from .windowed import WindowedIdentifier, WindowedSettings
 
 __all__ = [
     "CommissioningCheck",
@@ -576,7 +576,7 @@ def check_commissioning(
     hold, up to 0.2 ms late), ``model``'s play operator, an encoder at ``encoder_rate``
     whose stamps jitter (50 us), quantised to ``counts_per_rev`` (of ``2 pi`` units) and
     losing each reading with probability ``loss``. The readings feed a
-    :class:`~genbacklash_core.windowed.WindowedIdentifier` (``degree``, ``settings``;
+    :class:`~genbacklash_core.online.windowed.WindowedIdentifier` (``degree``, ``settings``;
     by default the node's: degree 3, ``WindowedSettings()``) in steps of one command
     period. The NRMSE is that of the final estimate simulated free-run against the
     noise-free truth on 20 s of the scenario's ``"operation"`` motion over the same travel

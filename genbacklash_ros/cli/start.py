@@ -26,12 +26,10 @@ import numpy as np
 
 from genbacklash_core import Estimate, GenBacklashError, IdentificationResult, Structure
 from genbacklash_core.estimate import EstimatorState, confidence_of, relative_std
-from genbacklash_core.windowed import (
-    WindowedSettings,
-    natural_covariance,
-    solve_normal,
-    window_rows,
-)
+from genbacklash_core.online.covariance import natural_covariance
+from genbacklash_core.online.fits import solve_normal
+from genbacklash_core.online.rows import window_rows
+from genbacklash_core.online.settings import WindowedSettings
 from genbacklash_ros.bags.csvio import Series
 from genbacklash_ros.node.checkpoint import CheckpointError, save_checkpoint
 

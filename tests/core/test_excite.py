@@ -17,7 +17,7 @@ from genbacklash_core.excite import (
     commissioning_trajectory,
     verify,
 )
-from genbacklash_core.memory import RowMemory
+from genbacklash_core.online.memory import RowMemory
 from genbacklash_core.scenarios import OPERATION_BACKLASH, STRAIGHT_BACKLASH
 
 DEFAULT = MotionLimits(-1.2, 1.2, v_max=3.0, a_max=30.0)  # the operation scenario's

@@ -1,4 +1,4 @@
-"""The row memory (genbacklash_core.memory): information filed by branch and input region."""
+"""The row memory (genbacklash_core.online.memory): information filed by branch and input region."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from genbacklash_core.errors import GenBacklashError
-from genbacklash_core.memory import RowMemory
+from genbacklash_core.online.memory import RowMemory
 
 
 def _moves(rng: np.random.Generator, lo: float, hi: float, n: int) -> np.ndarray:
@@ -73,7 +73,7 @@ def test_bad_arguments() -> None:
 
 
 def test_excitation_advice_names_what_is_missing_and_the_motion() -> None:
-    from genbacklash_core.memory import coverage_of, excitation_advice
+    from genbacklash_core.online.advice import coverage_of, excitation_advice
 
     up = np.linspace(0.0, 1.0, 101)
     down = up[::-1]

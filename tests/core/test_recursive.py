@@ -22,7 +22,7 @@ from genbacklash_core import (
     paper_example,
     track,
 )
-from genbacklash_core.recursive import memory_regression
+from genbacklash_core.online.rows import memory_regression
 
 from ._helpers import drifting_gap_data, tracking_lag
 

@@ -1,4 +1,4 @@
-"""The bands' tracking term (genbacklash_core.tracking): a wearing gap inside the 2-sigma band."""
+"""The bands' tracking term (genbacklash_core.online.tracking): a wearing gap in the band."""
 
 from __future__ import annotations
 
@@ -9,10 +9,10 @@ from hypothesis import strategies as st
 
 from genbacklash_core import RecursiveIdentifier, WindowedIdentifier
 from genbacklash_core.backlash import GeneralBacklash
-from genbacklash_core.memory import RowMemory
+from genbacklash_core.online.memory import RowMemory
+from genbacklash_core.online.tracking import dead_zone_drift
 from genbacklash_core.scenarios import OperationSettings, operation_record
 from genbacklash_core.structure import Structure
-from genbacklash_core.tracking import dead_zone_drift
 
 CURVED = GeneralBacklash([1.0, 0.03, -0.015], 0.045, [1.0, 0.025, -0.012], 0.05)
 

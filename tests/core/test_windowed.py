@@ -20,7 +20,7 @@ from genbacklash_core import (
     paper_example,
     track,
 )
-from genbacklash_core.windowed import SampleRing
+from genbacklash_core.online.rows import SampleRing
 
 from ._helpers import drifting_gap_data, tracking_lag
 

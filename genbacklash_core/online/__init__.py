@@ -1,0 +1,60 @@
+"""Online identification: the two identifiers and the parts they share.
+
+Both identifiers follow one interface (``update(u, y) -> Estimate``, ``update_many``,
+``seed``, ``refit``; :mod:`genbacklash_core.estimate`) and differ in how they remember:
+
+* :class:`~genbacklash_core.online.windowed.WindowedIdentifier` re-runs a few warm-started
+  iterations of the paper's batch method (eqs. 22-29, 31-37) over a sliding window;
+* :class:`~genbacklash_core.online.recursive.RecursiveIdentifier` runs one warm-started
+  iteration per block over a binned memory of regression rows.
+
+The modules below them hold one concept each, and what the two share stands once:
+
+========================  ==============================================================
+``settings``              the two frozen settings dataclasses
+``inputs``                structure and settings arguments, non-finite samples, the input
+                          deadband
+``rows``                  the sample rule's regression rows (a window's; as they come),
+                          the recent-sample ring, the cascade's lags and settling horizon
+``memory``                the row memories (``RowMemory``, ``BinnedRows``)
+``advice``                branch coverage and excitation advice
+``seed``                  a saved estimate as prior information (``seed``)
+``fits``                  the windowed fits and the batch (re-)initialisation both use
+``iteration``             the recursive identifier's iteration over its memory
+``divergence``            the recursive identifier's divergence test (error scales)
+``covariance``            the delta method of eq. (34): natural parameters and covariance
+``state``                 converged / converging / no_excitation and the confidence
+``tracking``              the bands' tracking term for a drifting gap
+``windowed``              :class:`WindowedIdentifier`
+``recursive``             :class:`RecursiveIdentifier`
+========================  ==============================================================
+
+``genbacklash_core.windowed``, ``.recursive``, ``.memory`` and ``.tracking`` remain as
+compatibility modules re-exporting from here.
+"""
+
+from __future__ import annotations
+
+from .advice import BranchCoverage, coverage_of, excitation_advice
+from .memory import BinnedRows, RowMemory, pair_series
+from .recursive import RecursiveIdentifier, RecursiveSettings
+from .rows import memory_regression
+from .tracking import DRIFT_Z, DeadZoneDrift, dead_zone_drift
+from .windowed import WindowedIdentifier, WindowedSettings
+
+__all__ = [
+    "DRIFT_Z",
+    "BinnedRows",
+    "BranchCoverage",
+    "DeadZoneDrift",
+    "RecursiveIdentifier",
+    "RecursiveSettings",
+    "RowMemory",
+    "WindowedIdentifier",
+    "WindowedSettings",
+    "coverage_of",
+    "dead_zone_drift",
+    "excitation_advice",
+    "memory_regression",
+    "pair_series",
+]
