@@ -102,6 +102,21 @@ def coverage(bag: Path, method: str, joint: str | None) -> dict[str, float]:
     return out
 
 
+def table_row(label: str, method: str, seed: int, c: dict[str, float]) -> tuple[object, ...]:
+    """One record's row of the per-record tables."""
+    return (
+        label,
+        method,
+        seed,
+        f"{c['c_left']:.0%}",
+        f"{c['c_right']:.0%}",
+        f"{c['play']:.0%}",
+        int(c["count"]),
+        f"{1e3 * c['error']:.2f}",
+        f"{1e3 * c['band']:.2f}",
+    )
+
+
 def physics_coverage(path: Path, seed: int, method: str) -> dict[str, float]:
     """The near-ideal physics drivetrain: the band against the geometric play."""
     from genbacklash_ros.physics.bag import write_physics_bag  # needs mujoco ([physics])
@@ -123,7 +138,7 @@ def main() -> None:
     if not args.quick:
         scenarios.append(("operation 10 min, +50 %", operation(600.0, 0.5), "drive_joint"))
     started = time.perf_counter()
-    rows = []
+    rows: list[tuple[object, ...]] = []
     pooled: dict[tuple[str, str], list[float]] = {}
     with tempfile.TemporaryDirectory(prefix="gb-coverage-bags-") as tmp:
         jobs = [(s, seed) for s in scenarios for seed in seeds]
@@ -133,20 +148,8 @@ def main() -> None:
             for method in METHODS:
                 c = coverage(bag, method, joint)
                 pooled.setdefault((label, method), []).append(c["play"])
-                rows.append(
-                    (
-                        label,
-                        method,
-                        seed,
-                        f"{c['c_left']:.0%}",
-                        f"{c['c_right']:.0%}",
-                        f"{c['play']:.0%}",
-                        int(c["count"]),
-                        f"{1e3 * c['error']:.2f}",
-                        f"{1e3 * c['band']:.2f}",
-                    )
-                )
-        physics_rows = []
+                rows.append(table_row(label, method, seed, c))
+        physics_rows: list[tuple[object, ...]] = []
         if not args.quick:
             try:
                 import mujoco  # noqa: F401
@@ -156,19 +159,8 @@ def main() -> None:
                 for seed in tqdm(range(3), desc="physics", file=sys.stderr):
                     for method in METHODS:
                         c = physics_coverage(Path(tmp), seed, method)
-                        physics_rows.append(
-                            (
-                                "near_ideal 40 s, 60 Hz servo",
-                                method,
-                                seed,
-                                f"{c['c_left']:.0%}",
-                                f"{c['c_right']:.0%}",
-                                f"{c['play']:.0%}",
-                                int(c["count"]),
-                                f"{1e3 * c['error']:.2f}",
-                                f"{1e3 * c['band']:.2f}",
-                            )
-                        )
+                        label = "near_ideal 40 s, 60 Hz servo"
+                        physics_rows.append(table_row(label, method, seed, c))
     header = (
         "input",
         "identifier",
