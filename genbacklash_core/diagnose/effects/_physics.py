@@ -6,8 +6,8 @@ Signature (as :mod:`.input_lag` reads a servo lag): for a few trial parameter se
 the model's own Jacobian (:func:`~genbacklash_core.diagnose.stats.nested_f_test`); the best
 trial's F-test, Bonferroni-corrected over the trials, must pass the screening thresholds.
 
-Fit: the physics' continuous parameters and the two dead zones of the current model (the
-branch slopes and the rest held: they are not what the physics changes, and each free
+Fit: the physics' continuous parameters and the backlash's (branches and dead zones: a
+model without the physics biases both; an offset and the rest are held, since each free
 parameter costs a simulation per Jacobian) minimise the free-run simulation error on the estimation
 data (``scipy.optimize.least_squares``, trust-region reflective with bounds, a finite-difference
 Jacobian: a contact is a switch, so the recursion has no useful analytic derivative). It
@@ -44,6 +44,7 @@ __all__ = [
 
 _MAX_WINDOW = 50  # samples: longest flank-velocity window read off the command's holds
 _PLAY_SCALES = (1.0, 1.5)  # the current play split evenly and widened, as starts
+_GRID_KEPT = 3  # physics of the grid tried with the play starts
 _FINALISTS = 2  # starts refined by least squares
 _MAX_EVALUATIONS = 15  # least-squares iterations per start (each costs 1 + k + 2 runs)
 
@@ -155,8 +156,12 @@ def fit_physics(
     k = len(lower)
     base = context.spec
     u_range = (float(np.min(context.u)), float(np.max(context.u)))
+    # the grid on the current parameters, then the best few physics with the play starts
+    ranked = sorted(
+        grid, key=lambda phys: _sse(context, base.extended(physics=make(phys)), context.theta)
+    )
     screened: list[tuple[float, FloatArray]] = []
-    for phys in grid:
+    for phys in ranked[:_GRID_KEPT]:
         for theta in play_starts(context):
             if base.problem(theta, u_range) is not None:
                 continue
@@ -164,9 +169,11 @@ def fit_physics(
             screened.append((_sse(context, spec, theta), np.concatenate([phys, theta])))
     screened.sort(key=lambda item: item[0])
     n = base.structure.degree
-    zones = [k + n, k + 2 * n + 1]  # c_left, c_right in (physics, theta)
-    low = np.concatenate([np.asarray(lower, dtype=np.float64), [0.0, 0.0]])
-    high = np.concatenate([np.asarray(upper, dtype=np.float64), [np.inf, np.inf]])
+    zones = list(range(k, k + base.structure.n_backlash))  # branches and dead zones
+    free_low = np.full(len(zones), -np.inf)
+    free_low[[n, 2 * n + 1]] = 0.0  # c_left, c_right >= 0
+    low = np.concatenate([np.asarray(lower, dtype=np.float64), free_low])
+    high = np.concatenate([np.asarray(upper, dtype=np.float64), np.full(len(zones), np.inf)])
 
     def full(z: FloatArray, start: FloatArray) -> FloatArray:
         out = start.copy()

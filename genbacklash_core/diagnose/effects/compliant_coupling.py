@@ -32,9 +32,10 @@ from ._physics import command_window, fit_physics, trial_tests
 
 __all__ = ["EFFECT", "CompliantCoupling"]
 
-_STIFFNESSES = (0.05, 0.1, 0.2, 0.4, 0.8)  # natural frequency, rad per sample
-_DAMPINGS = (0.1, 0.3)
-_RETENTIONS = (0.98, 0.995)
+_STIFFNESSES = (0.05, 0.1, 0.2, 0.4, 0.8)  # trial natural frequencies, rad per sample
+_GRID_STIFFNESSES = tuple(float(w) for w in np.geomspace(0.03, 1.2, 14))  # the fit's grid
+_DAMPINGS = (0.05, 0.15, 0.4)
+_RETENTIONS = (0.0, 0.9, 0.98)  # a free load that stops at once .. coasts
 
 _KIND: PhysicsKind = "compliant_coupling"
 
@@ -52,7 +53,7 @@ class CompliantCoupling:
         """Trial springs; the best one counts (Bonferroni)."""
         window = command_window(context.u)
         trials = [
-            LoadPhysics(_KIND, 0.98, 0.0, window, stiffness=w, damping=0.2) for w in _STIFFNESSES
+            LoadPhysics(_KIND, 0.9, 0.0, window, stiffness=w, damping=0.2) for w in _STIFFNESSES
         ]
         best = trial_tests(context, trials)
         fires = best.fires(context)
@@ -90,7 +91,10 @@ class CompliantCoupling:
             )
 
         grid = [
-            np.array([w, d, r, 0.0]) for w in _STIFFNESSES for d in _DAMPINGS for r in _RETENTIONS
+            np.array([w, d, r, 0.0])
+            for w in _GRID_STIFFNESSES
+            for d in _DAMPINGS
+            for r in _RETENTIONS
         ]
         return fit_physics(
             context, make, grid, (1e-3, 0.0, 0.0, 0.0), (MAX_STIFFNESS, 5.0, 1.0, np.inf)
