@@ -40,7 +40,7 @@ import argparse
 import tempfile
 import time
 from collections.abc import Sequence
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 from genbacklash_core.diagnose import DiagnoseSettings, diagnose, operation_case
@@ -142,8 +142,8 @@ def main(argv: Sequence[str] | None = None) -> None:
             for bw in args.bandwidths
             for seed in args.seeds
         ]
-        for rows in pool.map(_record, jobs):
-            print(rows, flush=True)
+        for future in as_completed([pool.submit(_record, job) for job in jobs]):
+            print(future.result(), flush=True)  # as each finishes: sort the table after
         if args.operation_seeds:
             print()
             print("| operation record | seed | named | no physical name | s |")
@@ -153,8 +153,8 @@ def main(argv: Sequence[str] | None = None) -> None:
                 for effects in ((), ("input_lag",))
                 for seed in args.operation_seeds
             ]
-            for row in pool.map(_operation, operation_jobs):
-                print(row, flush=True)
+            for done in as_completed([pool.submit(_operation, job) for job in operation_jobs]):
+                print(done.result(), flush=True)
 
 
 if __name__ == "__main__":

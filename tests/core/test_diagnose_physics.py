@@ -174,3 +174,16 @@ def test_clean_backlash_names_no_physical_effect(seed: int) -> None:
 def test_the_catalog_holds_the_physical_names() -> None:
     names = [effect.name for effect in CATALOG]
     assert names[-3:] == list(PHYSICS_NAMES)
+
+
+def test_a_misfit_no_effect_explains_is_said_with_its_number() -> None:
+    # the coasting record with a catalog that lacks its effect: nothing named, and the output
+    # says how far above the floor the misfit stays instead of naming nothing silently
+    u, y = record(COASTING, 1)
+    result = diagnose(u, y, catalog=())
+    assert result.steps == ()
+    times = result.unexplained
+    assert times is not None and times > 3.0
+    text = result.unexplained_text()
+    assert text.startswith("unexplained: the final misfit") and f"{times:.0f} times" in text
+    assert result.to_dict()["unexplained"]["times_floor"] == pytest.approx(times)
