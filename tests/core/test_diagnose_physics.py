@@ -154,7 +154,6 @@ def test_each_physical_effect_is_named_first_on_a_record_that_shows_it(
     assert result.steps, result.reason
     assert result.steps[0].effect == physics.kind, [s.evidence for s in result.steps]
     first = result.steps[0]
-    print(first.gap_before, first.gap_after)
     assert first.gap_after < 0.6 * first.gap_before
     assert "%" in first.evidence  # the evidence carries its numbers
 
