@@ -30,6 +30,8 @@ from genbacklash_core.errors import GenBacklashError
 from genbacklash_core.linear import LinearBlock
 from genbacklash_core.structure import as_order
 
+from .physics import LoadPhysics
+
 __all__ = [
     "AugmentedModel",
     "Drift",
@@ -230,6 +232,9 @@ class AugmentedModel:
         command and the backlash input: ``v(t) = a v(t-1) + (1 - a) u(t - d)``; 0: none.
     periodic : PeriodicError, optional
         An output error periodic in the load position.
+    physics : LoadPhysics, optional
+        The load's own motion after the play (coasting, a compliant coupling, a load
+        torque; :mod:`.physics`), in place of the play operator of eq. (20).
 
     Examples
     --------
@@ -248,6 +253,7 @@ class AugmentedModel:
     saturation: Saturation | None = None
     input_lag: float = 0.0
     periodic: PeriodicError | None = None
+    physics: LoadPhysics | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.base, (GeneralBacklash, Cascade)):
@@ -279,6 +285,8 @@ class AugmentedModel:
             raise GenBacklashError(
                 f"periodic must be a PeriodicError or None, got {self.periodic!r}"
             )
+        if self.physics is not None and not isinstance(self.physics, LoadPhysics):
+            raise GenBacklashError(f"physics must be a LoadPhysics or None, got {self.physics!r}")
 
     @property
     def backlash(self) -> GeneralBacklash:
@@ -310,6 +318,8 @@ class AugmentedModel:
             names.append("input_lag")
         if self.periodic is not None:
             names.append("periodic_error")
+        if self.physics is not None:
+            names.append(self.physics.kind)
         return tuple(names)
 
     def simulate(self, u: ArrayLike, y_start: float | None = None) -> FloatArray:
@@ -362,6 +372,7 @@ class AugmentedModel:
             saturation = data.get("saturation")
             lag = data.get("input_lag")
             periodic = data.get("periodic_error")
+            physics = data.get("physics")
             return cls(
                 base,
                 delay=data.get("delay", 0),
@@ -380,6 +391,7 @@ class AugmentedModel:
                         periodic["period"], tuple(periodic["cos"]), tuple(periodic["sin"])
                     )
                 ),
+                physics=None if physics is None else LoadPhysics.from_dict(physics),
             )
         except (KeyError, TypeError, AttributeError) as err:
             raise GenBacklashError(
@@ -426,6 +438,7 @@ class AugmentedModel:
                 "amplitudes": list(periodic.amplitudes),
             }
         )
+        out["physics"] = None if self.physics is None else self.physics.to_dict()
         return out
 
 
@@ -469,5 +482,8 @@ def without_effect(model: AugmentedModel, effect: str) -> AugmentedModel | None:
         "saturation": {"saturation": None},
         "input_lag": {"input_lag": 0.0},
         "periodic_error": {"periodic": None},
+        "coasting_load": {"physics": None},
+        "compliant_coupling": {"physics": None},
+        "load_torque": {"physics": None},
     }
     return replace(model, **neutral[effect])

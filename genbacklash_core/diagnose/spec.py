@@ -44,6 +44,7 @@ from .model import (
     Saturation,
     drift_coordinate,
 )
+from .physics import LoadPhysics
 
 __all__ = ["ModelSpec", "SimulationOutput", "anchors_of", "shift_input"]
 
@@ -103,6 +104,7 @@ class ModelSpec:
     saturation: tuple[bool, bool] = (False, False)
     input_lag: bool = False
     harmonics: int = 0
+    physics: LoadPhysics | None = None
 
     @classmethod
     def of(cls, model: AugmentedModel) -> ModelSpec:
@@ -115,6 +117,7 @@ class ModelSpec:
             (False, False) if model.saturation is None else model.saturation.sides,
             model.input_lag != 0.0,
             0 if model.periodic is None else model.periodic.harmonics,
+            model.physics,
         )
 
     @property
@@ -131,8 +134,10 @@ class ModelSpec:
 
     @property
     def n_free(self) -> int:
-        """Free parameters for information criteria: the vector plus a dead time when present."""
-        return self.n_parameters + int(self.delay > 0)
+        """Free parameters for information criteria: the vector plus a dead time and the load
+        physics' parameters when present."""
+        physics = 0 if self.physics is None else self.physics.n_free
+        return self.n_parameters + int(self.delay > 0) + physics
 
     def names(self) -> tuple[str, ...]:
         """Parameter names in vector order."""
@@ -223,6 +228,7 @@ class ModelSpec:
             saturation,
             0.0 if i_lag is None else float(theta[i_lag]),
             self.periodic_error(theta),
+            self.physics,
         )
 
     # ------------------------------------------------------------------ pieces
@@ -367,7 +373,10 @@ class ModelSpec:
         if anchors is not None and y is not None and not structure.cascade:
             lo, hi = lo.copy(), hi.copy()
             lo[anchors] = hi[anchors] = self.unread(theta, y[anchors])  # pin x to the reading
-        x = play_operator(lo, hi, x0)  # eq. (20)
+        if self.physics is None:
+            x = play_operator(lo, hi, x0)  # eq. (20)
+        else:  # the load's own motion on eq. (20)'s interval (:mod:`.physics`)
+            x = self.physics.simulate(lo, hi, x0)
         if structure.cascade:
             a, b = structure.linear_part(p)
             num = np.concatenate([[0.0], a])
@@ -574,6 +583,7 @@ class ModelSpec:
         saturation: tuple[bool, bool] | None = None,
         input_lag: bool | None = None,
         harmonics: int | None = None,
+        physics: LoadPhysics | None = None,
     ) -> ModelSpec:
         """A spec with some parts replaced (``orders`` is ``(na, nb)``)."""
         s = self.structure
@@ -586,6 +596,7 @@ class ModelSpec:
             self.saturation if saturation is None else saturation,
             self.input_lag if input_lag is None else input_lag,
             self.harmonics if harmonics is None else harmonics,
+            self.physics if physics is None else physics,
         )
 
     def embed(self, model: AugmentedModel) -> FloatArray:

@@ -83,7 +83,8 @@ examples:
 "misfit_initial", "misfit_final", "misfit_floor", "model"} (and, for older tools, the same
 numbers as gap_before, gap_after, gap_initial, gap_final, gap_floor); model is the identify
 JSON plus delay, offset, drift (rate per sample, rate_per_s when the samples are stamped),
-saturation, input_lag and periodic_error; misfit_floor is the misfit quantisation and
+saturation, input_lag, periodic_error and physics (coasting_load, compliant_coupling,
+load_torque: the load's motion after the play); misfit_floor is the misfit quantisation and
 noise allow (null when not measured). Exit status 0 when the diagnosis ran, 2 for bad input.
 """
 
@@ -188,7 +189,26 @@ def _model_lines(result: Diagnosis, period: float | None = None) -> list[str]:
         lines.append(f"  {'period':<14}{periodic.period:>12.5f}")
         for j, amplitude in enumerate(periodic.amplitudes, 1):
             lines.append(f"  {f'harmonic {j}':<14}{amplitude:>12.5f}  amplitude")
+    if model.physics is not None:
+        for key, value in model.physics.to_dict().items():
+            if key == "kind":
+                lines.append(f"  {'load physics':<14}{value:>12}")
+            elif key == "region":
+                lines.append(f"  {key:<14}{value[0]:>12.5f} .. {value[1]:.5f}  load position")
+            else:
+                lines.append(f"  {key:<14}{value:>12.6g}  {_PHYSICS_UNITS.get(key, '')}")
     return lines
+
+
+_PHYSICS_UNITS = {
+    "retention": "of the free load's velocity kept per sample",
+    "friction": "deceleration per sample^2 (Coulomb)",
+    "window": "samples (flank velocity)",
+    "stiffness": "rad per sample (natural frequency)",
+    "damping": "damping ratio",
+    "side": "-1: held on the lower flank, +1: the upper",
+    "fall": "per sample, at most",
+}
 
 
 def _text(result: Diagnosis, period: float | None = None) -> str:

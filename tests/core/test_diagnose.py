@@ -25,6 +25,7 @@ from genbacklash_core.diagnose import (
     synthetic_case,
 )
 from genbacklash_core.diagnose.effects import CATALOG, time_delay
+from genbacklash_core.diagnose.physics import PHYSICS_NAMES
 from genbacklash_core.diagnose.synthetic import OPERATION_EFFECTS
 from genbacklash_core.samples import sample_breaks
 
@@ -139,9 +140,10 @@ def _record(effects: list[str], seed: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def test_the_catalog_is_open_and_the_names_are_the_contract() -> None:
-    # the first six names are the contract of GUIDE §4; the two new ones follow them
+    # the first six names are the contract of GUIDE §4; the drive's two and the physical
+    # three (issue 23) follow them, in that order
     assert effect_names()[: len(EFFECT_NAMES)] == EFFECT_NAMES
-    assert effect_names() == OPERATION_EFFECTS
+    assert effect_names() == (*OPERATION_EFFECTS, *PHYSICS_NAMES)
     assert len({effect.name for effect in CATALOG}) == len(CATALOG)
     u, y = _record(["time_delay"], 13)
     only_delay = diagnose(u, y, catalog=(time_delay.EFFECT,))

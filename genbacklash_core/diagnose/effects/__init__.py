@@ -9,10 +9,13 @@ object satisfying :class:`~genbacklash_core.diagnose.effects._base.Effect` and a
 from __future__ import annotations
 
 from . import (
+    coasting_load,
+    compliant_coupling,
     curved_branches,
     gap_drift,
     input_lag,
     linear_dynamics,
+    load_torque,
     output_offset,
     periodic_error,
     saturation,
@@ -31,6 +34,9 @@ CATALOG: tuple[Effect, ...] = (
     saturation.EFFECT,
     input_lag.EFFECT,
     periodic_error.EFFECT,
+    coasting_load.EFFECT,
+    compliant_coupling.EFFECT,
+    load_torque.EFFECT,
 )
 
 
@@ -39,6 +45,7 @@ def effect_names() -> tuple[str, ...]:
 
     >>> effect_names()  # doctest: +NORMALIZE_WHITESPACE
     ('curved_branches', 'linear_dynamics', 'time_delay', 'output_offset', 'gap_drift',
-     'saturation', 'input_lag', 'periodic_error')
+     'saturation', 'input_lag', 'periodic_error', 'coasting_load', 'compliant_coupling',
+     'load_torque')
     """
     return tuple(effect.name for effect in CATALOG)

@@ -1,0 +1,188 @@
+"""The physical effects of diagnose (issue 23): coasting_load, compliant_coupling and
+load_torque -- their recursions' limits, and known answers on records built to show each.
+
+The records are drivetrain-shaped (point-to-point moves with dwells, a command held for 10
+samples, a quantised reading with a little noise) and short, so each diagnosis takes seconds.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from genbacklash_core import GenBacklashError, GeneralBacklash
+from genbacklash_core.diagnose import AugmentedModel, diagnose
+from genbacklash_core.diagnose.effects import CATALOG
+from genbacklash_core.diagnose.effects._physics import command_window
+from genbacklash_core.diagnose.physics import PHYSICS_NAMES, LoadPhysics
+from genbacklash_core.play import play_operator_loop
+
+N = 3000
+HOLD = 10  # samples a command is held (100 Hz commands, 1 kHz readings)
+STEP = 2 * np.pi / 4096  # a 4096-count encoder
+BACKLASH = GeneralBacklash.ideal(1.0, 0.032, 0.037)
+
+
+def moves(seed: int, n: int = N) -> np.ndarray:
+    """Point-to-point moves between random targets in (-1, 1) rad at 1-3 mrad per sample,
+    dwells of 100-400 samples, every command held for :data:`HOLD` samples."""
+    rng = np.random.default_rng(seed)
+    out: list[float] = []
+    position = 0.0
+    while len(out) < n:
+        target = float(rng.uniform(-1.0, 1.0))
+        speed = float(rng.uniform(1e-3, 3e-3))
+        steps = max(1, int(abs(target - position) / speed))
+        out += list(np.linspace(position, target, steps + 1)[1:])
+        out += [target] * int(rng.integers(100, 400))
+        position = target
+    smooth = np.asarray(out[:n])
+    return np.repeat(smooth[::HOLD], HOLD)[:n]
+
+
+def record(physics: LoadPhysics | None, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(u, y)``: the moves through the backlash with ``physics``, a quantised reading."""
+    u = moves(seed)
+    model = AugmentedModel(BACKLASH, physics=physics)
+    rng = np.random.default_rng([seed, 1])
+    y = model.simulate(u, y_start=0.0) + rng.normal(0.0, 2e-4, u.size)
+    return u, np.round(y / STEP) * STEP
+
+
+COASTING = LoadPhysics("coasting_load", retention=0.995, friction=2e-6, window=HOLD)
+COMPLIANT = LoadPhysics("compliant_coupling", 0.9, 1e-6, HOLD, stiffness=0.13, damping=0.1)
+# the physical effects and those that imitate them (a servo's dead time and lag before the
+# play, a lag after it): the whole catalog takes a minute a record, these a few seconds
+RIVALS = tuple(
+    effect
+    for effect in CATALOG
+    if effect.name in (*PHYSICS_NAMES, "time_delay", "input_lag", "linear_dynamics")
+)
+TORQUE = LoadPhysics("load_torque", side=-1, region=(-0.5, 0.5), fall=0.004)
+
+
+# --------------------------------------------------------------------------- the recursions
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    x0=st.floats(-2.0, 2.0),
+    window=st.integers(1, 20),
+    friction=st.floats(0.0, 1.0),
+)
+def test_no_retention_is_the_play_operator(
+    seed: int, x0: float, window: int, friction: float
+) -> None:
+    rng = np.random.default_rng(seed)
+    centre = np.cumsum(rng.normal(0.0, 0.1, 200))
+    width = rng.uniform(0.0, 0.5, 200)
+    lo, hi = centre - width, centre + width
+    coast = LoadPhysics("coasting_load", 0.0, friction, window).simulate(lo, hi, x0)
+    np.testing.assert_array_equal(coast, play_operator_loop(lo, hi, x0))
+    # a load torque over a region the load never reaches changes nothing either
+    far = LoadPhysics("load_torque", region=(100.0, 101.0), fall=0.1).simulate(lo, hi, x0)
+    np.testing.assert_array_equal(far, play_operator_loop(lo, hi, x0))
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    retention=st.floats(0.0, 1.0),
+    friction=st.floats(0.0, 0.01),
+    side=st.sampled_from([-1, 1]),
+)
+def test_the_load_stays_between_the_flanks(
+    seed: int, retention: float, friction: float, side: int
+) -> None:
+    # a rigid contact (coasting, a torque) never lets the load leave the play's interval
+    rng = np.random.default_rng(seed)
+    centre = np.cumsum(rng.normal(0.0, 0.05, 300))
+    width = rng.uniform(0.01, 0.3, 300)
+    lo, hi = centre - width, centre + width
+    for physics in (
+        LoadPhysics("coasting_load", retention, friction, 5),
+        LoadPhysics("load_torque", side=side, region=(-0.5, 0.5), fall=0.05),
+    ):
+        x = physics.simulate(lo, hi, float(centre[0]))
+        assert np.all(x >= lo - 1e-12) and np.all(x <= hi + 1e-12)
+
+
+def test_a_coasting_load_keeps_moving_and_a_torque_holds_its_flank() -> None:
+    lo = np.concatenate([np.linspace(0.0, 1.0, 50), np.full(100, 1.0)])
+    hi = lo + 0.2
+    coast = LoadPhysics("coasting_load", retention=1.0, window=1).simulate(lo, hi, 0.0)
+    assert coast[-1] == pytest.approx(1.2)  # coasted across the play to the far flank
+    down = lo[::-1].copy()
+    held = LoadPhysics("load_torque", side=-1, region=(-1.0, 2.0), fall=1.0)
+    x = held.simulate(down, down + 0.2, 1.2)
+    np.testing.assert_allclose(x, down)  # rides the lower flank down (the play never shows)
+
+
+def test_load_physics_is_validated() -> None:
+    with pytest.raises(GenBacklashError, match="unknown load physics"):
+        LoadPhysics("gravity")  # type: ignore[arg-type]
+    with pytest.raises(GenBacklashError, match="retention"):
+        LoadPhysics("coasting_load", retention=1.5)
+    with pytest.raises(GenBacklashError, match="stiffness"):
+        LoadPhysics("compliant_coupling", stiffness=2.5)
+    with pytest.raises(GenBacklashError, match="region"):
+        LoadPhysics("load_torque", region=(1.0, 0.0))
+    model = AugmentedModel(BACKLASH, physics=COMPLIANT)
+    assert model.effects == ("compliant_coupling",)
+    assert AugmentedModel.from_dict(model.to_dict()) == model
+
+
+def test_the_command_window_is_its_hold_length() -> None:
+    assert command_window(moves(0)) == HOLD
+    assert command_window(np.arange(100.0)) == 1
+
+
+# --------------------------------------------------------------------------- known answers
+
+
+@pytest.mark.parametrize(
+    ("physics", "seed"), [(COASTING, 1), (COMPLIANT, 6), (TORQUE, 3)], ids=PHYSICS_NAMES
+)
+def test_each_physical_effect_is_named_first_on_a_record_that_shows_it(
+    physics: LoadPhysics, seed: int
+) -> None:
+    u, y = record(physics, seed)
+    result = diagnose(u, y, catalog=RIVALS)
+    assert result.steps, result.reason
+    assert result.steps[0].effect == physics.kind, [s.evidence for s in result.steps]
+    first = result.steps[0]
+    assert first.gap_after < 0.6 * first.gap_before
+    assert "%" in first.evidence  # the evidence carries its numbers
+
+
+@pytest.mark.parametrize("seed", [4, 5])
+def test_clean_backlash_names_no_physical_effect(seed: int) -> None:
+    u, y = record(None, seed)
+    result = diagnose(u, y, catalog=RIVALS)
+    assert not set(result.effects) & set(PHYSICS_NAMES), [s.evidence for s in result.steps]
+    detections = {d.effect: d for d in result.rounds[0].detections}
+    if not detections:  # the ideal backlash already sits at the floor: nothing was asked
+        assert "times the floor" in result.reason
+    for name in PHYSICS_NAMES:
+        assert name not in detections or not detections[name].fires, detections[name].evidence
+
+
+def test_the_catalog_holds_the_physical_names() -> None:
+    names = [effect.name for effect in CATALOG]
+    assert names[-3:] == list(PHYSICS_NAMES)
+
+
+def test_a_misfit_no_effect_explains_is_said_with_its_number() -> None:
+    # the coasting record with a catalog that lacks its effect: nothing named, and the output
+    # says how far above the floor the misfit stays instead of naming nothing silently
+    u, y = record(COASTING, 1)
+    result = diagnose(u, y, catalog=())
+    assert result.steps == ()
+    times = result.unexplained
+    assert times is not None and times > 3.0
+    text = result.unexplained_text()
+    assert text.startswith("unexplained: the final misfit") and f"{times:.0f} times" in text
+    assert result.to_dict()["unexplained"]["times_floor"] == pytest.approx(times)
