@@ -696,8 +696,21 @@ def operation_record(
         raise GenBacklashError(f"settings must be OperationSettings, got {cfg!r}")
     rng = np.random.default_rng([int(seed), 12])
     values, phase_starts = operation_commands(rng, cfg)
-    driven = drive(
-        rng,
+    return _driven_record(rng, cfg, seed, values, phase_starts, hidden)
+
+
+def _driven_record(
+    clock: np.random.Generator,
+    cfg: OperationSettings,
+    seed: int,
+    values: FloatArray,
+    phase_starts: tuple[tuple[str, float], ...],
+    hidden: HiddenEffects | None = None,
+) -> OperationRecord:
+    """``cfg.model`` driven by the commands ``values`` (:func:`drive`, drawing the clocks,
+    noise and losses from ``clock``), as an :class:`OperationRecord`."""
+    cmd_t, t, u, x, y, received, c_left, c_right = drive(
+        clock,
         values,
         cfg.model,
         command_rate=cfg.command_rate,
@@ -710,7 +723,6 @@ def operation_record(
         loss=cfg.loss,
         hidden=hidden,
     )
-    cmd_t, t, u, x, y, received, c_left, c_right = driven
     return OperationRecord(
         settings=cfg,
         seed=int(seed),
@@ -757,33 +769,5 @@ def arm_records(
         cfg = dataclasses.replace(base, model=model)
         values, phase_starts = operation_commands(np.random.default_rng([int(seed), 12, j]), cfg)
         clock = np.random.default_rng([int(seed), 13])  # the same clocks and losses for all
-        cmd_t, t, u, x, y, received, c_left, c_right = drive(
-            clock,
-            values,
-            model,
-            command_rate=cfg.command_rate,
-            encoder_rate=cfg.encoder_rate,
-            command_jitter_ns=round(cfg.command_jitter * 1e9),
-            stamp_jitter_ns=cfg.stamp_jitter * 1e9,
-            wear=cfg.wear,
-            noise=cfg.noise,
-            quantum=cfg.quantum,
-            loss=cfg.loss,
-        )
-        out.append(
-            OperationRecord(
-                settings=cfg,
-                seed=int(seed),
-                command_t_ns=cmd_t,
-                command_u=values,
-                sample_t_ns=t,
-                u_all=u,
-                x_all=x,
-                y_all=np.asarray(y, dtype=np.float64),
-                received=received,
-                c_left=c_left,
-                c_right=c_right,
-                phase_starts=phase_starts,
-            )
-        )
+        out.append(_driven_record(clock, cfg, seed, values, phase_starts))
     return out
