@@ -38,6 +38,7 @@ __all__ = [
     "PhysicsTrial",
     "command_window",
     "fit_physics",
+    "model_play",
     "play_starts",
     "trial_tests",
 ]
@@ -227,3 +228,9 @@ def fit_physics(
         if best is None or fit.bic < best.bic:
             best = fit
     return best
+
+
+def model_play(context: Context) -> float:
+    """The model's play ``c_L + c_R`` (kept above zero: the physics scale with it)."""
+    n = context.spec.structure.degree
+    return max(float(context.theta[n] + context.theta[2 * n + 1]), 1e-9)

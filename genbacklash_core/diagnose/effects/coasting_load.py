@@ -24,7 +24,7 @@ from genbacklash_core.diagnose.model import AugmentedModel
 from genbacklash_core.diagnose.physics import LoadPhysics, PhysicsKind
 
 from ._base import Detection
-from ._physics import command_window, fit_physics, trial_tests
+from ._physics import command_window, fit_physics, model_play, trial_tests
 
 __all__ = ["EFFECT", "CoastingLoad"]
 
@@ -69,8 +69,7 @@ class CoastingLoad:
     def augment(self, context: Context, detection: Detection) -> ModelFit | None:
         """Retention, Coulomb deceleration and the model refitted by least squares."""
         window = int(detection.hints.get("window", 1.0))
-        n = context.spec.structure.degree
-        play = max(float(context.theta[n] + context.theta[2 * n + 1]), 1e-9)
+        play = model_play(context)
 
         def make(z: FloatArray) -> LoadPhysics:
             return LoadPhysics(_KIND, float(z[0]), float(z[1]), window)

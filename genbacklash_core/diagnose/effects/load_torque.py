@@ -25,7 +25,7 @@ from genbacklash_core.diagnose.model import AugmentedModel
 from genbacklash_core.diagnose.physics import LoadPhysics, PhysicsKind
 
 from ._base import Detection
-from ._physics import fit_physics, trial_tests
+from ._physics import fit_physics, model_play, trial_tests
 
 __all__ = ["EFFECT", "LoadTorque"]
 
@@ -50,14 +50,10 @@ class LoadTorque:
         """Only while the model has no load physics and no linear block."""
         return model.physics is None and not model.cascade
 
-    def _play(self, context: Context) -> float:
-        n = context.spec.structure.degree
-        return max(float(context.theta[n] + context.theta[2 * n + 1]), 1e-9)
-
     def detect(self, context: Context) -> Detection:
         """Trial regions and sides; the best one counts (Bonferroni)."""
         load = context.simulation.load
-        fall = 0.3 * self._play(context)
+        fall = 0.3 * model_play(context)
         trials = [
             LoadPhysics(
                 _KIND,
@@ -94,7 +90,7 @@ class LoadTorque:
         squares; the BIC picks the side."""
         load = context.simulation.load
         levels = [float(np.quantile(load, q)) for q in _GRID]
-        play = self._play(context)
+        play = model_play(context)
         best: ModelFit | None = None
         for side in (-1, 1):
 
