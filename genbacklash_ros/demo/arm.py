@@ -23,11 +23,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from genbacklash_core import GenBacklashError
 from genbacklash_core.scenarios import OperationSettings, operation_commands
+
+if TYPE_CHECKING:  # the engine needs mujoco: imported when an arm is made
+    from genbacklash_ros.physics.engine import Drivetrain, Trajectory
 
 __all__ = ["ArmSettings", "JointErrors", "SimulatedArm"]
 
@@ -99,10 +103,10 @@ class JointErrors:
 @dataclass
 class _Joint:
     desired: np.ndarray
-    arm: object
-    twin: object
-    arm_part: object = None  # the last stretch stepped (a Trajectory)
-    twin_part: object = None
+    arm: Drivetrain
+    twin: Drivetrain
+    arm_part: Trajectory | None = None  # the last stretch stepped
+    twin_part: Trajectory | None = None
     window: JointErrors = field(default_factory=JointErrors)
     late: JointErrors = field(default_factory=JointErrors)  # the second half of the motion
 
@@ -170,8 +174,8 @@ class SimulatedArm:
         than its few steps."""
         held = self.desired(self.twin_tick)
         for j, obeyed, twin_u in zip(self._joints, self.obeyed, held, strict=True):
-            j.arm_part = j.arm.hold(obeyed, until_ns)  # type: ignore[attr-defined]
-            j.twin_part = j.twin.hold(twin_u, until_ns)  # type: ignore[attr-defined]
+            j.arm_part = j.arm.hold(obeyed, until_ns)
+            j.twin_part = j.twin.hold(twin_u, until_ns)
 
     def loads_at(self, t_ns: int, tick: int) -> tuple[float, ...]:
         """The arm's load positions at ``t_ns`` (inside the last stretch), and both loads'
@@ -181,8 +185,9 @@ class SimulatedArm:
         at = np.array([t_ns], dtype=np.int64)
         loads = []
         for j, want in zip(self._joints, desired, strict=True):
-            load = float(j.arm_part.load_at(at)[0])  # type: ignore[attr-defined]
-            twin = float(j.twin_part.load_at(at)[0])  # type: ignore[attr-defined]
+            assert j.arm_part is not None and j.twin_part is not None  # stepped at __init__
+            load = float(j.arm_part.load_at(at)[0])
+            twin = float(j.twin_part.load_at(at)[0])
             j.window.add(load - want, twin - want)
             if late:
                 j.late.add(load - want, twin - want)

@@ -32,7 +32,7 @@ import tempfile
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -46,19 +46,20 @@ ANSWER_NS = 1_000_000  # the node's answer to a command is taken this long after
 MATCH_TIMEOUT_S = 60.0  # the node's start (imports, DDS discovery) before the arm gives up
 
 
-@dataclass
+@dataclass(frozen=True)
 class LiveResult:
-    """What the live demo saw, per joint (for the closing table and tests)."""
+    """What the live demo saw, per joint in ``joints`` order (for the closing table and
+    tests)."""
 
     joints: tuple[str, ...]
     geometric_play: float
-    play: list[float] = field(default_factory=list)
-    compensated_rms: list[float] = field(default_factory=list)
-    uncompensated_rms: list[float] = field(default_factory=list)
-    commands_sent: int = 0
-    commands_answered: int = 0
-    behind_s: float = 0.0
-    compensation: list[str] = field(default_factory=list)
+    play: tuple[float, ...]
+    compensated_rms: tuple[float, ...]
+    uncompensated_rms: tuple[float, ...]
+    compensation: tuple[str, ...]
+    commands_sent: int
+    commands_answered: int
+    behind_s: float
 
 
 def node_params_yaml(joints: tuple[str, ...]) -> str:
@@ -309,14 +310,19 @@ def _run_arm(
                 _line(arm, inbox, when, log)
                 next_line += 1_000_000_000
     time.sleep(0.3)  # the last answers and estimates
-    result = LiveResult(joints, arm.play, commands_sent=sent, behind_s=behind / 1e9)
+    half = arm.second_half()
     with inbox.lock:
-        result.commands_answered = inbox.answered
-        result.play = [inbox.play[j] for j in joints]
-        result.compensation = [inbox.state[j] for j in joints]
-    for obeyed_rms, twin_rms in arm.second_half():
-        result.compensated_rms.append(obeyed_rms)
-        result.uncompensated_rms.append(twin_rms)
+        result = LiveResult(
+            joints,
+            arm.play,
+            play=tuple(inbox.play[j] for j in joints),
+            compensated_rms=tuple(obeyed for obeyed, _ in half),
+            uncompensated_rms=tuple(twin for _, twin in half),
+            compensation=tuple(inbox.state[j] for j in joints),
+            commands_sent=sent,
+            commands_answered=inbox.answered,
+            behind_s=behind / 1e9,
+        )
     _table(result, log)
     return result
 
