@@ -286,7 +286,10 @@ def _positive_float(text: str) -> float:
 
 
 def _joint_count(text: str) -> int:
-    value = int(text)
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a whole number, got {text!r}") from None
     if not 1 <= value <= 12:
         raise argparse.ArgumentTypeError(f"must lie in 1..12, got {value}")
     return value
