@@ -23,6 +23,7 @@ Needs rclpy (``pip install 'genbacklash[ros]'``) and mujoco (``[physics]``).
 
 from __future__ import annotations
 
+import heapq
 import math
 import shutil
 import signal
@@ -42,7 +43,8 @@ from genbacklash_ros.demo.arm import ArmSettings, SimulatedArm
 __all__ = ["LiveResult", "main_live", "node_params_yaml", "run_live"]
 
 NODE_NAME = "backlash_identifier"
-ANSWER_NS = 1_000_000  # the node's answer to a command is taken this long after it (ns)
+ANSWER_NS = 1_000_000  # the arm first looks for the answer to a command this long after it (ns)
+POLL_NS = 1_000_000  # then, until it comes, every POLL_NS (a drive's 1 kHz control loop)
 MATCH_TIMEOUT_S = 60.0  # the node's start (imports, DDS discovery) before the arm gives up
 
 
@@ -69,6 +71,8 @@ def node_params_yaml(joints: tuple[str, ...]) -> str:
         "  ros__parameters:",
         "    command_type: float64_multi_array",
         "    encoder_type: joint_state",
+        # the arm obeys /compensated_command: the gear's input is the command the node sent
+        "    compensation_in_loop: true",
     ]
     if len(joints) == 1:
         lines += [f"    joint: {joints[0]}", "    command_index: 0"]
@@ -266,18 +270,21 @@ def _run_arm(
     sent, k = 0, 0
     next_line = 1_000_000_000
     end_ns = arm.commands * cmd_ns
-    # Each command period: publish command c at c * cmd_ns; at c * cmd_ns + ANSWER_NS take
-    # the latest answer and step the physics one period ahead on it; publish the readings
-    # of that stretch as real time reaches them.
+    # Each command period: publish command c at c * cmd_ns; from c * cmd_ns + ANSWER_NS take
+    # the latest answer, as a drive's control loop takes the latest command each tick: while
+    # the answer to c has not come, step the physics one POLL_NS at a time on what it holds
+    # and look again; once it has, step to the next command's first look. Publish the
+    # readings of each stretch as real time reaches them.
     events: list[tuple[int, int, int]] = []  # (time, kind, index): 0 command, 1 step, 2 reading
     for c in range(arm.commands):
         events.append((c * cmd_ns, 0, c))
         events.append((c * cmd_ns + ANSWER_NS, 1, c))
     events += [(j * enc_ns, 2, j) for j in range(1, end_ns // enc_ns)]
-    events.sort()
+    heapq.heapify(events)
     arm.step_to(ANSWER_NS)  # before the first answer the arm holds where it stands
     tick = 0
-    for when, kind, index in events:
+    while events:
+        when, kind, index = heapq.heappop(events)
         wait = start + when - time.monotonic_ns()
         if wait > 0:
             time.sleep(wait / 1e9)
@@ -293,9 +300,16 @@ def _run_arm(
         elif kind == 1:
             with inbox.lock:
                 answer, inbox.command = inbox.command, None
+            number = -1
             if answer is not None and len(answer) == len(joints) + 1:
-                arm.obey(answer[:-1], int(answer[-1]))
-            arm.step_to(when + cmd_ns)
+                number = int(answer[-1])
+                arm.obey(answer[:-1], number)
+            next_look = (index + 1) * cmd_ns + ANSWER_NS
+            if number < index and when + POLL_NS < next_look:
+                arm.step_to(when + POLL_NS)  # the answer to this command is not here yet
+                heapq.heappush(events, (when + POLL_NS, 1, index))
+            else:
+                arm.step_to(next_look)
         else:
             loads = arm.loads_at(when, tick)
             state = JointState()
