@@ -17,7 +17,7 @@ over its second half (the node learns in the first); the node's final play ``c_L
 against the geometric play; the guard's final trust and error ratio.
 
 Run: ``python bench/physics_loop.py [--seeds 0 1 2] [--bandwidths 20 60 100]
-[--variants ...] [--duration 40] [--guard on|off]``
+[--variants ...] [--duration 40] [--guard on|off] [--delay-ms 0]``
 """
 
 from __future__ import annotations
@@ -27,78 +27,11 @@ import time
 
 import numpy as np
 
-from genbacklash_core import Estimate, GuardVerdict, compensate
-from genbacklash_core.scenarios import OperationSettings, operation_commands, timeline
-from genbacklash_ros.node.parameters import NodeParameters
-from genbacklash_ros.node.pipeline import BacklashPipeline
-from genbacklash_ros.physics.engine import Drivetrain, Trajectory
+from genbacklash_core import compensate
+from genbacklash_core.scenarios import OperationSettings
+from genbacklash_ros.physics.loop import Clocks, node_loop, open_loop
 from genbacklash_ros.physics.truth import quasi_static
-from genbacklash_ros.physics.variants import VARIANTS, DrivetrainParameters, variant
-
-
-class Clocks:
-    """The motion and the clocks of one seed (the operation scenario's)."""
-
-    def __init__(self, seed: int, duration: float) -> None:
-        cfg = OperationSettings(duration=duration)
-        rng = np.random.default_rng([int(seed), 12])
-        self.values, _ = operation_commands(rng, cfg)
-        self.cmd_t, self.t = timeline(
-            rng,
-            self.values.size,
-            command_rate=cfg.command_rate,
-            encoder_rate=cfg.encoder_rate,
-            command_jitter_ns=round(cfg.command_jitter * 1e9),
-            stamp_jitter_ns=cfg.stamp_jitter * 1e9,
-        )
-        self.received = np.random.default_rng([int(seed), 31]).random(self.t.size) >= cfg.loss
-        self.quantum = float(cfg.quantum)
-        k = np.maximum(np.searchsorted(self.cmd_t, self.t, side="right") - 1, 0)
-        self.desired = self.values[k]
-
-
-def open_loop(params: DrivetrainParameters, clocks: Clocks, commands: np.ndarray) -> np.ndarray:
-    """The load at every encoder instant for ``commands`` at the command stamps."""
-    sim = Drivetrain(params, position=float(commands[0]))
-    end = int(max(clocks.t[-1], clocks.cmd_t[-1])) + sim.step_ns
-    return sim.follow(clocks.cmd_t, commands, end).load_at(clocks.t)
-
-
-def node_loop(
-    params: DrivetrainParameters, clocks: Clocks, *, guard: bool
-) -> tuple[np.ndarray, Estimate, GuardVerdict]:
-    """The node's pipeline in the loop: its compensated command drives the servo."""
-    node = NodeParameters(
-        command_type="float64",
-        encoder_type="float64",
-        compensation_in_loop=True,
-        compensation_guard=guard,
-    )
-    pipe = BacklashPipeline(node)
-    values, cmd_t, t = clocks.values, clocks.cmd_t, clocks.t
-    sim = Drivetrain(params, position=float(values[0]))
-    loads = np.empty(t.size)
-    j, prev = 0, None
-    for k in range(values.size):
-        got = pipe.on_command_value(None, float(values[k]), int(cmd_t[k]))
-        sent = float(values[k]) if got is None else got[1]
-        end = int(cmd_t[k + 1]) if k + 1 < values.size else int(t[-1]) + sim.step_ns
-        piece = sim.hold(sent, end)
-        traj = piece if prev is None else Trajectory.concatenate([prev, piece])
-        prev = piece
-        stop = int(np.searchsorted(t, min(end, int(traj.t_ns[-1])), side="right"))
-        if stop <= j:
-            continue
-        x = traj.load_at(t[j:stop])
-        loads[j:stop] = x
-        q = clocks.quantum
-        for i in range(j, stop):
-            if clocks.received[i]:
-                y = float(np.round(x[i - j] / q) * q) if q else float(x[i - j])
-                pipe.on_encoder_value(None, y, int(t[i]))
-        j = stop
-    pipe.finish(refit=False)
-    return loads, pipe.estimate, pipe.guard
+from genbacklash_ros.physics.variants import VARIANTS, variant
 
 
 def _rms(e: np.ndarray) -> float:
@@ -112,12 +45,19 @@ def main() -> None:
     parser.add_argument("--variants", nargs="+", default=list(VARIANTS))
     parser.add_argument("--duration", type=float, default=40.0)
     parser.add_argument("--guard", choices=("on", "off"), default="on")
+    parser.add_argument(
+        "--delay-ms",
+        type=float,
+        default=0.0,
+        help="the servo takes the node's answer this long after the command (default 0)",
+    )
     args = parser.parse_args()
     print(
         "| variant | bandwidth (Hz) | seed | rms none (mrad) | cut true (%) | cut node (%) "
-        "| 2nd half: cut true / node (%) | node play / geometric | guard (trust, ratio) | s |"
+        "| 2nd half: cut true / node (%) | node play / geometric | guard (trust, ratio) "
+        "| measured (state, ratio) | s |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for name in args.variants:
         for bw in args.bandwidths:
             params = variant(name, bandwidth=bw)
@@ -127,12 +67,18 @@ def main() -> None:
                 start = time.perf_counter()
                 clocks = Clocks(seed, args.duration)
                 half = clocks.t >= clocks.t[-1] // 2
+                delay = round(args.delay_ms * 1e6)
+                true_commands = compensate(truth.model, clocks.values)
                 errors = {
-                    "none": open_loop(params, clocks, clocks.values) - clocks.desired,
-                    "true": open_loop(params, clocks, compensate(truth.model, clocks.values))
-                    - clocks.desired,
+                    "none": open_loop(params, clocks, clocks.values, delay) - clocks.desired,
+                    "true": open_loop(params, clocks, true_commands, delay) - clocks.desired,
                 }
-                loads, est, verdict = node_loop(params, clocks, guard=args.guard == "on")
+                loads, est, verdict, measured = node_loop(
+                    params,
+                    clocks,
+                    guard=args.guard == "on",
+                    delay_ns=delay,
+                )
                 errors["node"] = loads - clocks.desired
                 whole = {k: 100 * (1 - _rms(e) / _rms(errors["none"])) for k, e in errors.items()}
                 late = {
@@ -147,6 +93,7 @@ def main() -> None:
                     f"| {whole['true']:.1f} | {whole['node']:.1f} "
                     f"| {late['true']:.1f} / {late['node']:.1f} | {play:.3f} "
                     f"| {verdict.trust:.2f}, {verdict.ratio:.2f} "
+                    f"| {measured.state}, {measured.ratio:.2f} "
                     f"| {time.perf_counter() - start:.1f} |",
                     flush=True,
                 )

@@ -30,6 +30,7 @@ from genbacklash_core import (
     GuardVerdict,
     InverseBacklash,
 )
+from genbacklash_core.measured import TrackingVerdict
 
 __all__ = ["CompensateStage", "CompensationStatus"]
 
@@ -78,7 +79,11 @@ class CompensateStage:
         # the compensation guard's trust in [0, 1] (genbacklash_core.guard), a factor on the
         # estimate's confidence: compensation fades out where it does not help
         self.trust = 1.0
+        # the measured tracking's share in [0, 1] (genbacklash_core.measured), a factor on
+        # the weight itself: a trial at half weight, off where compensating tracked worse
+        self.share = 1.0
         self.last_sent: float | None = None
+        self.last_weight = 0.0  # the share of the inverse in the last command sent
         self.problems: list[str] = []  # why a model was not taken (the caller reports them)
 
     @property
@@ -90,13 +95,31 @@ class CompensateStage:
         """How much of the inverse is applied at ``est``'s confidence (0 without a model)."""
         if not self._on or est.model is None:
             return 0.0
-        return self._options.weight(est.confidence * self.trust)
+        return self._options.weight(self._confidence(est.confidence))
+
+    def _confidence(self, confidence: float) -> float:
+        """The confidence the compensator is given for an estimate's ``confidence``: scaled
+        by the guard's trust, then moved so that the weight it gives is scaled by
+        :attr:`share`."""
+        opts = self._options
+        c = confidence * self.trust
+        if self.share >= 1.0:
+            return c
+        w = opts.weight(c) * max(self.share, 0.0)
+        if w <= 0.0:
+            return 0.0
+        return opts.gate_low + w * (opts.gate_high - opts.gate_low)
 
     def status(
-        self, est: Estimate, faults: tuple[str, ...], guard: GuardVerdict
+        self,
+        est: Estimate,
+        faults: tuple[str, ...],
+        guard: GuardVerdict,
+        measured: TrackingVerdict | None = None,
     ) -> CompensationStatus:
         """How much the next command is compensated with ``est`` while ``faults`` (names)
-        pass commands through, ``guard`` being the guard's verdict, and why."""
+        pass commands through, ``guard`` being the guard's verdict and ``measured`` the
+        measured tracking's (:mod:`genbacklash_core.measured`), and why."""
         if not self._on:
             return CompensationStatus(0.0, "off", "compensation switched off (compensate: false)")
         if est.model is None:
@@ -114,6 +137,8 @@ class CompensateStage:
             )
         if guard.state != "judging" and (guard.trust < 1.0 or state == "on"):
             parts.append(guard.reason)
+        if measured is not None and measured.state in ("faded", "off", "probing"):
+            parts.append(measured.reason)
         return CompensationStatus(weight, state, "; ".join(parts) or f"compensation {state}")
 
     def command(
@@ -133,7 +158,9 @@ class CompensateStage:
             return []
         if not self._on or comp is None or est is not self._comp_estimate:
             return [self.command(v, est, passing=_no_fault, last_y=last_y) for v in values]
-        sent = comp.steps(values, est.confidence * self.trust)
+        confidence = self._confidence(est.confidence)
+        sent = comp.steps(values, confidence)
+        self.last_weight = self._options.weight(confidence)
         for k, command in enumerate(sent):
             if not math.isfinite(command):  # as _command: within the limits instead
                 if k:
@@ -145,6 +172,7 @@ class CompensateStage:
     def _command(
         self, value: float, est: Estimate, passing: Callable[[], bool], last_y: float | None
     ) -> float:
+        self.last_weight = 0.0
         if not self._on:
             return value
         if est is not self._comp_estimate:
@@ -152,9 +180,12 @@ class CompensateStage:
         comp = self._comp
         if comp is None:
             return self._limit(value)
-        confidence = 0.0 if passing() else est.confidence * self.trust
+        confidence = 0.0 if passing() else self._confidence(est.confidence)
         sent = comp.step(value, confidence)
-        return sent if math.isfinite(sent) else self._limit(value)
+        if not math.isfinite(sent):
+            return self._limit(value)
+        self.last_weight = self._options.weight(confidence)
+        return sent
 
     def ready(self, est: Estimate) -> bool:
         """True when :meth:`command` with ``est`` needs no new model (the batch form runs

@@ -41,6 +41,7 @@ from genbacklash_core import (
     WindowedSettings,
 )
 from genbacklash_core.guard import GuardSettings
+from genbacklash_core.measured import TrackingJudgeSettings
 from genbacklash_ros.node.messages import COMMAND_TYPES, ENCODER_TYPES, CommandType, EncoderType
 
 __all__ = [
@@ -257,17 +258,19 @@ PARAMETER_SPECS: tuple[ParameterSpec, ...] = (
         "compensation_in_loop",
         "bool",
         False,
-        "The compensated command drives the drivetrain, so identify from it; false (and in "
-        "replay): identify from the raw command.",
+        "The compensated command drives the drivetrain, so identify from it, and judge "
+        "compensation by the tracking it measures; false (and in replay): identify from the "
+        "raw command (a node whose command does drive the drivetrain says so in /diagnostics).",
         restarts=True,
     ),
     ParameterSpec(
         "compensation_guard",
         "bool",
         True,
-        "Judge from the data whether compensation helps (the model's error on the commands "
-        "against the error with no model) and fade it out where it does not; false: only "
-        "report the judgement.",
+        "Judge from the data whether compensation helps and fade it out where it does not: "
+        "the model's error on the commands against the error with no model, and, with "
+        "compensation_in_loop, the tracking error measured with compensation against without "
+        "it (a trial at half weight first); false: only report the judgements.",
     ),
     ParameterSpec(
         "u_min", "double", -math.inf, "Lower limit of the compensated command.", unit="command"
@@ -517,6 +520,12 @@ class NodeParameters:
     def guard_settings(self) -> GuardSettings:
         """How the compensation guard judges (:class:`~genbacklash_core.guard.GuardSettings`)."""
         return GuardSettings(enabled=self.compensation_guard)
+
+    def judge_settings(self) -> TrackingJudgeSettings:
+        """How the measured tracking is judged
+        (:class:`~genbacklash_core.measured.TrackingJudgeSettings`): its verdict counts only
+        while the compensated command drives the drivetrain and the guard is on."""
+        return TrackingJudgeSettings(in_loop=self.compensation_in_loop and self.compensation_guard)
 
     @property
     def settle_ns(self) -> int:

@@ -133,8 +133,9 @@ from typing import Literal, TypeAlias
 
 import numpy as np
 
-from genbacklash_core import Estimate, GenBacklashError, OnlineIdentifier
+from genbacklash_core import Cascade, Estimate, GenBacklashError, OnlineIdentifier
 from genbacklash_core.guard import CompensationGuard, GuardVerdict
+from genbacklash_core.measured import TrackingVerdict
 from genbacklash_ros.node.align import Aligner
 from genbacklash_ros.node.batch import BlockView
 from genbacklash_ros.node.checkpoint import Checkpoint, CheckpointError, save_checkpoint, warm_start
@@ -187,6 +188,7 @@ from genbacklash_ros.node.parameters import NodeParameters
 from genbacklash_ros.node.publish import DIAGNOSTICS_PERIOD_NS, Schedule
 from genbacklash_ros.node.screen import Screen
 from genbacklash_ros.node.silence import SilentStreams
+from genbacklash_ros.node.tracking_stage import TrackingStage
 
 __all__ = [
     "COMMAND_WAIT_NS",
@@ -443,6 +445,7 @@ class BacklashPipeline:
         self._screen = Screen(bridge=params.model == "backlash")
         self._comp = CompensateStage(params.compensator_options(), compensate=params.compensate)
         self._guard = CompensationGuard(params.guard_settings())
+        self._tracking = TrackingStage(params.judge_settings())
         self._feed_at_count = self._batch
         self._clock.restart()
 
@@ -465,7 +468,9 @@ class BacklashPipeline:
             )
             return
         self._comp.reconfigure(params.compensator_options(), compensate=params.compensate)
-        self._comp.trust = self._guard.configure(params.guard_settings()).trust
+        self._guard.configure(params.guard_settings())
+        self._tracking.judge.configure(params.judge_settings())
+        self._set_trust()
         self._problems(self._comp.problems)
         self._clock.configure(
             publish_ns=params.publish_period_ns, checkpoint_ns=self._checkpoint_period()
@@ -499,6 +504,11 @@ class BacklashPipeline:
     def guard(self) -> GuardVerdict:
         """The compensation guard's latest verdict (:mod:`genbacklash_core.guard`)."""
         return self._guard.verdict
+
+    @property
+    def measured(self) -> TrackingVerdict:
+        """The measured tracking's latest verdict (:mod:`genbacklash_core.measured`)."""
+        return self._tracking.verdict
 
     @property
     def using_checkpoint(self) -> bool:
@@ -574,6 +584,7 @@ class BacklashPipeline:
         )
         if self._comp.problems:
             self._problems(self._comp.problems)
+        self._tracking.command(value, self._comp.last_weight)
         align.add_command(stamp, sent if self._in_loop else value)
         led = self._ledger
         led.commands += 1
@@ -877,6 +888,8 @@ class BacklashPipeline:
         self._silence.arrived_many(
             _seen(view, i, end, c0, c1, e0, e1, True), _seen(view, i, end, c0, c1, e0, e1, False)
         )
+        stamps: list[int] = []
+        values: list[float] = []
         if c1 > c0:
             est = self._use.current
             comp = self._comp
@@ -912,6 +925,14 @@ class BacklashPipeline:
             health.accept_readings(last, gaps, view.enc_rx[final], still)
             align.add_readings(t[e0:e1], y[e0:e1], gaps)
             led.encoders += e1 - e0
+        self._tracking.stretch(
+            list(view.cmd_pos[c0:c1]) if values else [],
+            values,
+            self._comp.last_weight,
+            list(view.enc_pos[e0:e1]),
+            view.enc_t[e0:e1],
+            view.enc_y[e0:e1],
+        )
         outputs: list[Output] = []
         last = end - 1
         for p in marks:  # before the clock moves past them (in order)
@@ -973,6 +994,7 @@ class BacklashPipeline:
                 self._drop("encoder_stuck", "encoder reading unchanged", pending)
         self._events(check.events)
         align.add_reading(stamp, value, stuck=check.stuck)
+        self._tracking.reading(stamp, value)
         self._ledger.encoders += 1
         outputs: list[Output] = []
         if align.pending >= self._feed_at_count:
@@ -1051,11 +1073,19 @@ class BacklashPipeline:
             level = max(level, DiagnosticStatus.WARN)
             parts.extend(period.problems)
         guard = self._guard.verdict
-        status = self._comp.status(est, health.active if passing else (), guard)
+        measured = self._tracking.verdict
+        status = self._comp.status(est, health.active if passing else (), guard, measured)
         if est.available and self._params.compensate and guard.state in ("faded", "off"):
             parts.append(guard.reason)
             if guard.state == "off":
                 level = max(level, DiagnosticStatus.WARN)
+        if est.available and self._params.compensate and measured.state in ("faded", "off"):
+            parts.append(measured.reason)
+            if measured.state == "off":
+                level = max(level, DiagnosticStatus.WARN)
+        if measured.state == "watching" and "compensation_in_loop true" in measured.reason:
+            parts.append(measured.reason)  # the compensated command drives the drivetrain
+            level = max(level, DiagnosticStatus.WARN)
         if stale:
             level = DiagnosticStatus.STALE
             parts.insert(0, "no data")
@@ -1071,6 +1101,11 @@ class BacklashPipeline:
             ("compensation_guard", guard.state),
             ("compensation_trust", format(guard.trust, ".3g")),
             ("guard_error_ratio", format(guard.ratio, ".3g") if guard.ratio < math.inf else "none"),
+            ("measured_tracking", measured.state),
+            (
+                "measured_tracking_ratio",
+                format(measured.ratio, ".3g") if math.isfinite(measured.ratio) else "none",
+            ),
             ("faults", ",".join(health.active) or "none"),
             ("commands", str(led.commands)),
             ("encoder_messages", str(led.encoders)),
@@ -1128,10 +1163,9 @@ class BacklashPipeline:
         if screened.size == 0:
             return
         # does compensating with the model in use help on these samples? (fades it if not)
-        verdict = self._guard.update(
-            screened.us, screened.ys, screened.breaks, self._use.current.model
-        )
-        self._comp.trust = verdict.trust
+        self._guard.update(screened.us, screened.ys, screened.breaks, self._use.current.model)
+        self._tracking.flush()  # and the tracking measured on every reading since
+        self._set_trust()
         assert self._worker is not None
         self._worker.submit(screened.us, screened.ys, screened.breaks)
         self._take_results()
@@ -1155,10 +1189,21 @@ class BacklashPipeline:
                 self._drop("identifier_behind", result.reason, result.samples)
         if adopted is not None:
             # the new model judged at once on the samples the guard remembers
-            self._comp.trust = self._guard.adopt(self._use.current.model).trust
+            model = self._use.current.model
+            self._guard.adopt(model)
+            if model is not None:
+                backlash = model.backlash if isinstance(model, Cascade) else model
+                self._tracking.judge.new_model(backlash.c_left + backlash.c_right)
+            self._set_trust()
             self._comp.adopt(self._use.current, self._align.last_y)
             if self._comp.problems:
                 self._problems(self._comp.problems)
+
+    def _set_trust(self) -> None:
+        """The compensator's trust (the guard's judgement of the model) and share (the
+        judge's of the tracking measured)."""
+        self._comp.trust = self._guard.verdict.trust
+        self._comp.share = self._tracking.verdict.trust
 
     def _advance(self, stamp: int, outputs: list[Output], *, heavy: bool) -> None:
         """Move the data clock to ``stamp``; append the periodic outputs now due.

@@ -23,6 +23,7 @@ from genbacklash_core import (
     paper_example,
     simulate_backlash,
 )
+from genbacklash_core.measured import TrackingVerdict
 from genbacklash_ros.node.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
 from genbacklash_ros.node.messages import (
     DiagnosticArray,
@@ -193,10 +194,13 @@ def test_replay_is_deterministic(example1: list[Event]) -> None:
 # --------------------------------------------------------------------------- compensation
 
 
-def closed_loop(in_loop: bool, seed: int = 0, seconds: float = 8.0) -> tuple[float, float]:
+def closed_loop(
+    in_loop: bool, seed: int = 0, seconds: float = 8.0
+) -> tuple[float, float, TrackingVerdict]:
     """The drivetrain driven by the compensated command; the identifier in the loop.
 
-    Returns the largest parameter error and the RMS tracking error of the last 400 commands.
+    Returns the largest parameter error, the RMS tracking error of the last 400 commands and
+    the measured tracking's verdict.
     """
     rng = np.random.default_rng(seed)
     params = NodeParameters(
@@ -222,18 +226,21 @@ def closed_loop(in_loop: bool, seed: int = 0, seconds: float = 8.0) -> tuple[flo
             pipe.on_encoder(Float64(x + float(rng.normal(0.0, 0.02))), t)
     pipe.finish()
     error = float(np.max(np.abs(pipe.estimate.parameters - TRUTH.parameters())))
-    return error, float(np.sqrt(np.mean(np.square(errors[-400:]))))
+    return error, float(np.sqrt(np.mean(np.square(errors[-400:])))), pipe.measured
 
 
 def test_in_loop_identification_follows_the_compensated_command() -> None:
-    error, tracking = closed_loop(in_loop=True)
+    error, tracking, measured = closed_loop(in_loop=True)
     assert error < 0.05 and tracking < 0.05
+    assert measured.state == "on" and measured.ratio < 0.3, measured.reason
 
 
 def test_raw_command_identification_fails_when_the_compensator_drives_the_plant() -> None:
     # the documented reason for compensation_in_loop: the raw command is not the plant input
-    error, tracking = closed_loop(in_loop=False)
+    error, tracking, measured = closed_loop(in_loop=False)
     assert error > 0.1 and tracking > 0.2
+    # not in the loop, the measured tracking only watches (its trust stays 1)
+    assert measured.state == "watching" and measured.trust == 1.0, measured.reason
 
 
 def converged_checkpoint(path: Path, model: GeneralBacklash = TRUTH) -> Path:

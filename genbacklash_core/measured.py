@@ -1,0 +1,393 @@
+"""Does the compensation help? Measured on the machine: tracking with it against without it.
+
+The :mod:`~genbacklash_core.guard` judges the *model*: where the play operator describes the
+settled samples it feeds, compensating with it should help. What it cannot see is what the
+play operator leaves out and a closed loop adds: the servo's lag behind each compensated jump,
+a transport delay before the drive takes the command, a load that overshoots when the play
+closes fast. Those make themselves known in one number only, the tracking error the machine
+actually has: the load ``y`` against the desired position ``r`` (the command the node was
+given) at every encoder reading, settled or not.
+
+While the compensated command drives the drivetrain (the node's ``compensation_in_loop``),
+both are measured, each while it is in force:
+
+* ``e_on = y - r`` at the readings taken while a compensated command was in force (weight
+  above 0), and
+* ``e_off = y - r`` at the readings taken while the command went out as it came (weight 0:
+  before the first estimate, while a fault passes commands through, while the guard or this
+  judge holds compensation off, and during a probe).
+
+Their root-mean-square ratio ``q = rms(e_on) / rms(e_off)`` (each exponentially weighted over
+``window`` seconds of its *own* time, so the baseline does not fade while compensation runs)
+is what compensating keeps of the tracking error, measured, including every effect no model
+has. ``q`` below ``ratio_full``: trust 1; above ``ratio_off`` (compensation tracks worse than
+nothing): trust 0; linear between. Each needs ``min_time`` seconds of its own readings first
+(before that the judge says ``"judging"``; compensation's first ``min_time`` seconds are a
+trial at ``trial`` of its weight). Where compensating clearly helps (``q`` under
+``CLEAR_HELP`` times ``ratio_full``) a sixth of that baseline does; where it clearly harms
+(``q`` above ``STRONG_HARM`` times ``ratio_off``) a third of the compensated time does.
+
+Where no uncompensated baseline exists (compensation on from the first command, say from a
+checkpoint), or once every ``probe_every`` seconds of compensating, the judge asks for a
+*probe*: ``min_time`` seconds with compensation off, to measure the baseline. After a verdict
+of harm compensation stays off until a new model is adopted or ``retry`` seconds have passed;
+then it is tried (and measured) again.
+
+Without ``compensation_in_loop`` (replay; a node that only watches) compensation changes
+nothing the readings show, and the judge only watches: trust 1 always, and when tracking is
+clearly better while compensating (``q < ratio_wiring``) it says that the compensated command
+seems to drive the drivetrain after all.
+
+Examples
+--------
+>>> judge = TrackingJudge(TrackingJudgeSettings(min_time=1.0))
+>>> t = [k * 1_000_000 for k in range(4000)]  # 4 s at 1 kHz
+>>> verdict = judge.readings(t[:2000], [0.05] * 2000, [0.0] * 2000, [0.0] * 2000)
+>>> verdict.state  # only the baseline so far
+'judging'
+>>> verdict = judge.readings(t[2000:], [0.08] * 2000, [0.0] * 2000, [1.0] * 2000)
+>>> verdict.state, verdict.trust, round(verdict.ratio, 2)
+('off', 0.0, 1.6)
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ._typing import ArrayLike, FloatArray, IntArray
+from .errors import GenBacklashError
+
+__all__ = [
+    "CLEAR_HELP",
+    "RETRY_CHANGE",
+    "SHORT_BASELINE",
+    "STRONG_HARM",
+    "TrackingJudge",
+    "TrackingJudgeSettings",
+    "TrackingVerdict",
+]
+
+RETRY_CHANGE = 0.1
+"""A new model whose play differs from the one judged harmful by more than this share is
+tried again at once."""
+
+SHORT_BASELINE = 1.0 / 6.0
+"""The share of ``min_time`` of uncompensated readings that does as a baseline where
+compensating clearly helps (a ratio under :data:`CLEAR_HELP` times ``ratio_full``)."""
+
+CLEAR_HELP = 0.7
+"""A ratio under this times ``ratio_full`` clearly helps (at the trial's half weight a
+compensator that removes most of the error measures about 0.5)."""
+
+STRONG_HARM = 1.3
+"""A ratio above this times ``ratio_off`` is judged harmful after a third of ``min_time`` of
+compensating."""
+
+_MAX_STEP_S = 0.1  # a gap in one kind's readings counts at most this much of its time
+
+
+@dataclass(frozen=True)
+class TrackingJudgeSettings:
+    """How the measured tracking is judged (module notes).
+
+    Parameters
+    ----------
+    in_loop : bool
+        The compensated command drives the drivetrain: the judge's trust counts. False: it
+        only watches.
+    window : float
+        Seconds (of each kind's own readings) over which the mean squares are weighted.
+    min_time : float
+        Seconds of readings of each kind before the judge judges (and a probe's length).
+    ratio_full, ratio_off : float
+        The ratio ``q`` at or below which compensation is kept in full, at or above which it
+        is off (``0 < ratio_full < ratio_off``).
+    retry : float
+        Seconds with compensation held off for harm before it is tried again (a new model
+        tries at once).
+    probe_every : float
+        Seconds of compensating between probes of the uncompensated baseline (``inf``: only
+        when there is no baseline at all).
+    trial : float
+        The share of compensation applied during its first ``min_time`` seconds, while it
+        is measured (in ``(0, 1]``): what a harmful compensation costs before the verdict.
+    ratio_wiring : float
+        Watching only: ``q`` below this says the compensated command seems to drive the
+        drivetrain.
+
+    Examples
+    --------
+    >>> try:
+    ...     TrackingJudgeSettings(ratio_full=1.2, ratio_off=1.0)
+    ... except GenBacklashError as err:
+    ...     print(err)
+    ratio_full must be > 0 and below ratio_off, got 1.2 and 1.0
+    """
+
+    in_loop: bool = True
+    window: float = 10.0
+    min_time: float = 3.0
+    ratio_full: float = 0.9
+    ratio_off: float = 1.0
+    retry: float = 120.0
+    probe_every: float = 600.0
+    trial: float = 0.5
+    ratio_wiring: float = 0.7
+
+    def __post_init__(self) -> None:
+        full, off = float(self.ratio_full), float(self.ratio_off)
+        if not (math.isfinite(full) and math.isfinite(off) and 0.0 < full < off):
+            raise GenBacklashError(
+                f"ratio_full must be > 0 and below ratio_off, got {self.ratio_full} and "
+                f"{self.ratio_off}"
+            )
+        for name in ("window", "min_time", "retry"):
+            value = float(getattr(self, name))
+            if not (math.isfinite(value) and value > 0.0):
+                raise GenBacklashError(f"{name} must be a finite number > 0, got {value!r}")
+        if not 0.0 < float(self.trial) <= 1.0:
+            raise GenBacklashError(f"trial must lie in (0, 1], got {self.trial!r}")
+        if not float(self.probe_every) > 0.0:
+            raise GenBacklashError(f"probe_every must be > 0, got {self.probe_every!r}")
+
+
+@dataclass(frozen=True)
+class TrackingVerdict:
+    """The judge's verdict after the readings so far.
+
+    Attributes
+    ----------
+    trust : float
+        In ``[0, 1]``: the factor on the compensation's weight (0 during a probe, ``trial``
+        during compensation's first ``min_time`` seconds).
+    state : str
+        ``"judging"`` (not enough of both kinds yet), ``"on"``, ``"faded"``, ``"off"``
+        (judged harmful), ``"probing"`` (compensation held off to measure the baseline), or
+        ``"watching"`` (not in the loop: trust 1).
+    ratio : float
+        ``q = rms(e_on) / rms(e_off)`` (NaN until both kinds have readings).
+    on_rms, off_rms : float
+        The measured tracking errors, compensated and not (rad).
+    on_time, off_time : float
+        Seconds of readings of each kind judged so far.
+    reason : str
+        One sentence, with the numbers.
+    """
+
+    trust: float
+    state: str
+    ratio: float
+    on_rms: float
+    off_rms: float
+    on_time: float
+    off_time: float
+    reason: str
+
+
+class _Mean:
+    """An exponentially time-weighted mean square over one kind's own readings."""
+
+    __slots__ = ("last", "sum", "time", "weight")
+
+    def __init__(self) -> None:
+        self.sum = 0.0
+        self.weight = 0.0
+        self.time = 0.0  # seconds of this kind's readings seen
+        self.last: int | None = None  # the stamp of the last one (ns)
+
+    def add(self, stamps: IntArray, errors: FloatArray, window: float) -> None:
+        """Readings of this kind in order (stamps in ns), each after the last one added."""
+        steps = np.diff(stamps, prepend=stamps[0] if self.last is None else self.last)
+        steps = np.clip(steps / 1e9, 0.0, _MAX_STEP_S)
+        ages = np.cumsum(steps)
+        total = float(ages[-1])
+        fade = np.exp((ages - total) / window)  # exp(-(age of the newest - age) / window)
+        keep = math.exp(-total / window)
+        self.sum = self.sum * keep + float(fade @ (errors * errors))
+        self.weight = self.weight * keep + float(fade.sum())
+        self.time += total
+        self.last = int(stamps[-1])
+
+    def rms(self) -> float:
+        return math.sqrt(self.sum / self.weight) if self.weight > 0.0 else math.nan
+
+
+class TrackingJudge:
+    """Judges compensation by the tracking error it measures with it and without it.
+
+    Parameters
+    ----------
+    settings : TrackingJudgeSettings
+    """
+
+    def __init__(self, settings: TrackingJudgeSettings | None = None) -> None:
+        self.settings = settings or TrackingJudgeSettings()
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget every reading (identification restarted)."""
+        self._on = _Mean()
+        self._off = _Mean()
+        self._harm_at: float | None = None  # off_time when harm was judged
+        self._play = math.nan  # the play of the model in use
+        self._harm_play: float | None = None  # ... when harm was judged
+        self._probe_from: float | None = None  # off_time when a probe began
+        self._next_probe = self.settings.probe_every  # compensated time of the next probe
+        self._on_before = 0.0  # compensated seconds of the means forgotten
+        self._trial_done = False  # the trial at part weight passed
+        self.verdict = self._judge()
+
+    def configure(self, settings: TrackingJudgeSettings) -> TrackingVerdict:
+        """New settings, the evidence kept; returns the verdict under them."""
+        self.settings = settings
+        self.verdict = self._judge()
+        return self.verdict
+
+    def new_model(self, play: float) -> TrackingVerdict:
+        """A model with the play ``play`` (rad) is in use. After a verdict of harm, a play
+        more than :data:`RETRY_CHANGE` away from the one judged harmful is tried (and
+        measured) again at once; the baseline is kept."""
+        self._play = float(play)
+        harmful = self._harm_play
+        if self._harm_at is not None and (
+            harmful is None
+            or not math.isfinite(harmful)
+            or abs(self._play - harmful) > RETRY_CHANGE * abs(harmful)
+        ):
+            self._harm_at = None
+            self._measure_afresh(trial=True)
+            self.verdict = self._judge()
+        return self.verdict
+
+    def readings(
+        self,
+        stamps: ArrayLike,
+        loads: ArrayLike,
+        desired: ArrayLike,
+        weights: ArrayLike,
+    ) -> TrackingVerdict:
+        """Add encoder readings (stamps in ns, in order) with the desired position and the
+        compensation's weight in force at each; returns the new :attr:`verdict`."""
+        t = np.asarray(stamps, dtype=np.int64)
+        error = np.asarray(loads, dtype=np.float64) - np.asarray(desired, dtype=np.float64)
+        w = np.asarray(weights, dtype=np.float64)
+        if not (t.shape == error.shape == w.shape):
+            raise GenBacklashError("give as many stamps, loads, desired positions and weights")
+        ok = np.isfinite(error)
+        compensated = w > 0.0
+        window = float(self.settings.window)
+        for mean, mask in ((self._on, ok & compensated), (self._off, ok & ~compensated)):
+            if mask.any():
+                mean.add(t[mask], error[mask], window)
+        self.verdict = self._judge()
+        return self.verdict
+
+    def _measure_afresh(self, *, trial: bool) -> None:
+        """Forget the compensated readings (the baseline is kept); ``trial``: start with a
+        trial at part weight again."""
+        self._on_before += self._on.time
+        self._on = _Mean()
+        if trial:
+            self._trial_done = False
+
+    def _verdict(self, trust: float, state: str, why: str) -> TrackingVerdict:
+        on, off = self._on, self._off
+        on_rms, off_rms = on.rms(), off.rms()
+        ratio = on_rms / off_rms if off_rms > 0.0 else math.nan
+        numbers = (
+            f"(measured tracking error {on_rms:.3g} rad rms compensating over {on.time:.0f} s, "
+            f"{off_rms:.3g} rad without over {off.time:.0f} s)"
+        )
+        return TrackingVerdict(
+            trust, state, ratio, on_rms, off_rms, on.time, off.time, f"{why} {numbers}"
+        )
+
+    def _judge(self) -> TrackingVerdict:
+        """The verdict on the readings so far; moves the judge's own state (a probe begun
+        or ended, harm judged, a trial passed)."""
+        s = self.settings
+        on, off = self._on, self._off
+        on_rms, off_rms = on.rms(), off.rms()
+        ratio = on_rms / off_rms if off_rms > 0.0 else math.nan
+        if not s.in_loop:
+            if on.time >= s.min_time and off.time >= s.min_time and ratio < s.ratio_wiring:
+                return self._verdict(
+                    1.0,
+                    "watching",
+                    f"tracking is better while compensating ({100 * ratio:.0f} % of the "
+                    "error without): the compensated command seems to drive the drivetrain; "
+                    "set compensation_in_loop true so the identifier learns from what it sends",
+                )
+            return self._verdict(
+                1.0,
+                "watching",
+                "not in the loop (compensation_in_loop false): measured tracking watched only",
+            )
+        if self._probe_from is not None:
+            if off.time - self._probe_from < s.min_time:
+                return self._verdict(
+                    0.0,
+                    "probing",
+                    f"compensation held off for {s.min_time:g} s to measure the tracking "
+                    "without it",
+                )
+            self._probe_from = None
+            self._next_probe = self._on_before + on.time + s.probe_every
+        if self._harm_at is not None:
+            if off.time - self._harm_at < s.retry:
+                return self._verdict(
+                    0.0,
+                    "off",
+                    f"compensation off: measured, it tracked worse than without "
+                    f"({100 * ratio:.0f} % of the error); tried again with a new model or "
+                    f"after {s.retry:g} s",
+                )
+            self._harm_at = None
+            self._measure_afresh(trial=True)
+            return self._judge()
+        full_base = off.time >= s.min_time
+        some_base = off.time >= SHORT_BASELINE * s.min_time
+        # clear harm (the ratio above STRONG_HARM times ratio_off) is judged on a third of
+        # the compensated time against a full baseline: each second of it costs tracking
+        if on.time >= s.min_time / 3.0 and full_base and ratio >= STRONG_HARM * s.ratio_off:
+            return self._harm()
+        if on.time < s.min_time:
+            if self._trial_done:
+                return self._verdict(1.0, "judging", "measuring compensation at full weight")
+            return self._verdict(
+                s.trial,
+                "judging",
+                f"compensation on trial at {100 * s.trial:.0f} % while its tracking is measured",
+            )
+        if not self._trial_done:
+            if full_base and ratio >= s.ratio_off:
+                return self._harm()
+            # a short baseline will do where compensating helps even at trial weight; a
+            # verdict of harm, or one near the thresholds, waits for a full one
+            if not some_base or (not full_base and ratio >= s.ratio_full):
+                return self._probe()
+            self._trial_done = True
+            self._measure_afresh(trial=False)  # now judge it at full weight
+            return self._judge()
+        if not full_base and ratio >= CLEAR_HELP * s.ratio_full:
+            return self._probe()
+        if self._on_before + on.time >= self._next_probe:
+            return self._probe()
+        fit = min(max((s.ratio_off - ratio) / (s.ratio_off - s.ratio_full), 0.0), 1.0)
+        if fit <= 0.0:
+            return self._harm()
+        kept = f"measured, compensating keeps {100 * ratio:.0f} % of the tracking error"
+        if fit < 1.0:
+            return self._verdict(fit, "faded", f"compensation faded to {100 * fit:.0f} %: {kept}")
+        return self._verdict(1.0, "on", f"compensation on: {kept}")
+
+    def _harm(self) -> TrackingVerdict:
+        self._harm_at, self._harm_play = self._off.time, self._play
+        return self._judge()
+
+    def _probe(self) -> TrackingVerdict:
+        self._probe_from = self._off.time
+        return self._judge()

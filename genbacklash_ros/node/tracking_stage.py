@@ -1,0 +1,97 @@
+"""The measured-tracking stage: every reading against the desired position then in force.
+
+:class:`TrackingStage` feeds the :class:`~genbacklash_core.measured.TrackingJudge` of the node:
+it remembers the desired position (the command as it came) and the share of the inverse the
+compensator applied to it (its weight) of the command in force, pairs each accepted encoder
+reading with them, and hands the readings to the judge in batches (at each feed of the
+identifier). The per-message path pairs a reading with the last command handled; a stretch
+of the batch form pairs each reading with the last command of the stretch that came before
+it (by the messages' order), so both forms judge the same pairs.
+
+Examples
+--------
+>>> from genbacklash_core.measured import TrackingJudgeSettings
+>>> stage = TrackingStage(TrackingJudgeSettings(min_time=0.001))
+>>> stage.command(0.5, 1.0)
+>>> stage.reading(1_000_000, 0.45)
+>>> stage.flush().on_rms
+0.04999999999999999
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from genbacklash_core.measured import TrackingJudge, TrackingJudgeSettings, TrackingVerdict
+
+__all__ = ["TrackingStage"]
+
+
+class TrackingStage:
+    """Readings paired with the desired position and the compensation in force.
+
+    Parameters
+    ----------
+    settings : TrackingJudgeSettings
+    """
+
+    def __init__(self, settings: TrackingJudgeSettings) -> None:
+        self.judge = TrackingJudge(settings)
+        self._r = math.nan  # the desired position of the command in force (NaN: none yet)
+        self._w = 0.0  # the weight the compensator gave it
+        self._t: list[int] = []
+        self._y: list[float] = []
+        self._rs: list[float] = []
+        self._ws: list[float] = []
+
+    @property
+    def verdict(self) -> TrackingVerdict:
+        """The judge's latest verdict."""
+        return self.judge.verdict
+
+    def command(self, desired: float, weight: float) -> None:
+        """A command handled: ``desired`` as it came, compensated with ``weight``."""
+        self._r, self._w = float(desired), float(weight)
+
+    def reading(self, stamp: int, load: float) -> None:
+        """An accepted encoder reading."""
+        self._t.append(int(stamp))
+        self._y.append(float(load))
+        self._rs.append(self._r)
+        self._ws.append(self._w)
+
+    def stretch(
+        self,
+        cmd_order: list[int],
+        desired: list[float],
+        weight: float,
+        order: list[int],
+        stamps: list[int],
+        loads: list[float],
+    ) -> None:
+        """A stretch of the batch form: its commands (all compensated with ``weight``) and
+        its readings, each paired with the last command that came before it (``cmd_order``
+        and ``order``: the messages' places in the batch)."""
+        if stamps:
+            if cmd_order:
+                k = np.searchsorted(np.asarray(cmd_order), np.asarray(order), side="right") - 1
+                rs = np.where(k >= 0, np.asarray(desired)[np.maximum(k, 0)], self._r)
+                ws = np.where(k >= 0, weight, self._w)
+                self._rs.extend(rs.tolist())
+                self._ws.extend(ws.tolist())
+            else:
+                self._rs.extend([self._r] * len(stamps))
+                self._ws.extend([self._w] * len(stamps))
+            self._t.extend(stamps)
+            self._y.extend(loads)
+        if cmd_order:
+            self._r, self._w = float(desired[-1]), float(weight)
+
+    def flush(self) -> TrackingVerdict:
+        """Judge the readings gathered; the new verdict."""
+        if self._t:
+            self.judge.readings(self._t, self._y, self._rs, self._ws)
+            self._t, self._y, self._rs, self._ws = [], [], [], []
+        return self.judge.verdict

@@ -1,0 +1,209 @@
+"""The measured-tracking judge: compensation judged by the tracking error it leaves."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from genbacklash_core import GenBacklashError
+from genbacklash_core.measured import (
+    RETRY_CHANGE,
+    TrackingJudge,
+    TrackingJudgeSettings,
+)
+
+MS = 1_000_000
+TRIAL = TrackingJudgeSettings().trial
+
+
+class Feed:
+    """Readings at 1 kHz on one clock, judged 100 at a time as the node's feeds are; errors
+    drawn per reading (seeded)."""
+
+    def __init__(self, judge: TrackingJudge, seed: int = 0) -> None:
+        self.judge = judge
+        self.t = 0
+        self.rng = np.random.default_rng(seed)
+
+    def run(self, seconds: float, rms: float, weight: float) -> None:
+        n = round(seconds * 1000)
+        stamps = self.t + MS * np.arange(1, n + 1)
+        self.t = int(stamps[-1])
+        errors = self.rng.normal(0.0, rms, n)
+        for k in range(0, n, 100):
+            part = slice(k, k + 100)
+            w = np.full(stamps[part].size, weight * self.judge.verdict.trust)
+            self.judge.readings(stamps[part], errors[part], np.zeros(w.size), w)
+
+
+def test_helping_compensation_stays_on() -> None:
+    judge = TrackingJudge()
+    feed = Feed(judge)
+    feed.run(4.0, 0.04, 0.0)  # the baseline before the first estimate
+    feed.run(10.0, 0.01, 1.0)
+    v = judge.verdict
+    assert v.state == "on" and v.trust == 1.0
+    assert v.ratio == pytest.approx(0.25, rel=0.1)
+    assert "keeps 25 %" in v.reason or "keeps 24 %" in v.reason or "keeps 26 %" in v.reason
+
+
+def test_compensation_starts_as_a_trial_at_part_weight() -> None:
+    judge = TrackingJudge()
+    feed = Feed(judge)
+    feed.run(4.0, 0.04, 0.0)
+    assert judge.verdict.state == "judging" and judge.verdict.trust == TRIAL
+    feed.run(1.0, 0.03, TRIAL)  # 0.75: not clearly better yet
+    assert judge.verdict.state == "judging" and judge.verdict.trust == TRIAL
+
+
+def test_clear_harm_is_judged_early() -> None:
+    judge = TrackingJudge()
+    feed = Feed(judge)
+    feed.run(4.0, 0.04, 0.0)
+    feed.run(1.2, 0.07, TRIAL)  # 1.75 after 1.2 s of the 3 s
+    assert judge.verdict.state == "off"
+
+
+def test_harmful_compensation_is_switched_off_and_says_so() -> None:
+    judge = TrackingJudge()
+    feed = Feed(judge)
+    feed.run(4.0, 0.04, 0.0)
+    feed.run(4.0, 0.06, 1.0)
+    v = judge.verdict
+    assert v.state == "off" and v.trust == 0.0
+    assert "tracked worse than without" in v.reason and "rad" in v.reason
+
+
+def test_in_between_fades() -> None:
+    judge = TrackingJudge()
+    feed = Feed(judge)
+    feed.run(4.0, 0.04, 0.0)
+    feed.run(10.0, 0.038, 1.0)  # about 95 %: between ratio_full 0.9 and ratio_off 1.0
+    v = judge.verdict
+    assert v.state == "faded" and 0.0 < v.trust < 1.0
+
+
+def test_no_baseline_asks_for_a_probe_then_judges() -> None:
+    judge = TrackingJudge(TrackingJudgeSettings(min_time=2.0))
+    feed = Feed(judge)
+    feed.run(2.5, 0.03, 1.0)  # compensating from the first command (a checkpoint)
+    assert judge.verdict.state == "probing" and judge.verdict.trust == 0.0
+    feed.run(1.0, 0.04, 0.0)
+    assert judge.verdict.state == "probing"  # 1 s of the 2 s probe
+    feed.run(1.5, 0.04, 0.0)
+    # the trial passed (0.75, not harm, on a full baseline): judged at full weight next
+    assert judge.verdict.state == "judging" and judge.verdict.trust == 1.0
+    feed.run(2.5, 0.03, 1.0)
+    assert judge.verdict.state == "on"  # 0.03 / 0.04 = 0.75, below ratio_full 0.9
+    assert judge.verdict.ratio == pytest.approx(0.75, rel=0.1)
+
+
+def test_a_short_baseline_does_where_compensation_clearly_helps() -> None:
+    judge = TrackingJudge(TrackingJudgeSettings(min_time=3.0))
+    feed = Feed(judge)
+    feed.run(0.7, 0.05, 0.0)  # the estimate converged quickly
+    feed.run(7.0, 0.005, 1.0)  # a 3 s trial, then 3 s at full weight: no probe
+    assert judge.verdict.state == "on"
+    assert judge.verdict.off_time == pytest.approx(0.7, abs=0.01)
+
+
+def test_a_short_baseline_does_not_do_for_a_verdict_of_harm() -> None:
+    judge = TrackingJudge(TrackingJudgeSettings(min_time=3.0))
+    feed = Feed(judge)
+    feed.run(0.7, 0.05, 0.0)
+    feed.run(3.5, 0.06, 1.0)
+    assert judge.verdict.state == "probing"  # measure the baseline before judging harm
+
+
+def test_harm_is_retried_with_a_new_play_or_after_retry_seconds() -> None:
+    judge = TrackingJudge(TrackingJudgeSettings(retry=5.0))
+    feed = Feed(judge)
+    judge.new_model(0.07)
+    feed.run(4.0, 0.04, 0.0)
+    feed.run(4.0, 0.06, 1.0)
+    assert judge.verdict.state == "off"
+    judge.new_model(0.07 * (1 + RETRY_CHANGE / 2))  # nearly the same play: still off
+    assert judge.verdict.state == "off"
+    judge.new_model(0.07 * (1 + 2 * RETRY_CHANGE))  # a new play: tried again, as a trial
+    assert judge.verdict.state == "judging" and judge.verdict.trust == TRIAL
+    feed.run(4.0, 0.06, 1.0)
+    assert judge.verdict.state == "off"
+    feed.run(4.0, 0.04, 0.0)
+    assert judge.verdict.state == "off"  # 4 s of the 5 s
+    feed.run(1.5, 0.04, 0.0)
+    assert judge.verdict.state == "judging" and judge.verdict.trust == TRIAL
+
+
+def test_the_baseline_does_not_fade_while_compensating() -> None:
+    judge = TrackingJudge(TrackingJudgeSettings(window=5.0, probe_every=math.inf))
+    feed = Feed(judge)
+    feed.run(4.0, 0.04, 0.0)
+    feed.run(60.0, 0.01, 1.0)  # twelve windows of compensating
+    assert judge.verdict.off_rms == pytest.approx(0.04, rel=0.1)
+    assert judge.verdict.off_time == pytest.approx(4.0, abs=0.01)
+
+
+def test_a_probe_every_probe_every_seconds() -> None:
+    judge = TrackingJudge(TrackingJudgeSettings(probe_every=20.0))
+    feed = Feed(judge)
+    feed.run(4.0, 0.04, 0.0)
+    feed.run(19.0, 0.01, 1.0)
+    assert judge.verdict.state == "on"
+    feed.run(2.0, 0.01, 1.0)
+    assert judge.verdict.state == "probing"
+
+
+def test_watching_never_changes_the_trust_and_names_the_wiring() -> None:
+    judge = TrackingJudge(TrackingJudgeSettings(in_loop=False))
+    feed = Feed(judge)
+    feed.run(4.0, 0.04, 0.0)
+    feed.run(4.0, 0.08, 1.0)
+    assert judge.verdict.state == "watching" and judge.verdict.trust == 1.0
+    judge = TrackingJudge(TrackingJudgeSettings(in_loop=False))
+    feed = Feed(judge)
+    feed.run(4.0, 0.04, 0.0)
+    feed.run(4.0, 0.01, 1.0)  # better while compensating: the command drives the drivetrain
+    v = judge.verdict
+    assert v.trust == 1.0 and "compensation_in_loop true" in v.reason
+
+
+def test_non_finite_readings_are_left_out() -> None:
+    judge = TrackingJudge()
+    judge.readings([MS, 2 * MS], [math.nan, 0.1], [0.0, 0.0], [0.0, 0.0])
+    assert judge.verdict.off_rms == pytest.approx(0.1)
+
+
+def test_bad_settings_and_shapes_are_refused() -> None:
+    with pytest.raises(GenBacklashError, match="ratio_full"):
+        TrackingJudgeSettings(ratio_full=1.0, ratio_off=1.0)
+    with pytest.raises(GenBacklashError, match="min_time"):
+        TrackingJudgeSettings(min_time=0.0)
+    with pytest.raises(GenBacklashError, match="as many"):
+        TrackingJudge().readings([1, 2], [0.0], [0.0], [0.0])
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    on=st.floats(0.001, 0.2),
+    off=st.floats(0.001, 0.2),
+    scale=st.floats(0.01, 100.0),
+    seed=st.integers(0, 2**16),
+)
+def test_the_verdict_is_a_trust_in_0_1_and_does_not_depend_on_units(
+    on: float, off: float, scale: float, seed: int
+) -> None:
+    verdicts = []
+    for k in (1.0, scale):
+        judge = TrackingJudge()
+        feed = Feed(judge, seed)
+        feed.run(4.0, k * off, 0.0)
+        feed.run(4.0, k * on, 1.0)
+        verdicts.append(judge.verdict)
+    a, b = verdicts
+    assert 0.0 <= a.trust <= 1.0
+    assert a.state == b.state
+    assert a.ratio == pytest.approx(b.ratio, rel=1e-9)

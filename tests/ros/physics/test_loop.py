@@ -1,0 +1,37 @@
+"""The node's pipeline in closed loop with physics drivetrains: compensation never harms."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("mujoco", reason="the physics drivetrains need mujoco (genbacklash[physics])")
+
+from genbacklash_ros.physics.loop import Clocks, node_loop, open_loop
+from genbacklash_ros.physics.variants import variant
+
+
+def _rms(e: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(e * e)))
+
+
+def test_the_measured_tracking_keeps_compensation_on_where_it_helps() -> None:
+    params = variant("near_ideal", bandwidth=60.0)
+    clocks = Clocks(0, 30.0)
+    loads, _est, _guard, measured = node_loop(params, clocks, guard=True, delay_ns=2_000_000)
+    none = open_loop(params, clocks, clocks.values, 2_000_000)
+    cut = 1.0 - _rms(loads - clocks.desired) / _rms(none - clocks.desired)
+    assert measured.state == "on" and measured.ratio < 0.5, measured.reason
+    assert cut > 0.4
+
+
+def test_compensation_on_a_flank_held_by_gravity_never_tracks_worse() -> None:
+    # gravity holds one flank over part of the travel: the model's guard lets compensation
+    # run for a second before it switches it off (before the measured tracking's trial at
+    # half weight this record tracked 2.6 % worse than doing nothing)
+    params = variant("gravity", bandwidth=60.0)
+    clocks = Clocks(1, 40.0)
+    loads, _est, _guard, measured = node_loop(params, clocks, guard=True)
+    none = open_loop(params, clocks, clocks.values)
+    assert measured.on_time > 0.5  # it was tried
+    assert _rms(loads - clocks.desired) <= 1.02 * _rms(none - clocks.desired)
