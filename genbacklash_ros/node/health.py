@@ -372,6 +372,7 @@ class StreamHealth:
         "_stuck_branches",
         "_stuck_why",
         "faults",
+        "model_fits",
     )
 
     faults: dict[str, tuple[int, int]]
@@ -383,6 +384,9 @@ class StreamHealth:
 
     def reset(self) -> None:
         """Forget the faults and what detects them (construction, restart)."""
+        # the compensation guard's judgement: the model describes the drivetrain (a reading
+        # far from a prediction of a model that does not is no evidence of a spike)
+        self.model_fits = True
         self.faults = {}
         self._fault_texts: dict[str, tuple[int, str]] = {}  # since the last report
         self._enc_rejects = 0  # encoder messages rejected since the last accepted one
@@ -792,9 +796,11 @@ class StreamHealth:
         return Screening(keep, events)
 
     def _limit(self, trusted: bool) -> float:
-        """The spike limit now (infinite while the estimate may not judge)."""
+        """The spike limit now (infinite while the estimate may not judge, or while the
+        compensation guard judges that the model does not describe the drivetrain:
+        :attr:`model_fits`)."""
         scale = self._scale
-        if trusted and scale is not None:
+        if trusted and self.model_fits and scale is not None:
             return max(SPIKE_SIGMAS * scale, SPIKE_COUNTS * self._quantum)
         return math.inf
 

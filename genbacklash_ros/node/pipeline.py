@@ -1158,6 +1158,7 @@ class BacklashPipeline:
             )
         if batch.size == 0:
             return
+        self._health.model_fits = self._guard.verdict.state != "off"
         screened = self._screen.run(batch, self._health, self._use.current)
         self._events(screened.events)
         if screened.size == 0:
