@@ -154,6 +154,7 @@ def load_bag_series(
         command_index=index,
         bridge=bridge,
         settle_ns=params.settle_ns if params is not None else 0,
+        servo=params.servo() if params is not None else None,
     )
     if series.skipped:
         print(
@@ -161,7 +162,14 @@ def load_bag_series(
             file=sys.stderr,
         )
     t = (series.t - series.t[0]) / 1e9 if series.t.size else None  # seconds from the first
-    return Series(u=series.u, y=series.y, t=t, breaks=series.breaks)
+    return Series(
+        u=series.u,
+        y=series.y,
+        t=t,
+        breaks=series.breaks,
+        servo=series.servo,
+        servo_fit=series.servo_fit,
+    )
 
 
 BAG_SUFFIXES = (".mcap", ".db3")
@@ -196,6 +204,7 @@ def load_series(
         bad_rows="drop" if drop else "raise",
         bridge=bridge,
         settle_ns=params.settle_ns if params is not None else 0,
+        servo=params.servo() if params is not None else None,
     )
     if series.dropped:  # --drop-nonfinite: say what went, never silently
         print(f"genbacklash {args.command}: {dropped_note(file, series.dropped)}", file=sys.stderr)
@@ -208,7 +217,7 @@ def load_series(
 BATCH_PARAMETERS = ("model", "degree", "na", "nb")
 # ... and the rule for which samples are rows (genbacklash_core.settling), on bags and on
 # a CSV with t (the same rule: genbacklash_ros.node.sample_rule.select_rows)
-_ROW_PARAMETERS = ("settle_time",)
+_ROW_PARAMETERS = ("settle_time", "servo_model", "servo_dead_time", "servo_time_constant")
 _BAG_PARAMETERS = ("joint", "command_index")
 # set by the replay itself (genbacklash_ros.bags.replay): the bag's message types, the recorded
 # command, no checkpoint
