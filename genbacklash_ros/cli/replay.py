@@ -668,6 +668,16 @@ def _summary(result: ReplayResult) -> str:
         unit = "  rad" if name in RAD_PARAMETERS else ""
         lines.append(f"{name:<12}{value:>12.5f}{2 * sigma:>12.5f}{unit}")
     lines.append(play_line(*est.play()))
+    servo = result.servo
+    if servo is not None:  # servo_model: the play is on the servo's modelled output
+        if "dead_time" in servo:
+            dead, lag = float(servo["dead_time"]), float(servo["time_constant"])  # type: ignore[arg-type]
+            lines.append(
+                f"servo ({servo['state']}): dead time {1e3 * dead:.2f} ms, lag {1e3 * lag:.2f} ms"
+                + (f"; {servo['note']}" if "note" in servo else "")
+            )
+        else:
+            lines.append(f"servo: {servo['state']}")
     stats = result.stats
     dropped = {k: n for k, n in stats.dropped.items() if n}
     rate = result.messages_in / result.seconds if result.seconds > 0 else 0.0
