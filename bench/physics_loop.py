@@ -17,7 +17,7 @@ over its second half (the node learns in the first); the node's final play ``c_L
 against the geometric play; the guard's final trust and error ratio.
 
 Run: ``python bench/physics_loop.py [--seeds 0 1 2] [--bandwidths 20 60 100]
-[--variants ...] [--duration 40] [--guard on|off]``
+[--variants ...] [--duration 40] [--guard on|off] [--param NAME=VALUE ...]``
 """
 
 from __future__ import annotations
@@ -65,14 +65,22 @@ def open_loop(params: DrivetrainParameters, clocks: Clocks, commands: np.ndarray
 
 
 def node_loop(
-    params: DrivetrainParameters, clocks: Clocks, *, guard: bool
+    params: DrivetrainParameters,
+    clocks: Clocks,
+    *,
+    guard: bool,
+    extra: dict[str, object] | None = None,
 ) -> tuple[np.ndarray, Estimate, GuardVerdict]:
-    """The node's pipeline in the loop: its compensated command drives the servo."""
-    node = NodeParameters(
-        command_type="float64",
-        encoder_type="float64",
-        compensation_in_loop=True,
-        compensation_guard=guard,
+    """The node's pipeline in the loop: its compensated command drives the servo
+    (``extra``: more node parameters, e.g. ``servo_model``)."""
+    node = NodeParameters.from_mapping(
+        {
+            "command_type": "float64",
+            "encoder_type": "float64",
+            "compensation_in_loop": True,
+            "compensation_guard": guard,
+            **(extra or {}),
+        }
     )
     pipe = BacklashPipeline(node)
     values, cmd_t, t = clocks.values, clocks.cmd_t, clocks.t
@@ -101,6 +109,14 @@ def node_loop(
     return loads, pipe.estimate, pipe.guard
 
 
+def _value(text: str) -> object:
+    """A --param value: a number where it reads as one, else the text."""
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
 def _rms(e: np.ndarray) -> float:
     return float(np.sqrt(np.mean(e * e)))
 
@@ -112,7 +128,15 @@ def main() -> None:
     parser.add_argument("--variants", nargs="+", default=list(VARIANTS))
     parser.add_argument("--duration", type=float, default=40.0)
     parser.add_argument("--guard", choices=("on", "off"), default="on")
+    parser.add_argument(
+        "--param",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="a node parameter for the node's pipeline (e.g. servo_model=auto)",
+    )
     args = parser.parse_args()
+    extra = {k: _value(v) for k, _, v in (p.partition("=") for p in args.param)}
     print(
         "| variant | bandwidth (Hz) | seed | rms none (mrad) | cut true (%) | cut node (%) "
         "| 2nd half: cut true / node (%) | node play / geometric | guard (trust, ratio) | s |"
@@ -132,7 +156,9 @@ def main() -> None:
                     "true": open_loop(params, clocks, compensate(truth.model, clocks.values))
                     - clocks.desired,
                 }
-                loads, est, verdict = node_loop(params, clocks, guard=args.guard == "on")
+                loads, est, verdict = node_loop(
+                    params, clocks, guard=args.guard == "on", extra=extra
+                )
                 errors["node"] = loads - clocks.desired
                 whole = {k: 100 * (1 - _rms(e) / _rms(errors["none"])) for k, e in errors.items()}
                 late = {

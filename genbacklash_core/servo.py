@@ -72,7 +72,7 @@ __all__ = [
 #: The coarse grid of :func:`estimate_servo` (s): dead times, then time constants.
 DEAD_TIMES: tuple[float, ...] = (0.0, 0.002, 0.004, 0.006, 0.009, 0.013, 0.018)
 TIME_CONSTANTS: tuple[float, ...] = (0.0, 0.002, 0.004, 0.007, 0.011, 0.016, 0.024, 0.035)
-_REFINE_ROUNDS = 4  # halvings of the grid step around the best candidate
+_REFINE_ROUNDS = 6  # halvings of the step of the compass search (2 ms grid: to 0.016 ms)
 
 
 @dataclass(frozen=True)
@@ -189,6 +189,8 @@ class ServoModel:
         ev_v = np.empty(due + 1)
         ev_t[0], ev_x[0], ev_v[0] = anchor_t, anchor_x, anchor_v
         tau_ns = self.time_constant * 1e9
+        if tau_ns < 1.0:  # under a nanosecond: no lag at the stamps' resolution
+            tau_ns = 0.0
         x_now, t_now, v_now = anchor_x, anchor_t, anchor_v
         for j in range(due):
             s, v = events_t[j], events_v[j]
@@ -283,9 +285,9 @@ def estimate_servo(
     sample (:meth:`ServoModel.output`, S1); a backlash of ``degree`` is identified from that
     input and the readings (eqs. 22-29, the iteration without the output-error refinement)
     and scored by its free-run NRMSE on the same samples. The coarse grid
-    ``dead_times x time_constants`` is searched first, then ``rounds`` times the four
-    neighbours of the best at half the previous step (a pattern search; both values kept
-    at 0 or above).
+    ``dead_times x time_constants`` is searched first, then a compass search from the best:
+    its eight neighbours at half the grid's spacing, moving while one scores better, the
+    step halved when none does, ``rounds`` halvings (both values kept at 0 or above).
 
     Parameters
     ----------
@@ -330,16 +332,24 @@ def estimate_servo(
             "the servo could not be estimated: no candidate's backlash could be identified "
             "from these samples (too few, or too little excitation)"
         )
-    step_d = _spacing(dead_times, best[0])
-    step_c = _spacing(time_constants, best[1])
-    for _ in range(rounds):
-        step_d, step_c = step_d / 2, step_c / 2
+    step_d = _spacing(dead_times, best[0]) / 2
+    step_c = _spacing(time_constants, best[1]) / 2
+    halvings = 0
+    while halvings < rounds:
+        # the eight neighbours at this step (the dead time and the lag trade off along a
+        # diagonal valley, which steps along one axis at a time would crawl down)
         d0, c0 = best
         around = [
-            (max(d0 + dd, 0.0), max(c0 + dc, 0.0))
-            for dd, dc in ((step_d, 0.0), (-step_d, 0.0), (0.0, step_c), (0.0, -step_c))
+            (max(d0 + i * step_d, 0.0), max(c0 + j * step_c, 0.0))
+            for i in (-1, 0, 1)
+            for j in (-1, 0, 1)
+            if i or j
         ]
-        best = min([best, *around], key=lambda p: score(*p))
+        moved = min(around, key=lambda p: score(*p))
+        if score(*moved) < score(*best):
+            best = moved  # the same step again from there
+        else:
+            step_d, step_c, halvings = step_d / 2, step_c / 2, halvings + 1
     return ServoFit(ServoModel(*best), score(*best), score(0.0, 0.0), len(scores))
 
 
