@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from genbacklash_core import GenBacklashError
+from genbacklash_core import GenBacklashError, GeneralBacklash
 from genbacklash_core.identify import identify_backlash
 from genbacklash_core.play import play_operator
 from genbacklash_core.servo import ServoModel, estimate_servo, servo_changes
@@ -28,7 +28,8 @@ def _reference(model: ServoModel, t: np.ndarray, u: np.ndarray, dt_ns: int = 100
     a = math.exp(-dt_ns / (model.time_constant * 1e9)) if model.time_constant else 0.0
     for i in range(1, grid.size):
         x[i] = target[i - 1] + (x[i - 1] - target[i - 1]) * a
-    return np.interp(t, grid, x)
+    out: np.ndarray = np.interp(t, grid, x)
+    return out
 
 
 def _commands(seed: int, n: int = 4000, hold: int = 10) -> tuple[np.ndarray, np.ndarray]:
@@ -127,6 +128,7 @@ def test_the_servo_and_the_play_are_recovered_exactly_without_noise(
     assert fit.misfit <= fit.none_misfit
     xs, _ = fit.model.output(t, u)
     model = identify_backlash(xs, y, 1).model
+    assert isinstance(model, GeneralBacklash)
     assert model.c_left + model.c_right == pytest.approx(c_left + c_right, rel=0.01)
 
 
