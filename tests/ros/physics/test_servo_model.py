@@ -57,11 +57,9 @@ def test_replay_and_identify_read_the_play_through_the_servo(
     params = variant("near_ideal", bandwidth=bandwidth)
     bag = tmp_path / "bag"
     write_physics_bag(bag, params, OperationSettings(duration=20.0), 0)
-    online = _json(
-        ["replay", str(bag), *TOPICS, "-o", str(tmp_path / "out"), "--json", "--no-progress"]
-        + AUTO,
-        capsys,
-    )
+    out = str(tmp_path / "out")
+    replay = ["replay", str(bag), *TOPICS, "-o", out, "--json", "--no-progress", *AUTO]
+    online = _json(replay, capsys)
     batch = _json(["identify", str(bag), *TOPICS, "--json", *AUTO], capsys)
     assert online["servo"]["state"] == "estimated"  # type: ignore[index]
     assert batch["servo"]["estimated"] is True  # type: ignore[index]
