@@ -177,28 +177,6 @@ def _summary(result: IdentificationResult) -> str:
     )
 
 
-def _servo_dict(series: Series) -> dict[str, object]:
-    """The servo model of the rows for the JSON: its values, and how it was estimated."""
-    assert series.servo is not None  # the caller checked
-    out: dict[str, object] = dict(series.servo.to_dict())
-    out["estimated"] = series.servo_fit is not None
-    if series.servo_fit is not None:
-        fit = series.servo_fit
-        out.update(misfit=fit.misfit, misfit_without=fit.none_misfit, candidates=fit.evaluated)
-    return out
-
-
-def _servo_line(series: Series) -> str:
-    """One line on the servo model of the rows (text output)."""
-    assert series.servo is not None  # the caller checked
-    servo = series.servo
-    how = "estimated with the play" if series.servo_fit is not None else "given"
-    return (
-        f"servo: dead time {1e3 * servo.dead_time:.2f} ms, lag {1e3 * servo.time_constant:.2f} "
-        f"ms ({how}); the play is on the servo's output"
-    )
-
-
 def _cmd_identify(args: argparse.Namespace) -> int:
     params = replay_cli.node_parameters(args, replay_cli.batch_parameters(args.data)).params
     model = params.model if args.model is None else args.model
@@ -221,13 +199,13 @@ def _cmd_identify(args: argparse.Namespace) -> int:
         out = result.to_dict()
         out.update(spread.to_dict(result.model.parameter_names))
         if series.servo is not None:  # the servo the rows model (genbacklash_core.servo)
-            out["servo"] = _servo_dict(series)
+            out["servo"] = replay_cli.servo_dict(series)
         print(json.dumps(out))
     else:
         print(_parameter_table(result, std=spread.std))
         print(replay_cli.play_line(spread.play, spread.play_std))
         if series.servo is not None:
-            print(_servo_line(series))
+            print(replay_cli.servo_line(series))
         print(_summary(result))
     if args.checkpoint:
         from genbacklash_ros.cli.start import identify_estimate, write_start
@@ -322,8 +300,9 @@ def _joint_count(text: str) -> int:
 
 
 _BATCH_USES = (
-    "{command} uses model, degree, na, nb, settle_time (a bag, or a CSV with t: the same "
-    "row rules) and, for a bag, joint, command_index; the others "
+    "{command} uses model, degree, na, nb, settle_time and servo_model, servo_dead_time, "
+    "servo_time_constant (a bag, or a CSV with t: the same row rules; servo_model=auto "
+    "estimates the servo from the whole record) and, for a bag, joint, command_index; the others "
     "are validated, then ignored (a note on stderr names those set to other than their "
     "defaults). Bags are read with header stamps, one sample per encoder message (the node's "
     "default stamp_source and sample_period)."

@@ -172,6 +172,28 @@ def load_bag_series(
     )
 
 
+def servo_dict(series: Series) -> dict[str, object]:
+    """The servo model of the rows for the JSON: its values, and how it was estimated."""
+    assert series.servo is not None  # the caller checked
+    out: dict[str, object] = dict(series.servo.to_dict())
+    out["estimated"] = series.servo_fit is not None
+    if series.servo_fit is not None:
+        fit = series.servo_fit
+        out.update(misfit=fit.misfit, misfit_without=fit.none_misfit, candidates=fit.evaluated)
+    return out
+
+
+def servo_line(series: Series) -> str:
+    """One line on the servo model of the rows (text output)."""
+    assert series.servo is not None  # the caller checked
+    servo = series.servo
+    how = "estimated with the play" if series.servo_fit is not None else "given"
+    return (
+        f"servo: dead time {1e3 * servo.dead_time:.2f} ms, lag {1e3 * servo.time_constant:.2f} "
+        f"ms ({how}); the play is on the servo's output"
+    )
+
+
 BAG_SUFFIXES = (".mcap", ".db3")
 
 
