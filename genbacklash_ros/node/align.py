@@ -148,7 +148,7 @@ class Aligner:
         wait_ns: int,
         settle_ns: int = 0,
         servo: ServoChoice = None,
-        servo_window_ns: int = 10_000_000_000,
+        servo_window_ns: int = 5_000_000_000,
     ) -> None:
         self._use_header = use_header
         self._grid_ns = grid_ns

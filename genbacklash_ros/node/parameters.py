@@ -373,7 +373,7 @@ PARAMETER_SPECS: tuple[ParameterSpec, ...] = (
     ParameterSpec(
         "servo_window",
         "double",
-        10.0,
+        5.0,
         "Data time the node collects before it estimates the servo (servo_model auto); "
         "batch identify and diagnose estimate it from the whole record.",
         1.0,
@@ -463,7 +463,7 @@ class NodeParameters:
     servo_model: Literal["none", "auto", "fixed"] = "none"
     servo_dead_time: float = 0.0
     servo_time_constant: float = 0.0
-    servo_window: float = 10.0
+    servo_window: float = 5.0
     sample_period: float = 0.0
     stamp_source: Literal["header", "receive"] = "header"
 
