@@ -67,7 +67,16 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument("--variants", nargs="+", default=list(VARIANTS))
     parser.add_argument("--duration", type=float, default=40.0)
+    parser.add_argument("--bandwidth", type=float, default=None, help="servo bandwidth, Hz")
+    parser.add_argument(
+        "--param",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="a node parameter for both identify runs (e.g. servo_model=auto)",
+    )
     args = parser.parse_args()
+    extra = [w for p in args.param for w in ("--param", p)]
     print(
         "| variant | seed | play, bag (mrad) | play, CSV (mrad) | max abs difference, any "
         "JSON number | before: play, CSV (mrad) | before: CSV - bag (mrad) |"
@@ -76,15 +85,17 @@ def main() -> None:
     worst_play = worst_any = worst_before = 0.0
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.variants:
-            params = variant(name)
+            params = variant(
+                name, **({} if args.bandwidth is None else {"bandwidth": args.bandwidth})
+            )
             for seed in args.seeds:
                 bag = Path(tmp) / f"{name}-{seed}"
                 csv = Path(tmp) / f"{name}-{seed}.csv"
                 write_physics_bag(bag, params, OperationSettings(duration=args.duration), seed)
                 with contextlib.redirect_stderr(io.StringIO()):
                     genbacklash(["readings", str(bag), *TOPICS, "-o", str(csv)])
-                from_bag = _run(["identify", str(bag), *TOPICS, "--json"])
-                from_csv = _run(["identify", str(csv), "--json"])
+                from_bag = _run(["identify", str(bag), *TOPICS, "--json", *extra])
+                from_csv = _run(["identify", str(csv), "--json", *extra])
                 old = read_series_csv(csv)  # the stamps' breaks only: the CSV path before
                 before = identify_backlash(old.u, old.y, 3, breaks=old.breaks).model
                 play_bag, play_csv = _play(from_bag), _play(from_csv)

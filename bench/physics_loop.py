@@ -17,7 +17,8 @@ over its second half (the node learns in the first); the node's final play ``c_L
 against the geometric play; the guard's final trust and error ratio.
 
 Run: ``python bench/physics_loop.py [--seeds 0 1 2] [--bandwidths 20 60 100]
-[--variants ...] [--duration 40] [--guard on|off] [--delay-ms 0]``
+[--variants ...] [--duration 40] [--guard on|off] [--delay-ms 0]
+[--param NAME=VALUE ...]``
 """
 
 from __future__ import annotations
@@ -32,6 +33,14 @@ from genbacklash_core.scenarios import OperationSettings
 from genbacklash_ros.physics.loop import Clocks, node_loop, open_loop
 from genbacklash_ros.physics.truth import quasi_static
 from genbacklash_ros.physics.variants import VARIANTS, variant
+
+
+def _value(text: str) -> object:
+    """A --param value: a number where it reads as one, else the text."""
+    try:
+        return float(text)
+    except ValueError:
+        return text
 
 
 def _rms(e: np.ndarray) -> float:
@@ -51,7 +60,15 @@ def main() -> None:
         default=0.0,
         help="the servo takes the node's answer this long after the command (default 0)",
     )
+    parser.add_argument(
+        "--param",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="a node parameter for the node's pipeline (e.g. servo_model=auto)",
+    )
     args = parser.parse_args()
+    extra = {k: _value(v) for k, _, v in (p.partition("=") for p in args.param)}
     print(
         "| variant | bandwidth (Hz) | seed | rms none (mrad) | cut true (%) | cut node (%) "
         "| 2nd half: cut true / node (%) | node play / geometric | guard (trust, ratio) "
@@ -78,6 +95,7 @@ def main() -> None:
                     clocks,
                     guard=args.guard == "on",
                     delay_ns=delay,
+                    extra=extra,
                 )
                 errors["node"] = loads - clocks.desired
                 whole = {k: 100 * (1 - _rms(e) / _rms(errors["none"])) for k, e in errors.items()}

@@ -49,6 +49,7 @@ from typing import Any, Literal, NamedTuple
 import numpy as np
 
 from genbacklash_core import GenBacklashError
+from genbacklash_core.servo import ServoFit, ServoModel
 from genbacklash_ros.bags.output_marker import mark_output
 from genbacklash_ros.bags.raw_values import RawValueReader
 from genbacklash_ros.bags.rosbags_types import from_rosbags, jazzy_typestore, to_rosbags
@@ -61,7 +62,7 @@ from genbacklash_ros.node.messages import (
     JointState,
     Message,
 )
-from genbacklash_ros.node.sample_rule import select_rows
+from genbacklash_ros.node.sample_rule import ServoChoice, select_rows
 
 __all__ = [
     "COMMAND_MSGTYPES",
@@ -1023,7 +1024,8 @@ class AlignedSeries:
     sample rule: True where a sample does not follow the one before it on the encoder's
     clock (:mod:`genbacklash_ros.node.sample_rule`; pass it to the identifiers' ``breaks``).
     ``damage``: why the bag's reading stopped early ("" when it was read to its end; see
-    :func:`read_aligned`'s ``keep_readable``).
+    :func:`read_aligned`'s ``keep_readable``). ``servo``, ``servo_fit``: the servo model
+    whose output ``u`` is, and its estimate (:func:`~genbacklash_ros.node.sample_rule.select_rows`).
     """
 
     t: np.ndarray
@@ -1032,6 +1034,8 @@ class AlignedSeries:
     skipped: int
     breaks: np.ndarray
     damage: str = ""
+    servo: ServoModel | None = None
+    servo_fit: ServoFit | None = None
 
 
 def align(
@@ -1043,6 +1047,7 @@ def align(
     marks: np.ndarray | None = None,
     bridge: bool = False,
     settle_ns: int = 0,
+    servo: ServoChoice = None,
 ) -> AlignedSeries:
     """Zero-order-hold alignment of a command stream to encoder times (batch form); the rows
     and their breaks are :func:`~genbacklash_ros.node.sample_rule.select_rows`'s (shared with
@@ -1071,8 +1076,18 @@ def align(
     ct = np.asarray(cmd_t, dtype=np.int64)
     et = np.asarray(enc_t, dtype=np.int64)
     k = np.searchsorted(ct, et, side="right") - 1
-    rows = select_rows(et, k, cmd_u, enc_y, marks=marks, bridge=bridge, settle_ns=settle_ns)
-    return AlignedSeries(rows.t, rows.u, rows.y, rows.skipped, rows.breaks)
+    rows = select_rows(
+        et, k, cmd_u, enc_y, marks=marks, bridge=bridge, settle_ns=settle_ns, servo=servo
+    )
+    return AlignedSeries(
+        rows.t,
+        rows.u,
+        rows.y,
+        rows.skipped,
+        rows.breaks,
+        servo=rows.servo,
+        servo_fit=rows.servo_fit,
+    )
 
 
 def _increasing(times: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -1099,9 +1114,11 @@ def read_aligned(
     bridge: bool = False,
     settle_ns: int = 0,
     keep_readable: bool = False,
+    servo: ServoChoice = None,
 ) -> AlignedSeries:
     """Read a command and an encoder topic from a bag and align them (see :func:`align`;
-    ``bridge`` for a backlash alone; ``settle_ns`` the servo's settling rule, as the node).
+    ``bridge`` for a backlash alone; ``settle_ns`` the servo's settling rule, as the node;
+    ``servo`` the servo model, or ``"auto"``).
 
     A bag that turns out truncated or corrupt part-way raises :class:`BagError`; with
     ``keep_readable`` the messages before the damage are aligned instead, as a replay keeps
@@ -1169,7 +1186,7 @@ def read_aligned(
         seen = np.cumsum(e_m)[unique]
         e_m = np.diff(seen, prepend=0) > 0
         e_t, e_y = e_t[unique], e_y[unique]
-    series = align(c_t, c_u, e_t, e_y, marks=e_m, bridge=bridge, settle_ns=settle_ns)
+    series = align(c_t, c_u, e_t, e_y, marks=e_m, bridge=bridge, settle_ns=settle_ns, servo=servo)
     if series.t.size == 0:
         raise BagError(f"no encoder reading on {encoder_topic!r} follows the first command{before}")
     return dataclasses.replace(series, damage=damage) if damage else series

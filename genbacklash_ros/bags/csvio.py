@@ -30,7 +30,8 @@ import numpy as np
 import numpy.typing as npt
 
 from genbacklash_core import GenBacklashError
-from genbacklash_ros.node.sample_rule import select_rows, time_breaks
+from genbacklash_core.servo import ServoFit, ServoModel
+from genbacklash_ros.node.sample_rule import ServoChoice, select_rows, time_breaks
 
 __all__ = [
     "BadRows",
@@ -55,6 +56,8 @@ class Series:
     ``breaks`` (optional, bool): the sample rule, True where a sample does not follow the
     one before it on the encoder's clock (None: all do); for the identifiers' ``breaks``.
     ``dropped``: the line numbers of the file's rows :func:`read_series_csv` left out.
+    ``servo``, ``servo_fit``: the servo model whose output ``u`` is, and its estimate
+    (:func:`~genbacklash_ros.node.sample_rule.select_rows`; None: ``u`` is the command).
     """
 
     u: FloatArray
@@ -62,6 +65,8 @@ class Series:
     t: FloatArray | None = None
     breaks: npt.NDArray[np.bool_] | None = None
     dropped: tuple[int, ...] = ()
+    servo: ServoModel | None = None
+    servo_fit: ServoFit | None = None
 
     def sample_period(self) -> float | None:
         """The nominal sample period in seconds: the median step of ``t`` (None without
@@ -221,15 +226,20 @@ def dropped_note(path: str | Path, dropped: Sequence[int]) -> str:
 
 
 def read_series_csv(
-    path: str | Path, *, bad_rows: BadRows = "raise", bridge: bool = False, settle_ns: int = 0
+    path: str | Path,
+    *,
+    bad_rows: BadRows = "raise",
+    bridge: bool = False,
+    settle_ns: int = 0,
+    servo: ServoChoice = None,
 ) -> Series:
     r"""Read a CSV whose header names the columns ``u`` and ``y`` (and optionally ``t``).
 
     With ``t`` the series carries its ``breaks`` (see the module notes); with increasing
     stamps the rows are chosen by :func:`~genbacklash_ros.node.sample_rule.select_rows`
-    (``bridge``: a backlash alone; ``settle_ns``: the servo's settling time, with ``bridge``),
-    as a bag's readings are. Other columns are ignored, and so are blank lines and lines
-    starting with ``#``.
+    (``bridge``: a backlash alone; ``settle_ns``: the servo's settling time, with ``bridge``;
+    ``servo``: the servo model or ``"auto"``, which needs ``t``), as a bag's readings are.
+    Other columns are ignored, and so are blank lines and lines starting with ``#``.
 
     A row that cannot be used -- a cell that is empty, not a number, NaN or infinite, or a
     row with too few cells -- is, by ``bad_rows``:
@@ -321,12 +331,26 @@ def read_series_csv(
             marks=after_gap,
             bridge=bridge,
             settle_ns=settle_ns,
+            servo=servo,
         )
         if _in_ns(t):  # seconds from the first row kept, as a bag's series (from exact ns)
             t = (rows.t - rows.t[0]) / 1e9 if rows.t.size else rows.t.astype(np.float64)
         else:
             t = t[rows.index]
-        return Series(u=rows.u, y=rows.y, t=t, breaks=rows.breaks, dropped=dropped)
+        return Series(
+            u=rows.u,
+            y=rows.y,
+            t=t,
+            breaks=rows.breaks,
+            dropped=dropped,
+            servo=rows.servo,
+            servo_fit=rows.servo_fit,
+        )
+    if servo is not None:
+        raise GenBacklashError(
+            f"{file}: a servo model needs the readings' times: the CSV needs a 't' column of "
+            "increasing stamps"
+        )
     breaks = None if t is None else time_breaks(t)  # no clock: the stamps' steps alone
     if after_gap is not None:
         breaks = after_gap if breaks is None else breaks | after_gap

@@ -164,6 +164,10 @@ class ReplayResult:
     custom_data : dict or None
         The input bag's metadata ``custom_data`` (a synthetic bag's truth lives there:
         :func:`genbacklash_ros.bags.simbags.read_truth`); None when it has none.
+    servo : dict or None
+        The servo model the identifier's input went through
+        (:attr:`~genbacklash_ros.node.pipeline.BacklashPipeline.servo`); None with
+        ``servo_model`` none.
     """
 
     output: Path
@@ -176,6 +180,7 @@ class ReplayResult:
     history: ReplayHistory
     error: str = ""
     custom_data: dict[str, str] | None = None
+    servo: dict[str, object] | None = None
 
     def to_dict(self) -> dict[str, object]:
         """JSON-ready summary: the final estimate (``Estimate.to_dict``) plus counters."""
@@ -187,6 +192,8 @@ class ReplayResult:
         out["compensated"] = self.stats.compensated
         out["dropped"] = dict(self.stats.dropped)
         out["error"] = self.error or None
+        if self.servo is not None:  # servo_model: the servo the input was modelled through
+            out["servo"] = dict(self.servo)
         return out
 
 
@@ -597,4 +604,5 @@ def replay(
         history,
         error,
         custom_data,
+        pipeline.servo,
     )

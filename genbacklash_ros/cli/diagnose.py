@@ -33,6 +33,8 @@ from genbacklash_ros.cli.replay import (
     is_bag,
     load_series,
     node_parameters,
+    servo_dict,
+    servo_line,
 )
 from genbacklash_ros.node.parameters import NodeParameters
 
@@ -297,9 +299,13 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     if args.json:
         out = result.to_dict()
         drift_per_second(out["model"], period)
+        if series.servo is not None:  # servo_model: the input the model saw is its output
+            out["servo"] = servo_dict(series)
         print(json.dumps(out))
     else:
         print(_text(result, period))
+        if series.servo is not None:
+            print(servo_line(series))
     for path in written:
         print(f"wrote {path}", file=sys.stderr)
     return EXIT_OK

@@ -198,10 +198,14 @@ def _cmd_identify(args: argparse.Namespace) -> int:
     if args.json:
         out = result.to_dict()
         out.update(spread.to_dict(result.model.parameter_names))
+        if series.servo is not None:  # the servo the rows model (genbacklash_core.servo)
+            out["servo"] = replay_cli.servo_dict(series)
         print(json.dumps(out))
     else:
         print(_parameter_table(result, std=spread.std))
         print(replay_cli.play_line(spread.play, spread.play_std))
+        if series.servo is not None:
+            print(replay_cli.servo_line(series))
         print(_summary(result))
     if args.checkpoint:
         from genbacklash_ros.cli.start import identify_estimate, write_start
@@ -296,8 +300,9 @@ def _joint_count(text: str) -> int:
 
 
 _BATCH_USES = (
-    "{command} uses model, degree, na, nb, settle_time (a bag, or a CSV with t: the same "
-    "row rules) and, for a bag, joint, command_index; the others "
+    "{command} uses model, degree, na, nb, settle_time and servo_model, servo_dead_time, "
+    "servo_time_constant (a bag, or a CSV with t: the same row rules; servo_model=auto "
+    "estimates the servo from the whole record) and, for a bag, joint, command_index; the others "
     "are validated, then ignored (a note on stderr names those set to other than their "
     "defaults). Bags are read with header stamps, one sample per encoder message (the node's "
     "default stamp_source and sample_period)."

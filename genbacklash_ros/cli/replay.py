@@ -154,6 +154,7 @@ def load_bag_series(
         command_index=index,
         bridge=bridge,
         settle_ns=params.settle_ns if params is not None else 0,
+        servo=params.servo() if params is not None else None,
     )
     if series.skipped:
         print(
@@ -161,7 +162,36 @@ def load_bag_series(
             file=sys.stderr,
         )
     t = (series.t - series.t[0]) / 1e9 if series.t.size else None  # seconds from the first
-    return Series(u=series.u, y=series.y, t=t, breaks=series.breaks)
+    return Series(
+        u=series.u,
+        y=series.y,
+        t=t,
+        breaks=series.breaks,
+        servo=series.servo,
+        servo_fit=series.servo_fit,
+    )
+
+
+def servo_dict(series: Series) -> dict[str, object]:
+    """The servo model of the rows for the JSON: its values, and how it was estimated."""
+    assert series.servo is not None  # the caller checked
+    out: dict[str, object] = dict(series.servo.to_dict())
+    out["estimated"] = series.servo_fit is not None
+    if series.servo_fit is not None:
+        fit = series.servo_fit
+        out.update(misfit=fit.misfit, misfit_without=fit.none_misfit, candidates=fit.evaluated)
+    return out
+
+
+def servo_line(series: Series) -> str:
+    """One line on the servo model of the rows (text output)."""
+    assert series.servo is not None  # the caller checked
+    servo = series.servo
+    how = "estimated with the play" if series.servo_fit is not None else "given"
+    return (
+        f"servo: dead time {1e3 * servo.dead_time:.2f} ms, lag {1e3 * servo.time_constant:.2f} "
+        f"ms ({how}); the play is on the servo's output"
+    )
 
 
 BAG_SUFFIXES = (".mcap", ".db3")
@@ -196,6 +226,7 @@ def load_series(
         bad_rows="drop" if drop else "raise",
         bridge=bridge,
         settle_ns=params.settle_ns if params is not None else 0,
+        servo=params.servo() if params is not None else None,
     )
     if series.dropped:  # --drop-nonfinite: say what went, never silently
         print(f"genbacklash {args.command}: {dropped_note(file, series.dropped)}", file=sys.stderr)
@@ -208,7 +239,7 @@ def load_series(
 BATCH_PARAMETERS = ("model", "degree", "na", "nb")
 # ... and the rule for which samples are rows (genbacklash_core.settling), on bags and on
 # a CSV with t (the same rule: genbacklash_ros.node.sample_rule.select_rows)
-_ROW_PARAMETERS = ("settle_time",)
+_ROW_PARAMETERS = ("settle_time", "servo_model", "servo_dead_time", "servo_time_constant")
 _BAG_PARAMETERS = ("joint", "command_index")
 # set by the replay itself (genbacklash_ros.bags.replay): the bag's message types, the recorded
 # command, no checkpoint
@@ -659,6 +690,16 @@ def _summary(result: ReplayResult) -> str:
         unit = "  rad" if name in RAD_PARAMETERS else ""
         lines.append(f"{name:<12}{value:>12.5f}{2 * sigma:>12.5f}{unit}")
     lines.append(play_line(*est.play()))
+    servo = result.servo
+    if servo is not None:  # servo_model: the play is on the servo's modelled output
+        if "dead_time" in servo:
+            dead, lag = float(servo["dead_time"]), float(servo["time_constant"])  # type: ignore[arg-type]
+            lines.append(
+                f"servo ({servo['state']}): dead time {1e3 * dead:.2f} ms, lag {1e3 * lag:.2f} ms"
+                + (f"; {servo['note']}" if "note" in servo else "")
+            )
+        else:
+            lines.append(f"servo: {servo['state']}")
     stats = result.stats
     dropped = {k: n for k, n in stats.dropped.items() if n}
     rate = result.messages_in / result.seconds if result.seconds > 0 else 0.0

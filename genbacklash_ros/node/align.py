@@ -30,12 +30,15 @@ Examples
 from __future__ import annotations
 
 import bisect
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
 
+from genbacklash_core.errors import GenBacklashError
+from genbacklash_core.servo import ServoFit, ServoModel, ServoState, estimate_servo
 from genbacklash_core.settling import SettleState, carry_marks, settling_keep
-from genbacklash_ros.node.sample_rule import EncoderPeriod
+from genbacklash_ros.node.sample_rule import EncoderPeriod, ServoChoice, keep_breaks, link_breaks
 
 __all__ = ["MAX_COMMANDS", "AlignedBatch", "Aligner"]
 
@@ -124,14 +127,39 @@ class Aligner:
     settle_ns : int
         The servo's settling time (:mod:`genbacklash_core.settling`): samples taken sooner
         after their command changed are taken out as lost readings are (0: none). Not on a
-        grid.
+        grid, nor with a ``servo``.
+    servo : ServoModel or "auto" or None
+        The servo between the command and the gear (:mod:`genbacklash_core.servo`): the
+        samples' input becomes its modelled output, as
+        :func:`~genbacklash_ros.node.sample_rule.select_rows` makes it for the batch path
+        (no settling rule, no bridging). ``"auto"``: the samples of the first
+        ``servo_window_ns`` are held back, the servo estimated from them
+        (:func:`~genbacklash_core.servo.estimate_servo`), then they and all later ones are
+        handed on with its output. Not on a grid.
+    servo_window_ns : int
+        The data time ``"auto"`` collects before it estimates.
     """
 
-    def __init__(self, *, use_header: bool, grid_ns: int, wait_ns: int, settle_ns: int = 0) -> None:
+    def __init__(
+        self,
+        *,
+        use_header: bool,
+        grid_ns: int,
+        wait_ns: int,
+        settle_ns: int = 0,
+        servo: ServoChoice = None,
+        servo_window_ns: int = 5_000_000_000,
+    ) -> None:
         self._use_header = use_header
         self._grid_ns = grid_ns
         self._wait = wait_ns
-        self._settle_ns = 0 if grid_ns else settle_ns
+        self._servo: ServoChoice = None if grid_ns else servo
+        self._servo_window = servo_window_ns
+        self._servo_state: ServoState | None = None
+        self._servo_held: list[AlignedBatch] = []  # "auto": batches before the estimate
+        self.servo_fit: ServoFit | None = None
+        self.servo_note = ""  # why "auto" fell back to no servo ("" when it did not)
+        self._settle_ns = 0 if grid_ns or self._servo is not None else settle_ns
         self._settle = SettleState()
         self._settle_tail = False  # the last batch ended with samples taken out settling
         # streams: accepted times and values (commands: what the identifier takes)
@@ -246,6 +274,9 @@ class Aligner:
         self._linked = False  # a new time line: its first sample breaks
         self._next_grid_k = None
         self._last_time = None
+        self._servo_state = None  # the servo's output restarts at rest on the new line
+        if self._servo_held:  # "auto" estimates from one time line: the old one is dropped
+            self._servo_held = []
         if self.cmd_u:
             self.cmd_t, self.cmd_u = [stamp - 1], [self.cmd_u[-1]]
             self.last_cmd_ns = stamp - 1
@@ -269,8 +300,82 @@ class Aligner:
             horizon = self.last_cmd_ns
         return horizon
 
-    def take(self, horizon: int | None) -> AlignedBatch | None:
-        """The final samples up to ``horizon``, with their commands (None: none)."""
+    @property
+    def servo(self) -> ServoModel | None:
+        """The servo model the samples' input comes from (None: none, or not yet estimated)."""
+        return self._servo if isinstance(self._servo, ServoModel) else None
+
+    @property
+    def servo_pending(self) -> bool:
+        """``"auto"`` still collects the samples it estimates the servo from."""
+        return self._servo == "auto"
+
+    def take(self, horizon: int | None, *, final: bool = False) -> AlignedBatch | None:
+        """The final samples up to ``horizon``, with their commands (None: none); ``final``:
+        the stream ends (``"auto"`` estimates from what it holds)."""
+        batch = self._take(horizon)
+        if self._servo is None:
+            return batch
+        if isinstance(self._servo, ServoModel):
+            return None if batch is None else self._servo_output(batch)
+        if batch is not None:
+            self._servo_held.append(batch)
+        return self._servo_estimate(final)
+
+    def _servo_output(self, batch: AlignedBatch) -> AlignedBatch:
+        """``batch`` with the modelled servo output as its input (no bridging)."""
+        model = self._servo
+        assert isinstance(model, ServoModel)
+        if batch.size == 0:
+            return batch
+        xs, self._servo_state = model.output(batch.times, batch.us, self._servo_state)
+        no = np.zeros(batch.size, dtype=bool)
+        return dataclasses.replace(batch, us=xs, monotone=no, resumed=None)
+
+    def _servo_estimate(self, final: bool) -> AlignedBatch | None:
+        """``"auto"``: once the held samples span the window (or at the end), estimate the
+        servo from them and hand them all on as one batch with its output."""
+        held = [b for b in self._servo_held if b.size]
+        early = sum(b.before_first_command for b in self._servo_held)
+        span = int(held[-1].times[-1] - held[0].times[0]) if held else 0
+        if not final and span < self._servo_window:
+            if early:  # counted as they come; the held samples wait
+                for i, b in enumerate(self._servo_held):
+                    self._servo_held[i] = dataclasses.replace(b, before_first_command=0)
+                return self._empty(None, early)
+            return None
+        self._servo_held = []
+        if not held:
+            return self._empty(None, early) if early else None
+        times = np.concatenate([b.times for b in held])
+        us = np.concatenate([b.us for b in held])
+        marks = np.concatenate([b.marks for b in held])
+        marks[0] |= not held[0].linked
+        for i in range(1, len(held)):  # a batch that does not link to the one before breaks
+            if not held[i].linked:
+                marks[sum(b.size for b in held[:i])] = True
+        period = held[-1].period
+        breaks, _ = keep_breaks(link_breaks(times, period, marks=marks), np.ones(times.size, bool))
+        try:
+            self.servo_fit = estimate_servo(times, us, np.concatenate([b.ys for b in held]), breaks)
+            self._servo = self.servo_fit.model
+        except GenBacklashError as err:
+            self._servo = ServoModel(0.0, 0.0)
+            self.servo_note = f"servo not estimated ({err}); taken as none"
+        batch = AlignedBatch(
+            times,
+            us,
+            np.concatenate([b.ys for b in held]),
+            np.concatenate([b.held for b in held]),
+            marks,
+            period,
+            held[0].linked,
+            early,
+        )
+        return self._servo_output(batch)
+
+    def _take(self, horizon: int | None) -> AlignedBatch | None:
+        """:meth:`take` before the servo stage."""
         if horizon is None or not self._enc_t:
             return None
         if self._grid_ns:

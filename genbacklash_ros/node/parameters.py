@@ -42,7 +42,9 @@ from genbacklash_core import (
 )
 from genbacklash_core.guard import GuardSettings
 from genbacklash_core.measured import TrackingJudgeSettings
+from genbacklash_core.servo import ServoModel
 from genbacklash_ros.node.messages import COMMAND_TYPES, ENCODER_TYPES, CommandType, EncoderType
+from genbacklash_ros.node.sample_rule import ServoChoice
 
 __all__ = [
     "JOINT_KEYS",
@@ -340,6 +342,49 @@ PARAMETER_SPECS: tuple[ParameterSpec, ...] = (
         restarts=True,
     ),
     ParameterSpec(
+        "servo_model",
+        "string",
+        "none",
+        "The servo between the command and the gear (a dead time and a first-order lag, "
+        "genbacklash_core.servo): none (the gear's input is the command, with the settling "
+        "rule), auto (estimated with the play from the first servo_window of data, then "
+        "fixed), fixed (servo_dead_time, servo_time_constant). With a servo the identifier's "
+        "input is the modelled servo output and the compensator aims it.",
+        choices=("none", "auto", "fixed"),
+        restarts=True,
+    ),
+    ParameterSpec(
+        "servo_dead_time",
+        "double",
+        0.0,
+        "The servo's dead time (servo_model fixed).",
+        0.0,
+        1.0,
+        unit="s",
+        restarts=True,
+    ),
+    ParameterSpec(
+        "servo_time_constant",
+        "double",
+        0.0,
+        "The servo's first-order lag time constant (servo_model fixed).",
+        0.0,
+        1.0,
+        unit="s",
+        restarts=True,
+    ),
+    ParameterSpec(
+        "servo_window",
+        "double",
+        5.0,
+        "Data time the node collects before it estimates the servo (servo_model auto); "
+        "batch identify and diagnose estimate it from the whole record.",
+        1.0,
+        600.0,
+        unit="s",
+        restarts=True,
+    ),
+    ParameterSpec(
         "sample_period",
         "double",
         0.0,
@@ -418,6 +463,10 @@ class NodeParameters:
     checkpoint_period: float = 10.0
     publish_rate: float = 10.0
     settle_time: float = 0.005
+    servo_model: Literal["none", "auto", "fixed"] = "none"
+    servo_dead_time: float = 0.0
+    servo_time_constant: float = 0.0
+    servo_window: float = 5.0
     sample_period: float = 0.0
     stamp_source: Literal["header", "receive"] = "header"
 
@@ -526,6 +575,19 @@ class NodeParameters:
         (:class:`~genbacklash_core.measured.TrackingJudgeSettings`): its verdict counts only
         while the compensated command drives the drivetrain and the guard is on."""
         return TrackingJudgeSettings(in_loop=self.compensation_in_loop and self.compensation_guard)
+
+    def servo(self) -> ServoChoice:
+        """The servo the rows model (:mod:`genbacklash_core.servo`): None, ``"auto"`` or
+        the fixed model. A cascade keeps the command as its input (None).
+
+        >>> NodeParameters(servo_model="fixed", servo_dead_time=0.002).servo()
+        ServoModel(dead_time=0.002, time_constant=0.0)
+        """
+        if self.model != "backlash" or self.servo_model == "none":
+            return None
+        if self.servo_model == "auto":
+            return "auto"
+        return ServoModel(self.servo_dead_time, self.servo_time_constant)
 
     @property
     def settle_ns(self) -> int:

@@ -441,6 +441,9 @@ class BacklashPipeline:
             # a backlash alone: its rows skip the servo's settling (bridged); linear dynamics
             # after the backlash model the lag themselves
             settle_ns=params.settle_ns if params.model == "backlash" else 0,
+            # the servo between the command and the gear, modelled (genbacklash_core.servo)
+            servo=params.servo(),
+            servo_window_ns=round(params.servo_window * 1e9),
         )
         self._screen = Screen(bridge=params.model == "backlash")
         self._comp = CompensateStage(params.compensator_options(), compensate=params.compensate)
@@ -509,6 +512,37 @@ class BacklashPipeline:
     def measured(self) -> TrackingVerdict:
         """The measured tracking's latest verdict (:mod:`genbacklash_core.measured`)."""
         return self._tracking.verdict
+
+    @property
+    def servo(self) -> dict[str, object] | None:
+        """The servo the identifier's input is modelled through (``servo_model``;
+        :mod:`genbacklash_core.servo`), for /diagnostics and the replay's JSON: ``state``
+        (``"fixed"``, ``"estimated"``, ``"estimating"``, ``"none"`` when auto could not
+        estimate), the dead time and time constant (s) once known, the estimate's misfit
+        with and without it, a ``note``. None with ``servo_model`` none.
+
+        The compensator inverts the play on the servo's *output*: the command it sends is
+        the servo output the play needs. The servo's lag is not inverted (no lead): a lead
+        on held commands would amplify their steps and the encoder's noise, so the load
+        trails the desired position by about the dead time plus the time constant, as it
+        would without play; a caller who knows the desired path ahead may advance it by
+        that much.
+        """
+        if self._params.servo() is None:
+            return None
+        align = self._align
+        model, fit = align.servo, align.servo_fit
+        if align.servo_pending:
+            return {"state": "estimating", "window": self._params.servo_window}
+        assert model is not None
+        out: dict[str, object] = dict(model.to_dict())
+        if align.servo_note:
+            out.update(state="none", note=align.servo_note)
+        elif fit is not None:
+            out.update(state="estimated", misfit=fit.misfit, misfit_without=fit.none_misfit)
+        else:
+            out["state"] = "fixed"
+        return out
 
     @property
     def using_checkpoint(self) -> bool:
@@ -1124,6 +1158,14 @@ class BacklashPipeline:
         extra.append(("last_checkpoint_s", "none" if saved is None else f"{saved / 1e9:.3f}"))
         if self.warm_start_note:
             extra.append(("warm_start", self.warm_start_note))
+        servo = self.servo
+        if servo is not None:  # the servo model the identifier's input goes through
+            extra.append(("servo_state", str(servo["state"])))
+            for key in ("dead_time", "time_constant"):
+                if key in servo:
+                    extra.append((f"servo_{key}", format(float(servo[key]), ".6g")))  # type: ignore[arg-type]
+            if "note" in servo:
+                extra.append(("servo_note", str(servo["note"])))
         message = diagnostic_array(
             stamp_ns,
             est,
@@ -1146,7 +1188,7 @@ class BacklashPipeline:
         now = self._clock.now
         if horizon is not None and not final and now is not None:
             horizon = self._health.feed_horizon(horizon, now)  # equal readings wait
-        batch = align.take(horizon)
+        batch = align.take(horizon, final=final)
         self._feed_at_count = align.pending + self._batch
         if batch is None:
             return

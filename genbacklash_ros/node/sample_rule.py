@@ -42,6 +42,7 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass
+from typing import Literal, TypeAlias
 
 import numpy as np
 import numpy.typing as npt
@@ -53,12 +54,14 @@ from genbacklash_core.samples import (
     nominal_period,
     sample_breaks,
 )
+from genbacklash_core.servo import ServoFit, ServoModel, estimate_servo
 from genbacklash_core.settling import carry_marks, settling_keep
 
 __all__ = [
     "PERIOD_WINDOW",
     "EncoderPeriod",
     "Rows",
+    "ServoChoice",
     "keep_breaks",
     "link_breaks",
     "record_period",
@@ -69,6 +72,10 @@ __all__ = [
 BoolArray = npt.NDArray[np.bool_]
 
 PERIOD_WINDOW = 255  # stamp differences behind the node's period estimate (0.26 s at 1 kHz)
+
+#: The servo between the command and the gear (:mod:`genbacklash_core.servo`): None (the
+#: gear's input is the command), a model, or ``"auto"`` (estimated from the rows).
+ServoChoice: TypeAlias = ServoModel | Literal["auto"] | None
 
 
 def link_breaks(
@@ -162,7 +169,9 @@ def time_breaks(t: npt.ArrayLike) -> BoolArray | None:
 class Rows:
     """The samples :func:`select_rows` keeps: stamps ``t`` (int64 ns), the command held ``u``,
     the reading ``y``, the sample rule's ``breaks``, ``skipped``: readings before the first
-    command (they hold none), and ``index``: where each row was among the readings given."""
+    command (they hold none), and ``index``: where each row was among the readings given.
+    With a servo, ``u`` is the modelled servo output (:mod:`genbacklash_core.servo`),
+    ``servo`` the model used and ``servo_fit`` how it was estimated (``"auto"``)."""
 
     t: npt.NDArray[np.int64]
     u: npt.NDArray[np.float64]
@@ -170,6 +179,8 @@ class Rows:
     breaks: BoolArray
     skipped: int
     index: npt.NDArray[np.intp]
+    servo: ServoModel | None = None
+    servo_fit: ServoFit | None = None
 
 
 def select_rows(
@@ -181,6 +192,7 @@ def select_rows(
     marks: npt.ArrayLike | None = None,
     bridge: bool = False,
     settle_ns: int = 0,
+    servo: ServoChoice = None,
 ) -> Rows:
     """Which readings are identification samples, and where their chain breaks.
 
@@ -198,6 +210,13 @@ def select_rows(
        :data:`~genbacklash_core.samples.MAX_BRIDGED`, none rejected) is lifted where the
        commands in force over the gap were monotone.
 
+    With a ``servo`` (:mod:`genbacklash_core.servo`) the gear's input is the servo's
+    modelled output, evaluated at every reading from the commands the readings hold: the
+    row's ``u``. The model then describes the readings taken while the servo moves, so the
+    settling rule is not applied, and no break is bridged (the commands' monotony says
+    nothing of the lagged output between two readings). ``"auto"`` estimates the servo
+    from these rows first (:func:`~genbacklash_core.servo.estimate_servo`).
+
     Parameters
     ----------
     stamps : array_like of int, shape (N,)
@@ -213,7 +232,10 @@ def select_rows(
     bridge : bool
         A backlash alone: lift breaks lost readings made along monotone commands.
     settle_ns : int
-        The servo's settling time (applies with ``bridge`` only; 0: off).
+        The servo's settling time (applies with ``bridge`` only and without ``servo``; 0:
+        off).
+    servo : ServoModel or "auto" or None
+        The servo between the command and the gear (None: none, the command is the input).
 
     >>> rows = select_rows([5, 10, 15, 25], [-1, 0, 0, 1], [1.0, 2.0], [0.1, 0.2, 0.3, 0.4])
     >>> rows.u.tolist(), rows.y.tolist(), rows.skipped, rows.breaks.tolist()
@@ -224,6 +246,8 @@ def select_rows(
     cmd_u = np.asarray(commands, dtype=np.float64)
     ys = np.asarray(values, dtype=np.float64)
     index = np.arange(et.size)
+    if servo is not None:
+        return _servo_rows(et, k, cmd_u, ys, marks, servo)
     if settle_ns and bridge:  # the node's settling rule (a backlash alone): as lost readings
         on = k >= 0
         settled, _ = settling_keep(et[on], cmd_u[k[on]], settle_ns)
@@ -246,6 +270,34 @@ def select_rows(
     breaks, _ = keep_breaks(linked, keep)
     skipped = int(np.count_nonzero(~keep))
     return Rows(et[keep], cmd_u[k[keep]], ys[keep], breaks, skipped, index[keep])
+
+
+def _servo_rows(
+    et: npt.NDArray[np.int64],
+    k: npt.NDArray[np.int64],
+    cmd_u: npt.NDArray[np.float64],
+    ys: npt.NDArray[np.float64],
+    marks: npt.ArrayLike | None,
+    servo: ServoModel | Literal["auto"],
+) -> Rows:
+    """:func:`select_rows` with a servo: every reading after the first command is a row,
+    its input the modelled servo output; breaks from the stamps and marks alone."""
+    keep = k >= 0
+    period = record_period(et)
+    linked = link_breaks(et, period)
+    if marks is not None:
+        linked |= np.asarray(marks, dtype=bool)
+    breaks, _ = keep_breaks(linked, keep)
+    t, held, y = et[keep], cmd_u[k[keep]], ys[keep]
+    fit = None
+    if servo == "auto":
+        fit = estimate_servo(t, held, y, breaks)
+        model = fit.model
+    else:
+        model = servo
+    x, _ = model.output(t, held)
+    index = np.flatnonzero(keep)
+    return Rows(t, x, y, breaks, int(np.count_nonzero(~keep)), index, model, fit)
 
 
 class EncoderPeriod:

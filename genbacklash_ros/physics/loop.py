@@ -56,15 +56,24 @@ def open_loop(
 
 
 def node_loop(
-    params: DrivetrainParameters, clocks: Clocks, *, guard: bool, delay_ns: int = 0
+    params: DrivetrainParameters,
+    clocks: Clocks,
+    *,
+    guard: bool,
+    delay_ns: int = 0,
+    extra: dict[str, object] | None = None,
 ) -> tuple[np.ndarray, Estimate, GuardVerdict, TrackingVerdict]:
     """The node's pipeline in the loop: its compensated command drives the servo,
-    ``delay_ns`` after the command (a transport and a drive's loop between them)."""
-    node = NodeParameters(
-        command_type="float64",
-        encoder_type="float64",
-        compensation_in_loop=True,
-        compensation_guard=guard,
+    ``delay_ns`` after the command (a transport and a drive's loop between them);
+    ``extra``: more node parameters (e.g. ``servo_model``)."""
+    node = NodeParameters.from_mapping(
+        {
+            "command_type": "float64",
+            "encoder_type": "float64",
+            "compensation_in_loop": True,
+            "compensation_guard": guard,
+            **(extra or {}),
+        }
     )
     pipe = BacklashPipeline(node)
     values, cmd_t, t = clocks.values, clocks.cmd_t, clocks.t

@@ -1217,6 +1217,20 @@ def _play(result: ReplayResult) -> str:
     return f"{gap:.4f}{band} rad (2\u03c3)"
 
 
+def _servo_summary(servo: dict[str, object]) -> str:
+    """One line: the servo the identifier's input went through (``servo_model``)."""
+    if "dead_time" not in servo:
+        return f"{servo['state']} (no estimate: the data ended inside the window)"
+    dead, lag = float(servo["dead_time"]), float(servo["time_constant"])  # type: ignore[arg-type]
+    text = (
+        f"{servo['state']}: dead time {1e3 * dead:.2f} ms, lag {1e3 * lag:.2f} ms; the play "
+        "is on its output, and the compensated command aims it (the lag is not inverted)"
+    )
+    if "note" in servo:
+        text += f"; {servo['note']}"
+    return text
+
+
 def _compensation_summary(result: ReplayResult) -> str:
     """One line: how the compensation ended, and why."""
     h = result.history
@@ -1253,6 +1267,7 @@ def _page_content(
         ("Data", f"{data.end:.1f} s"),
         ("Final state", f"{est.state.value}, confidence {est.confidence:.2f}"),
         ("Play c_L + c_R", play),
+        *([("Servo model", _servo_summary(result.servo))] if result.servo is not None else []),
         ("Tracking error", tracking_headline(errors)),
         ("Compensation", _compensation_summary(result)),
     ]
