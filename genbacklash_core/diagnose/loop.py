@@ -25,8 +25,9 @@
    constant and the lag then fits badly; the offset alone extrapolates poorly). If no pair
    passes either, stop.
 7. When the accepted effect and a rival are nearly tied (the rival's BIC change within
-   ``_TIE`` of it: a servo lag before the backlash and a load lag after it look alike when a
-   dead time hides where the lag sits), each is followed by its best follow-up and the path
+   ``_TIE`` of it, and with lost readings also the validation misfit it closes: a servo lag
+   before the backlash and a load lag after it look alike when a dead time hides where the
+   lag sits), each is followed by its best follow-up and the path
    with the lower BIC is taken, the numbers in the evidence.
 8. At the end, with two effects or more, each must earn its place: the final model is refitted
    without it, and an effect whose removal does not worsen the model (the same BIC margin
@@ -292,10 +293,22 @@ class _Run:
         return fit.bic, measure_gap(fit.model, self.u, self.y, self.split).gap, name
 
     def break_tie(
-        self, report: GapReport, candidates: list[_Candidate], chosen: _Candidate
+        self,
+        report: GapReport,
+        candidates: list[_Candidate],
+        chosen: _Candidate,
+        gaps: dict[int, GapReport] | None = None,
     ) -> tuple[_Candidate, GapReport, str] | None:
         """A rival nearly tied with ``chosen`` (see the module notes, step 7) that wins once
-        both are followed by their best follow-up, judged as ``chosen`` was; else None."""
+        both are followed by their best follow-up, judged as ``chosen`` was; else None.
+
+        A near tie is measured on the yardstick that ranked the candidates: the BIC change,
+        or, when ``anchored`` (``gaps``: the candidates' validation gaps), the validation
+        misfit each closes. A rival that closes far less of the misfit is no tie, however
+        close its BIC (which the ranking did not trust): a dead time closing 21 % of a
+        coasting load's misfit was preferred to the coasting load closing 37 % by the
+        follow-ups, before this rule.
+        """
         margin = self.settings.bic_margin
         rivals = [
             c
@@ -304,6 +317,11 @@ class _Run:
             and c.bic_change < -margin
             and c.bic_change <= _TIE * chosen.bic_change
         ]
+        if self.anchored and gaps is not None and id(chosen) in gaps:
+            closed = report.gap - gaps[id(chosen)].gap
+            rivals = [
+                c for c in rivals if id(c) in gaps and report.gap - gaps[id(c)].gap >= _TIE * closed
+            ]
         if not rivals:
             return None
         rival = rivals[0]
@@ -502,7 +520,7 @@ def diagnose(
             if ok:
                 accepted = [(candidate, after, verdict)]
         if len(accepted) == 1:
-            swapped = run.break_tie(report, candidates, accepted[0][0])
+            swapped = run.break_tie(report, candidates, accepted[0][0], gaps)
             if swapped is not None:
                 trials.append(
                     Trial(

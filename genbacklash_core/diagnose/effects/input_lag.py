@@ -8,12 +8,20 @@ exactly while the motor crosses the play; a lag after the backlash keeps the out
 after the backlash output stopped. Both leave an error step response that decays, so both
 are tried and the BIC on the estimation data decides.
 
-Signature: for trial poles ``a`` the change ``y_sim(a) - y_sim(0)`` of the model's free-run
-output, regressed on the residual beyond the model's Jacobian (a trial-direction test: the
-score test at ``a = 0`` sees only the first-order part ``u(t-1) - u(t)``, which a held command
-makes spiky). The best pole's F-test, Bonferroni-corrected over the trial poles, must pass
-the screening thresholds.
-Augmentation: refit with the input lag from the best trial poles; the BIC picks.
+A servo is a lag *and* a dead time (the drive's own loop, the sample-and-hold of a held
+command, the encoder's latency): a critically damped position servo's two equal poles are
+close to one lag one sample late. So the servo's lag is searched with the dead time before it
+(up to :data:`_SERVO_DELAYS` samples beyond the model's), and one step adds both: a lag
+without its dead time fits the servo worse than a lag after the play or a spring does, which
+then get named in its place (the near-ideal physics drivetrain at 20-100 Hz, issue 23).
+
+Signature: for trial poles ``a`` and dead times the change ``y_sim(a, d) - y_sim`` of the
+model's free-run output, regressed on the residual beyond the model's Jacobian (a
+trial-direction test: the score test at ``a = 0`` sees only the first-order part ``u(t-1) -
+u(t)``, which a held command makes spiky). The best trial's F-test, Bonferroni-corrected over
+the trials, must pass the screening thresholds.
+Augmentation: short refits from the best trial poles at each dead time searched, the best
+refitted fully; the BIC picks.
 """
 
 from __future__ import annotations
@@ -31,13 +39,25 @@ from ._base import Detection, format_p, screen_starts
 __all__ = ["EFFECT", "InputLag"]
 
 _POLES = (0.5, 0.7, 0.8, 0.9, 0.95, 0.98)  # trial poles (time constants 1.4 .. 50 samples)
+_SERVO_DELAYS = 3  # dead time searched with the lag, samples beyond the model's own
 _SCREEN_STEPS = 8  # Levenberg-Marquardt steps per start before the best are finished
 _FINALISTS = 2
 
 
+def _specs(context: Context) -> dict[int, ModelSpec]:
+    """The model's spec with an input lag, at its own dead time and up to
+    :data:`_SERVO_DELAYS` samples more (within ``max_delay``), by dead time."""
+    own = context.spec.delay
+    longest = max(own, min(own + _SERVO_DELAYS, context.settings.max_delay))
+    return {
+        delay: context.spec.extended(input_lag=True, delay=delay)
+        for delay in range(own, longest + 1)
+    }
+
+
 def _trial(context: Context, spec: ModelSpec, pole: float) -> NestedTest:
-    """How much of the residual the change of the simulated output with pole ``a`` explains
-    beyond the model's Jacobian."""
+    """How much of the residual the change of the simulated output with pole ``a`` (and the
+    spec's dead time) explains beyond the model's Jacobian."""
     theta = spec.embed(context.fit.model)
     theta[spec.names().index("input_lag_pole")] = pole
     anchors = context.anchors
@@ -58,37 +78,52 @@ class InputLag:
         return model.input_lag == 0.0 and not model.cascade
 
     def detect(self, context: Context) -> Detection:
-        """Trial-direction tests of a few poles; the best one counts (Bonferroni)."""
-        spec = context.spec.extended(input_lag=True)
-        tests = {pole: _trial(context, spec, pole) for pole in _POLES}
-        pole = max(tests, key=lambda a: tests[a].share)
-        test = tests[pole]
-        p_value = min(1.0, len(_POLES) * test.test.p_value)
+        """Trial-direction tests of a few poles and dead times; the best one counts
+        (Bonferroni)."""
+        specs = _specs(context)
+        tests = {
+            (delay, pole): _trial(context, spec, pole)
+            for delay, spec in specs.items()
+            for pole in _POLES
+        }
+        delay, pole = max(tests, key=lambda key: tests[key].share)
+        test = tests[(delay, pole)]
+        p_value = min(1.0, len(tests) * test.test.p_value)
         settings = context.settings
         fires = p_value < settings.screen_alpha and test.share >= settings.min_share
         coefficient = float(test.coefficients[0])
         evidence = (
             f"lagging the input by a first-order servo lag (pole {pole:.2f}, time constant "
-            f"{-1.0 / math.log(pole):.1f} samples) changes the simulated output in a way that "
-            f"explains {100 * test.share:.1f}% of the residual beyond the model's own "
-            f"parameters (F = {test.test.statistic:.1f}, {format_p(p_value)} over "
-            f"{len(_POLES)} trial poles; it wants {coefficient:.2f} of that change): "
+            f"{-1.0 / math.log(pole):.1f} samples, dead time {delay} samples) changes the "
+            f"simulated output in a way that explains {100 * test.share:.1f}% of the residual "
+            f"beyond the model's own parameters (F = {test.test.statistic:.1f}, "
+            f"{format_p(p_value)} over {len(tests)} trial poles and dead times; it wants "
+            f"{coefficient:.2f} of that change): "
             + ("the motor lags the command" if fires else "no sign of a servo lag")
         )
-        return Detection(self.name, fires, test.share, settings.min_share, evidence, {"pole": pole})
+        return Detection(
+            self.name,
+            fires,
+            test.share,
+            settings.min_share,
+            evidence,
+            {"pole": pole, "delay": float(delay)},
+        )
 
     def augment(self, context: Context, detection: Detection) -> ModelFit | None:
-        """Refit with the input lag from the best trial poles; the BIC picks."""
-        spec = context.spec.extended(input_lag=True)
-        base = spec.embed(context.fit.model)
-        index = spec.names().index("input_lag_pole")
+        """Refit with the input lag from the best trial poles at each dead time searched (a
+        short refit each: the trial test, linear in the change, does not tell one sample of
+        dead time from a slightly slower lag); the BIC picks."""
         guess = float(detection.hints.get("pole", 0.9))
         poles = sorted({guess, *(p for p in _POLES if abs(p - guess) <= 0.15)})
         starts = []
-        for pole in poles:
-            start = base.copy()
-            start[index] = pole
-            starts.append((spec, start))
+        for spec in _specs(context).values():
+            base = spec.embed(context.fit.model)
+            index = spec.names().index("input_lag_pole")
+            for pole in poles:
+                start = base.copy()
+                start[index] = pole
+                starts.append((spec, start))
         screened = screen_starts(context, starts, _SCREEN_STEPS)
         return best_fit(
             [fit.model for fit in screened[:_FINALISTS]],
