@@ -28,9 +28,8 @@
    ``_TIE`` of it, and with lost readings also the validation misfit it closes: a servo lag
    before the backlash and a load lag after it look alike when a dead time hides where the
    lag sits), each is followed by its best follow-up and the path with the lower BIC is
-   taken, the numbers in the evidence. (With lost readings, where the validation misfit
-   ranked them, a near tie is first judged by the BIC of each model's free run over the
-   estimation segment: the larger sample, every model alike.)
+   taken, the numbers in the evidence. (With lost readings, two models that both restart
+   their simulation after a loss, or both cannot, are told apart by the BIC alone.)
 8. At the end, with two effects or more, each must earn its place: the final model is refitted
    without it, and an effect whose removal does not worsen the model (the same BIC margin
    and significant validation-gap test as when it was added) is dropped, its step removed.
@@ -63,7 +62,7 @@ from genbacklash_core.structure import as_order
 
 from .context import Context, build_context
 from .effects import CATALOG, Detection, Effect
-from .fit import ModelFit, bic, fit_model
+from .fit import ModelFit, fit_model
 from .floor import noise_floor
 from .gap import GapReport, Split, measure_gap, split_record
 from .model import AugmentedModel, without_effect
@@ -282,13 +281,6 @@ class _Run:
         good.sort(key=lambda c: gaps[id(c)].gap)
         return good + [c for c in candidates if c.bic_change >= -margin], gaps
 
-    def free_bic(self, candidate: _Candidate, report: GapReport) -> float:
-        """The BIC of ``candidate``'s free run over the estimation segment (``report``: its
-        gap report, whose simulation runs through the whole record without restarts)."""
-        est = self.split.estimation
-        error = self.y[est] - report.y_sim[est]
-        return bic(float(error @ error), error.size, candidate.fit.n_free)
-
     def follow_up(self, first: _Candidate) -> tuple[float, float, str]:
         """The BIC and validation gap after ``first`` and its best follow-up (``first``'s own
         when none lowers the BIC by the margin), and that follow-up's name ("nothing")."""
@@ -333,24 +325,29 @@ class _Run:
             ]
         if not rivals:
             return None
-        if self.anchored and gaps is not None and id(chosen) in gaps:
-            # Tied on the validation misfit: the free run over the estimation segment (the
-            # same free run, through the losses, that the validation misfit reads; every model
-            # alike, a linear block or not), with its parameters counted, is the larger
-            # sample. A lag after the play and a spring fitted the near-ideal drivetrain's
-            # servo 4-7 % closer on a short validation segment than the servo's own lag did.
-            free = {id(c): self.free_bic(c, gaps[id(c)]) for c in (chosen, *rivals)}
-            best = min(rivals, key=lambda c: free[id(c)])
-            if free[id(best)] < free[id(chosen)] - margin:
-                after = gaps[id(best)]
-                ok, verdict = self.judge(report, after, best.bic_change)
-                if ok:
-                    note = (
-                        f"{verdict}; preferred to {chosen.effect} (validation misfit "
-                        f"{gaps[id(chosen)].gap:.4f}, a near tie): over the estimation data "
-                        f"its free run's BIC is {free[id(chosen)] - free[id(best)]:.1f} lower"
-                    )
-                    return best, after, note
+        alike = [
+            c
+            for c in rivals
+            if c.fit.model.cascade == chosen.fit.model.cascade
+            and c.bic_change < chosen.bic_change - margin
+        ]
+        if self.anchored and alike:
+            # Tied on the validation misfit, and both restart their simulation after a loss
+            # (or neither does): their estimation errors are alike, and the BIC on the
+            # larger estimation segment, which counts the parameters, decides. (A spring
+            # after the play fitted the near-ideal drivetrain's critically damped servo 4 %
+            # closer on the validation data, with a BIC 5000 worse than the servo's lag.)
+            best = min(alike, key=lambda c: c.bic_change)
+            after = gaps.get(id(best)) if gaps is not None else None
+            after = after or measure_gap(best.fit.model, self.u, self.y, self.split)
+            ok, verdict = self.judge(report, after, best.bic_change)
+            if ok:
+                mine = gaps[id(chosen)].gap if gaps is not None else math.nan
+                note = (
+                    f"{verdict}; preferred to {chosen.effect} (validation misfit {mine:.4f}, "
+                    f"a near tie): its BIC is {chosen.bic_change - best.bic_change:.1f} lower"
+                )
+                return best, after, note
         rival = rivals[0]
         bic_chosen, gap_chosen, next_chosen = self.follow_up(chosen)
         bic_rival, gap_rival, next_rival = self.follow_up(rival)
