@@ -136,12 +136,31 @@ class InputLag:
                 start[index] = _pole(pole, order)
                 starts.append((spec, start))
         screened = screen_starts(context, starts, _SCREEN_STEPS)
-        return best_fit(
-            [fit.model for fit in screened[:_FINALISTS]],
-            context.u,
-            context.y,
-            breaks=context.breaks,
-        )
+        finals = [
+            fit
+            for order in _ORDERS
+            if (
+                fit := best_fit(
+                    [f.model for f in screened if f.model.input_lag_order == order][:_FINALISTS],
+                    context.u,
+                    context.y,
+                    breaks=context.breaks,
+                )
+            )
+            is not None
+        ]
+        if not finals:
+            return None
+        # the second stage is a structural choice with no parameter of its own: like an
+        # effect, it must lower the BIC by the margin over the one-stage lag (a first-order
+        # lag with a runout the model still lacks was fitted as two stages, and the runout
+        # named next then left a misfit twice the floor)
+        simple = finals[0]
+        best = min(finals, key=lambda fit: fit.bic)
+        if best is not simple and simple.model.input_lag_order == 1:
+            if not best.bic < simple.bic - context.settings.bic_margin:
+                return simple
+        return best
 
 
 EFFECT = InputLag()
