@@ -38,6 +38,14 @@ as they finish)
 
 from __future__ import annotations
 
+import os
+
+# one BLAS thread (as bench/diagnose.py): on a shared machine a multi-threaded BLAS spins
+# against the other processes, and the fits' least-squares steps take several times longer
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("MKL_NUM_THREADS", "1")
+
 import argparse
 import tempfile
 import time

@@ -235,6 +235,9 @@ class AugmentedModel:
     physics : LoadPhysics, optional
         The load's own motion after the play (coasting, a compliant coupling, a load
         torque; :mod:`.physics`), in place of the play operator of eq. (20).
+    input_lag_order : {1, 2}
+        Stages of the input lag, each with the pole ``input_lag``: 2 is a critically damped
+        servo (a position loop's two equal poles), the lag applied twice.
 
     Examples
     --------
@@ -254,6 +257,7 @@ class AugmentedModel:
     input_lag: float = 0.0
     periodic: PeriodicError | None = None
     physics: LoadPhysics | None = None
+    input_lag_order: int = 1
 
     def __post_init__(self) -> None:
         if not isinstance(self.base, (GeneralBacklash, Cascade)):
@@ -281,6 +285,10 @@ class AugmentedModel:
         if not 0.0 <= lag <= MAX_LAG_POLE:
             raise GenBacklashError(f"input_lag (a pole) must be in [0, {MAX_LAG_POLE}], got {lag}")
         object.__setattr__(self, "input_lag", float(lag))
+        order = self.input_lag_order
+        if isinstance(order, bool) or order not in (1, 2):
+            raise GenBacklashError(f"input_lag_order must be 1 or 2, got {order!r}")
+        object.__setattr__(self, "input_lag_order", int(order))
         if self.periodic is not None and not isinstance(self.periodic, PeriodicError):
             raise GenBacklashError(
                 f"periodic must be a PeriodicError or None, got {self.periodic!r}"
@@ -384,6 +392,7 @@ class AugmentedModel:
                     else Saturation(saturation.get("low"), saturation.get("high"))
                 ),
                 input_lag=0.0 if lag is None else lag["pole"],
+                input_lag_order=1 if lag is None else lag.get("order", 1),
                 periodic=(
                     None
                     if periodic is None
@@ -425,7 +434,11 @@ class AugmentedModel:
         out["input_lag"] = (
             None
             if self.input_lag == 0.0
-            else {"pole": self.input_lag, "time_constant": -1.0 / math.log(self.input_lag)}
+            else {
+                "pole": self.input_lag,
+                "time_constant": -1.0 / math.log(self.input_lag),
+                "order": self.input_lag_order,
+            }
         )
         periodic = self.periodic
         out["periodic_error"] = (
@@ -480,7 +493,7 @@ def without_effect(model: AugmentedModel, effect: str) -> AugmentedModel | None:
         "output_offset": {"offset": 0.0},
         "gap_drift": {"drift": None},
         "saturation": {"saturation": None},
-        "input_lag": {"input_lag": 0.0},
+        "input_lag": {"input_lag": 0.0, "input_lag_order": 1},
         "periodic_error": {"periodic": None},
         "coasting_load": {"physics": None},
         "compliant_coupling": {"physics": None},

@@ -22,6 +22,7 @@ with linear dynamics simulates on through (its state cannot be read off one outp
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -105,6 +106,7 @@ class ModelSpec:
     input_lag: bool = False
     harmonics: int = 0
     physics: LoadPhysics | None = None
+    input_lag_order: int = 1
 
     @classmethod
     def of(cls, model: AugmentedModel) -> ModelSpec:
@@ -118,6 +120,7 @@ class ModelSpec:
             model.input_lag != 0.0,
             0 if model.periodic is None else model.periodic.harmonics,
             model.physics,
+            model.input_lag_order,
         )
 
     @property
@@ -229,6 +232,7 @@ class ModelSpec:
             0.0 if i_lag is None else float(theta[i_lag]),
             self.periodic_error(theta),
             self.physics,
+            self.input_lag_order,
         )
 
     # ------------------------------------------------------------------ pieces
@@ -285,9 +289,8 @@ class ModelSpec:
         return None
 
     def backlash_input(self, theta: FloatArray, u: FloatArray) -> FloatArray:
-        """``v``: the input delayed by the dead time and lagged by the input lag (if any)."""
-        from scipy import signal  # here: a slow import most runs never need
-
+        """``v``: the input delayed by the dead time and lagged by the input lag (if any;
+        ``input_lag_order`` equal first-order stages)."""
         ud = shift_input(u, self.delay)
         i_lag, _ = self._extra_index()
         if i_lag is None:
@@ -295,19 +298,34 @@ class ModelSpec:
         a = float(theta[i_lag])
         if a == 0.0:
             return ud
-        # v(t) = a v(t-1) + (1 - a) u(t-d), v(-1) = u(-d): the servo at rest at the start
-        v, _ = signal.lfilter([1.0 - a], [1.0, -a], ud, zi=[a * float(ud[0])])
-        return np.asarray(v, dtype=np.float64)
+        return self._stages(a, ud)[-1]
+
+    def _stages(self, a: float, ud: FloatArray) -> list[FloatArray]:
+        """Each stage's output of the input lag: ``v_k(t) = a v_k(t-1) + (1 - a)
+        v_{k-1}(t)``, ``v_0 = u(t-d)``, every stage at rest at ``u(-d)`` at the start."""
+        from scipy import signal  # here: a slow import most runs never need
+
+        stages = [ud]
+        for _ in range(self.input_lag_order):
+            v, _ = signal.lfilter([1.0 - a], [1.0, -a], stages[-1], zi=[a * float(ud[0])])
+            stages.append(np.asarray(v, dtype=np.float64))
+        return stages
 
     def _input_sensitivity(self, theta: FloatArray, u: FloatArray, v: FloatArray) -> FloatArray:
-        """``dv/da``: ``dv(t) = a dv(t-1) + v(t-1) - u(t-d)``, 0 at the start."""
+        """``dv/da``, stage by stage: ``dv_k(t) = a dv_k(t-1) + v_k(t-1) - v_{k-1}(t) + (1 -
+        a) dv_{k-1}(t)``, 0 at the start (``v`` is the last stage's output)."""
         from scipy import signal  # here: a slow import most runs never need
 
         i_lag, _ = self._extra_index()
         a = 0.0 if i_lag is None else float(theta[i_lag])
         ud = shift_input(u, self.delay)
-        v_prev = np.concatenate([[float(ud[0])], v[:-1]])
-        return np.asarray(signal.lfilter([1.0], [1.0, -a], v_prev - ud), dtype=np.float64)
+        stages = self._stages(a, ud) if self.input_lag_order > 1 else [ud, v]
+        dv = np.zeros(ud.size)
+        for before, after in itertools.pairwise(stages):
+            after_prev = np.concatenate([[float(ud[0])], after[:-1]])
+            drive = after_prev - before + (1.0 - a) * dv
+            dv = np.asarray(signal.lfilter([1.0], [1.0, -a], drive), dtype=np.float64)
+        return dv
 
     def unread(self, theta: FloatArray, readings: FloatArray) -> FloatArray:
         """The load position ``z`` a reading ``r = z + o + E(z)`` comes from (the fixed point
@@ -584,6 +602,7 @@ class ModelSpec:
         input_lag: bool | None = None,
         harmonics: int | None = None,
         physics: LoadPhysics | None = None,
+        input_lag_order: int | None = None,
     ) -> ModelSpec:
         """A spec with some parts replaced (``orders`` is ``(na, nb)``)."""
         s = self.structure
@@ -597,6 +616,7 @@ class ModelSpec:
             self.input_lag if input_lag is None else input_lag,
             self.harmonics if harmonics is None else harmonics,
             self.physics if physics is None else physics,
+            self.input_lag_order if input_lag_order is None else input_lag_order,
         )
 
     def embed(self, model: AugmentedModel) -> FloatArray:

@@ -33,7 +33,9 @@ def _finite_difference_jacobian(spec: ModelSpec, theta: np.ndarray, u: np.ndarra
     return out
 
 
-def test_input_lag_and_periodic_error_have_exact_sensitivities() -> None:
+@pytest.mark.parametrize("order", [1, 2])
+def test_input_lag_and_periodic_error_have_exact_sensitivities(order: int) -> None:
+    # order 2: the lag applied twice with one pole (a critically damped servo)
     u = random_walk_input(600, np.random.default_rng(3))
     model = AugmentedModel(
         GeneralBacklash((1.0, 0.05), 0.3, (1.1, 0.04), 0.2),
@@ -41,6 +43,7 @@ def test_input_lag_and_periodic_error_have_exact_sensitivities() -> None:
         offset=0.1,
         input_lag=0.7,
         periodic=PeriodicError(0.9, (0.02, 0.01), (0.01, -0.005)),
+        input_lag_order=order,
     )
     spec = ModelSpec.of(model)
     theta = spec.vector(model)
@@ -66,6 +69,13 @@ def test_the_new_effects_round_trip_through_the_json_model() -> None:
     assert data["periodic_error"]["amplitudes"] == pytest.approx([math.hypot(0.001, 0.002)])
     assert AugmentedModel.from_dict(data) == model
     assert model.effects == ("input_lag", "periodic_error")
+    two = AugmentedModel(GeneralBacklash.ideal(1.0, 0.05, 0.06), input_lag=0.5, input_lag_order=2)
+    assert two.to_dict()["input_lag"]["order"] == 2
+    assert AugmentedModel.from_dict(json.loads(json.dumps(two.to_dict()))) == two
+    step = np.r_[np.zeros(5), np.ones(20)]  # two equal stages: (1 - a)^2 of a step at once
+    assert two.simulate(step, 0.0)[5] == pytest.approx(0.25 - 0.06)  # on the right branch
+    with pytest.raises(GenBacklashError, match="input_lag_order"):
+        AugmentedModel(GeneralBacklash.ideal(1.0, 0.05, 0.06), input_lag=0.5, input_lag_order=3)
     with pytest.raises(GenBacklashError, match="pole"):
         AugmentedModel(GeneralBacklash.ideal(1.0, 0.05, 0.06), input_lag=1.0)
     with pytest.raises(GenBacklashError, match="one cos and one sin"):

@@ -8,7 +8,8 @@ Where the torque beats the load's friction the play stops showing on reversals: 
 follows the same branch both ways.
 
 Signature: trial regions (the middle half, the middle 80% and all of the travel, each side)
-change the simulated output on the reversals inside them; the best trial's F-test beyond the
+and fall rates (a few to a hundred samples across the play) change the simulated output on
+the reversals inside them; the best trial's F-test beyond the
 model's Jacobian, Bonferroni over the trials, must pass the screening thresholds.
 Augmentation: side and region on a grid of travel quantiles; the fall rate, both ends of the
 region and the model's parameters by least squares (:func:`~._physics.fit_physics`).
@@ -31,7 +32,11 @@ __all__ = ["EFFECT", "LoadTorque"]
 
 _TRIAL_REGIONS = ((0.25, 0.75), (0.1, 0.9), (0.0, 1.0))  # quantiles of the simulated load
 _GRID = (0.0, 0.2, 0.5, 0.8, 1.0)  # region ends tried by the fit (quantiles)
-_FALLS = (0.1,)  # fall per sample, as shares of the play
+# Fall per sample, as shares of the play: a torque that barely beats the friction takes tens
+# of samples to carry the load across the play (the gravity drivetrain: m g l 0.12 N m against
+# 0.1 N m of friction, 1e-3 kg m^2, ~80 ms across 70 mrad at 1 kHz), a strong one a few.
+_TRIAL_FALLS = (0.01, 0.03, 0.3)
+_FALLS = (0.01, 0.03, 0.1)
 
 
 def _side_name(side: int) -> str:
@@ -53,16 +58,17 @@ class LoadTorque:
     def detect(self, context: Context) -> Detection:
         """Trial regions and sides; the best one counts (Bonferroni)."""
         load = context.simulation.load
-        fall = 0.3 * model_play(context)
+        play = model_play(context)
         trials = [
             LoadPhysics(
                 _KIND,
                 side=side,
                 region=(float(np.quantile(load, a)), float(np.quantile(load, b))),
-                fall=fall,
+                fall=fall * play,
             )
             for side in (-1, 1)
             for a, b in _TRIAL_REGIONS
+            for fall in _TRIAL_FALLS
         ]
         best = trial_tests(context, trials)
         fires = best.fires(context)
