@@ -9,7 +9,10 @@ jogs; 100 Hz held commands; a 1 kHz load encoder at 4096 counts/rev with stamp j
   characteristic (a compensator given the true play);
 * ``node``: the node's own pipeline (:class:`~genbacklash_ros.node.pipeline.BacklashPipeline`,
   its defaults with ``compensation_in_loop``), fed each command and each encoder reading as
-  they happen; its compensated command is what the simulated servo receives.
+  they happen; its compensated command is what the simulated servo receives. With
+  ``--motor-encoder`` the node's input is a motor encoder instead (``gear_input``
+  motor_encoder): the rotor read at each encoder instant, quantised alike, 2 % lost on its
+  own draw, fed just before the load's reading of the same stamp.
 
 The numbers: the RMS load tracking error ``load - desired`` (the true load at every encoder
 instant) and each compensator's cut against ``none`` in percent, over the whole record and
@@ -17,7 +20,7 @@ over its second half (the node learns in the first); the node's final play ``c_L
 against the geometric play; the guard's final trust and error ratio.
 
 Run: ``python bench/physics_loop.py [--seeds 0 1 2] [--bandwidths 20 60 100]
-[--variants ...] [--duration 40] [--guard on|off]``
+[--variants ...] [--duration 40] [--guard on|off] [--motor-encoder]``
 """
 
 from __future__ import annotations
@@ -52,6 +55,7 @@ class Clocks:
             stamp_jitter_ns=cfg.stamp_jitter * 1e9,
         )
         self.received = np.random.default_rng([int(seed), 31]).random(self.t.size) >= cfg.loss
+        self.motor_received = np.random.default_rng([int(seed), 32]).random(self.t.size) >= cfg.loss
         self.quantum = float(cfg.quantum)
         k = np.maximum(np.searchsorted(self.cmd_t, self.t, side="right") - 1, 0)
         self.desired = self.values[k]
@@ -65,14 +69,17 @@ def open_loop(params: DrivetrainParameters, clocks: Clocks, commands: np.ndarray
 
 
 def node_loop(
-    params: DrivetrainParameters, clocks: Clocks, *, guard: bool
+    params: DrivetrainParameters, clocks: Clocks, *, guard: bool, motor: bool = False
 ) -> tuple[np.ndarray, Estimate, GuardVerdict]:
-    """The node's pipeline in the loop: its compensated command drives the servo."""
+    """The node's pipeline in the loop: its compensated command drives the servo (with
+    ``motor`` its input is the motor encoder)."""
     node = NodeParameters(
         command_type="float64",
         encoder_type="float64",
-        compensation_in_loop=True,
+        compensation_in_loop=not motor,
         compensation_guard=guard,
+        gear_input="motor_encoder" if motor else "command",
+        motor_encoder_type="float64",
     )
     pipe = BacklashPipeline(node)
     values, cmd_t, t = clocks.values, clocks.cmd_t, clocks.t
@@ -90,9 +97,13 @@ def node_loop(
         if stop <= j:
             continue
         x = traj.load_at(t[j:stop])
+        m = traj.motor_at(t[j:stop]) if motor else x
         loads[j:stop] = x
         q = clocks.quantum
         for i in range(j, stop):
+            if motor and clocks.motor_received[i]:
+                r = float(np.round(m[i - j] / q) * q) if q else float(m[i - j])
+                pipe.on_motor_value(None, r, int(t[i]))
             if clocks.received[i]:
                 y = float(np.round(x[i - j] / q) * q) if q else float(x[i - j])
                 pipe.on_encoder_value(None, y, int(t[i]))
@@ -112,6 +123,9 @@ def main() -> None:
     parser.add_argument("--variants", nargs="+", default=list(VARIANTS))
     parser.add_argument("--duration", type=float, default=40.0)
     parser.add_argument("--guard", choices=("on", "off"), default="on")
+    parser.add_argument(
+        "--motor-encoder", action="store_true", help="the node's input: a motor encoder"
+    )
     args = parser.parse_args()
     print(
         "| variant | bandwidth (Hz) | seed | rms none (mrad) | cut true (%) | cut node (%) "
@@ -132,7 +146,9 @@ def main() -> None:
                     "true": open_loop(params, clocks, compensate(truth.model, clocks.values))
                     - clocks.desired,
                 }
-                loads, est, verdict = node_loop(params, clocks, guard=args.guard == "on")
+                loads, est, verdict = node_loop(
+                    params, clocks, guard=args.guard == "on", motor=args.motor_encoder
+                )
                 errors["node"] = loads - clocks.desired
                 whole = {k: 100 * (1 - _rms(e) / _rms(errors["none"])) for k, e in errors.items()}
                 late = {
