@@ -277,8 +277,8 @@ def read_series_csv(
     missing = [c for c in (first, "y") if c not in names]
     if missing:
         raise GenBacklashError(
-            f"{file} has columns {header}; the header must name 'u' (or 'motor') and 'y' "
-            f"(missing: {missing})"
+            f"{file} has columns {header}; the header must name 'u' and 'y' (missing: "
+            f"{missing}; a motor encoder's reading may be named 'motor' in place of 'u')"
         )
     wanted = [names.index(first), names.index("y")]
     wanted += [names.index("t")] if "t" in names else []
