@@ -278,7 +278,7 @@ def read_series_csv(
     if missing:
         raise GenBacklashError(
             f"{file} has columns {header}; the header must name 'u' and 'y' (missing: "
-            f"{missing}; a motor encoder's reading may be named 'motor' in place of 'u')"
+            f"{missing}); a motor encoder's reading may be named 'motor' in place of 'u'"
         )
     wanted = [names.index(first), names.index("y")]
     wanted += [names.index("t")] if "t" in names else []
