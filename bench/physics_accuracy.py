@@ -12,8 +12,13 @@ and the play of each is compared with the geometric play of the slot (and with e
 other). The CLI is run in process (``genbacklash_ros.cli.main.main``) so the numbers are the
 commands' own.
 
+With ``--motor-encoder`` the bags also hold a motor encoder (``/motor_encoder``: the rotor,
+sampled with the load encoder, its own 2 % lost) and both commands take it as the gear's
+input (``--motor-encoder /motor_encoder``: the node's ``gear_input`` motor_encoder, no
+settling rule).
+
 Run: ``python bench/physics_accuracy.py [--seeds 0 1 2] [--bandwidths 20 60 100]
-[--variants ...] [--duration 40] [--param NAME=VALUE ...]``
+[--variants ...] [--duration 40] [--param NAME=VALUE ...] [--motor-encoder]``
 """
 
 from __future__ import annotations
@@ -57,11 +62,19 @@ def main() -> None:
     parser.add_argument("--variants", nargs="+", default=list(VARIANTS))
     parser.add_argument("--duration", type=float, default=40.0)
     parser.add_argument("--param", action="append", default=[], metavar="NAME=VALUE")
+    parser.add_argument(
+        "--motor-encoder",
+        action="store_true",
+        help="the motor encoder as the gear's input (replay and identify --motor-encoder)",
+    )
     args = parser.parse_args()
     extra = [w for p in args.param for w in ("--param", p)]
+    if args.motor_encoder:
+        extra += ["--motor-encoder", "/motor_encoder"]
+    input_label = " (motor encoder)" if args.motor_encoder else ""
     print(
-        "| variant | bandwidth (Hz) | seed | geometric play (mrad) | online / geometric "
-        "| batch / geometric | online / batch | s |"
+        f"| variant | bandwidth (Hz) | seed | geometric play (mrad) | online{input_label} / "
+        f"geometric | batch{input_label} / geometric | online / batch | s |"
     )
     print("|---|---|---|---|---|---|---|---|")
     with tempfile.TemporaryDirectory() as tmp:
@@ -72,7 +85,13 @@ def main() -> None:
                 for seed in args.seeds:
                     start = time.perf_counter()
                     bag = Path(tmp) / f"{name}-{bw:g}-{seed}"
-                    write_physics_bag(bag, params, OperationSettings(duration=args.duration), seed)
+                    write_physics_bag(
+                        bag,
+                        params,
+                        OperationSettings(duration=args.duration),
+                        seed,
+                        motor_encoder=args.motor_encoder,
+                    )
                     online = _play(
                         _run(
                             [

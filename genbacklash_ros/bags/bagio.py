@@ -748,6 +748,45 @@ def check_selection(
     return cmd, enc
 
 
+def check_motor(
+    reader: BagReader, motor_topic: str, others: Sequence[str], *, joint: str = ""
+) -> TopicInfo:
+    """Check a motor encoder topic (the gear's input, dual encoders) as
+    :func:`check_selection` checks the others: it exists (else the bag's topics are named),
+    differs from ``others`` (the command and encoder topics), has an encoder's type, holds
+    messages, and a JointState's ``joint`` is one it holds (a JointState of several joints
+    needs one). Raises :class:`BagError` with a one-line reason."""
+    if motor_topic in others:
+        raise BagError(
+            f"the motor encoder topic must differ from the command and encoder topics, "
+            f"got {motor_topic!r} for both"
+        )
+    try:
+        info = reader.topic(motor_topic, ENCODER_MSGTYPES)
+    except BagError as err:
+        raise BagError(f"motor encoder: {err}") from err
+    if not info.count:
+        raise BagError(
+            f"the motor encoder topic {info.name} ({info.msgtype}) in {reader.path} holds no "
+            f"messages; the bag has: {reader.topic_list()}"
+        )
+    if info.msgtype == JointState.ros_type:
+        names = _joint_names(_peek(reader, [motor_topic])[motor_topic])
+        listed = ", ".join(names)
+        if names and joint and joint not in names:
+            raise BagError(
+                f"joint {joint!r} is not in the motor encoder JointState on {motor_topic} in "
+                f"{reader.path}{_did_you_mean(joint, names)}; it holds: {listed} (choose with "
+                "--motor-joint NAME)"
+            )
+        if names and not joint and len(names) > 1:
+            raise BagError(
+                f"the motor encoder JointState on {motor_topic} in {reader.path} holds "
+                f"{len(names)} joints ({listed}): say which with --motor-joint NAME"
+            )
+    return info
+
+
 # --------------------------------------------------------------------------- custom data
 
 _UNREAD = object()
@@ -1048,6 +1087,7 @@ def align(
     bridge: bool = False,
     settle_ns: int = 0,
     servo: ServoChoice = None,
+    motor: bool = False,
 ) -> AlignedSeries:
     """Zero-order-hold alignment of a command stream to encoder times (batch form); the rows
     and their breaks are :func:`~genbacklash_ros.node.sample_rule.select_rows`'s (shared with
@@ -1055,7 +1095,10 @@ def align(
 
     The pipeline's rule (:mod:`genbacklash_ros.node.pipeline`, ``sample_period = 0``): the input
     of the sample at encoder time ``t`` is the latest command with time ``<= t``; samples
-    before the first command are skipped. Both streams must be sorted by time.
+    before the first command are skipped. Both streams must be sorted by time. With
+    ``motor`` the "commands" are a motor encoder's readings (the gear's input): a reading
+    whose motor reading is not its own is taken out
+    (:func:`~genbacklash_ros.node.sample_rule.paired_keep`) and ``settle_ns`` is not applied.
 
     The breaks follow the pipeline's sample rule too: the encoder's nominal period is the
     median difference of ``enc_t`` (:func:`~genbacklash_core.samples.nominal_period`), a
@@ -1077,7 +1120,15 @@ def align(
     et = np.asarray(enc_t, dtype=np.int64)
     k = np.searchsorted(ct, et, side="right") - 1
     rows = select_rows(
-        et, k, cmd_u, enc_y, marks=marks, bridge=bridge, settle_ns=settle_ns, servo=servo
+        et,
+        k,
+        cmd_u,
+        enc_y,
+        marks=marks,
+        bridge=bridge,
+        settle_ns=0 if motor else settle_ns,
+        servo=None if motor else servo,
+        input_stamps=ct if motor else None,
     )
     return AlignedSeries(
         rows.t,
@@ -1115,10 +1166,17 @@ def read_aligned(
     settle_ns: int = 0,
     keep_readable: bool = False,
     servo: ServoChoice = None,
+    motor_topic: str | None = None,
+    motor_joint: str = "",
 ) -> AlignedSeries:
     """Read a command and an encoder topic from a bag and align them (see :func:`align`;
     ``bridge`` for a backlash alone; ``settle_ns`` the servo's settling rule, as the node;
     ``servo`` the servo model, or ``"auto"``).
+
+    With ``motor_topic`` (a motor encoder, dual encoders: the node's ``gear_input =
+    "motor_encoder"``) the input of each row is the motor reading of the encoder reading's
+    stamp (``motor_joint``: its joint, default ``joint``), as the node pairs them; the
+    command topic is still checked and read (the rows start at the first command).
 
     A bag that turns out truncated or corrupt part-way raises :class:`BagError`; with
     ``keep_readable`` the messages before the damage are aligned instead, as a replay keeps
@@ -1135,6 +1193,12 @@ def read_aligned(
             reader, command_topic, encoder_topic, joint=joint, command_index=command_index
         )
         cmd_type, enc_type = cmd_info.msgtype, enc_info.msgtype
+        motor_joint = motor_joint or joint
+        mot_type = ""
+        if motor_topic is not None:
+            mot_type = check_motor(
+                reader, motor_topic, (command_topic, encoder_topic), joint=motor_joint
+            ).msgtype
         # values straight from the CDR bytes, in numpy steps per block; a message the fast
         # path cannot vouch for is read (or rejected) by the adapters, one by one
         readers = {
@@ -1145,6 +1209,9 @@ def read_aligned(
             command_topic: [],
             encoder_topic: [],
         }
+        if motor_topic is not None:
+            readers[motor_topic] = RawValueReader(mot_type, "encoder", joint=motor_joint)
+            parts[motor_topic] = []
 
         def take(block: list[RawMessage]) -> None:
             for topic, read in readers.items():
@@ -1156,7 +1223,7 @@ def read_aligned(
         block: list[RawMessage] = []
         damage = ""
         try:
-            for item in reader.raw_messages([command_topic, encoder_topic]):
+            for item in reader.raw_messages(list(parts)):
                 block.append(item)
                 if len(block) >= 8192:
                     take(block)
@@ -1186,7 +1253,22 @@ def read_aligned(
         seen = np.cumsum(e_m)[unique]
         e_m = np.diff(seen, prepend=0) > 0
         e_t, e_y = e_t[unique], e_y[unique]
-    series = align(c_t, c_u, e_t, e_y, marks=e_m, bridge=bridge, settle_ns=settle_ns, servo=servo)
+    if motor_topic is not None:  # the gear's input: the motor readings after the first command
+        m_t, m_y, m_ok = (np.concatenate(a) for a in zip(*parts[motor_topic], strict=True))
+        m_t, m_y = m_t[m_ok], m_y[m_ok]
+        if not m_t.size:
+            raise BagError(f"no readable motor reading on {motor_topic!r} in {path}{before}")
+        order_m = np.argsort(m_t, kind="stable")
+        m_t, m_y = _increasing(m_t[order_m], m_y[order_m])
+        after = m_t >= c_t[0]
+        m_t, m_y = m_t[after], m_y[after]
+        if not m_t.size:
+            raise BagError(f"no motor reading on {motor_topic!r} follows the first command")
+        series = align(m_t, m_y, e_t, e_y, marks=e_m, bridge=bridge, motor=True)
+    else:
+        series = align(
+            c_t, c_u, e_t, e_y, marks=e_m, bridge=bridge, settle_ns=settle_ns, servo=servo
+        )
     if series.t.size == 0:
         raise BagError(f"no encoder reading on {encoder_topic!r} follows the first command{before}")
     return dataclasses.replace(series, damage=damage) if damage else series

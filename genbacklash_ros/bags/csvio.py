@@ -235,6 +235,12 @@ def read_series_csv(
 ) -> Series:
     r"""Read a CSV whose header names the columns ``u`` and ``y`` (and optionally ``t``).
 
+    A column ``motor`` in place of ``u`` is a motor encoder's reading, the gear's input
+    (the node's ``gear_input`` motor_encoder; ``genbacklash readings --motor-encoder``
+    writes one): it is the series' ``u``, each row's motor reading is its own (a reading
+    whose motor reading was lost is not a row: its stamp is missing, as a lost reading's),
+    and the settling rule does not apply.
+
     With ``t`` the series carries its ``breaks`` (see the module notes); with increasing
     stamps the rows are chosen by :func:`~genbacklash_ros.node.sample_rule.select_rows`
     (``bridge``: a backlash alone; ``settle_ns``: the servo's settling time, with ``bridge``;
@@ -276,12 +282,16 @@ def read_series_csv(
     if not header:
         raise GenBacklashError(f"{file} is empty; expected a header line with columns u,y")
     names = [name.strip().lower() for name in header]
-    missing = [c for c in ("u", "y") if c not in names]
+    motor = "motor" in names and "u" not in names  # a motor encoder's reading as the input
+    first = "motor" if motor else "u"
+    missing = [c for c in (first, "y") if c not in names]
     if missing:
         raise GenBacklashError(
-            f"{file} has columns {header}; the header must name 'u' and 'y' (missing: {missing})"
+            f"{file} has columns {header}; the header must name 'u' and 'y' (missing: "
+            f"{missing}); a motor encoder's reading may be named 'motor' in place of 'u'"
         )
-    wanted = [names.index("u"), names.index("y")] + ([names.index("t")] if "t" in names else [])
+    wanted = [names.index(first), names.index("y")]
+    wanted += [names.index("t")] if "t" in names else []
     dropped: tuple[int, ...] = ()
     kept: list[int] | None = None
     exact_t: npt.NDArray[np.int64] | None = None
@@ -323,6 +333,8 @@ def read_series_csv(
         # changes of u, and the bag's rules choose the rows (select_rows)
         change = np.ones(u.size, dtype=bool)
         change[1:] = u[1:] != u[:-1]
+        if motor:  # every row's motor reading is its own input, at its own stamp
+            change[:] = True
         rows = select_rows(
             clock,
             np.cumsum(change) - 1,
@@ -330,8 +342,9 @@ def read_series_csv(
             y,
             marks=after_gap,
             bridge=bridge,
-            settle_ns=settle_ns,
-            servo=servo,
+            settle_ns=0 if motor else settle_ns,
+            servo=None if motor else servo,
+            input_stamps=clock[change] if motor else None,
         )
         if _in_ns(t):  # seconds from the first row kept, as a bag's series (from exact ns)
             t = (rows.t - rows.t[0]) / 1e9 if rows.t.size else rows.t.astype(np.float64)
@@ -376,17 +389,20 @@ def write_readings_csv(
     t_ns: npt.ArrayLike,
     u: npt.ArrayLike,
     y: npt.ArrayLike,
+    *,
+    motor: bool = False,
 ) -> None:
     """Write readings as ``t,u,y``: ``t`` in integer nanoseconds (exact), ``u`` the command
     held at the reading and ``y`` the reading, at full float precision; what
-    :func:`read_series_csv` reads back into the same rows."""
+    :func:`read_series_csv` reads back into the same rows. With ``motor`` the input column
+    is ``motor`` (a motor encoder's reading at the reading's stamp: ``t,motor,y``)."""
     t = np.asarray(t_ns, dtype=np.int64)
     uu = np.asarray(u, dtype=np.float64)
     yy = np.asarray(y, dtype=np.float64)
     file = Path(path)
     file.parent.mkdir(parents=True, exist_ok=True)
     with file.open("w", newline="") as handle:
-        handle.write("t,u,y\n")
+        handle.write("t,motor,y\n" if motor else "t,u,y\n")
         handle.writelines(
             f"{a},{b!r},{c!r}\n"
             for a, b, c in zip(t.tolist(), uu.tolist(), yy.tolist(), strict=True)

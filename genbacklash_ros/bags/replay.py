@@ -42,6 +42,7 @@ from genbacklash_ros.bags.bagio import (
     BagReader,
     BagWriter,
     RawMessage,
+    check_motor,
     check_selection,
 )
 from genbacklash_ros.bags.raw_values import RawValueReader, UndecodableMessage
@@ -280,6 +281,7 @@ class _Feed:
         publish: Callable[[list[Output], int], list[RawMessage]],
         use_header: bool,
         batched: bool,
+        motor: tuple[str, RawValueReader] | None = None,
     ) -> None:
         self.pipeline = pipeline
         self.read_cmd, self.read_enc = read_cmd, read_enc
@@ -290,12 +292,17 @@ class _Feed:
         self.publish = publish
         self.use_header = use_header
         self.batched = batched
+        # a motor encoder (the gear's input): its messages go the per-message way
+        self.motor_topic = motor[0] if motor is not None else ""
+        self.read_motor: RawValueReader | None = motor[1] if motor is not None else None
 
     def block(self, items: list[RawMessage]) -> None:
         """Feed ``items`` (in log-time order) and write the output they make."""
         n = len(items)
         topics, times, _types, raws = zip(*items, strict=True)  # the fields, each in order
-        is_cmd = np.array(topics, dtype=object) == self.command_topic
+        names = np.array(topics, dtype=object)
+        is_cmd = names == self.command_topic
+        is_mot = names == self.motor_topic if self.read_motor is not None else None
         heads = np.zeros(n, dtype=np.int64)
         values = np.full(n, np.nan)
         ok = np.zeros(n, dtype=bool)
@@ -308,7 +315,8 @@ class _Feed:
         else:
             batched = self.batched
         if batched:
-            for reader, mine in ((self.read_cmd, is_cmd), (self.read_enc, ~is_cmd)):
+            enc_mask = ~is_cmd if is_mot is None else ~is_cmd & ~is_mot
+            for reader, mine in ((self.read_cmd, is_cmd), (self.read_enc, enc_mask)):
                 where = np.flatnonzero(mine)
                 h, v, good = reader.read_many([raws[k] for k in where.tolist()])
                 heads[where], values[where], ok[where] = h, v, good
@@ -319,7 +327,8 @@ class _Feed:
         stamps = np.zeros(n, dtype=np.int64)
         outputs: dict[int, list[Output]] = {}
         start = 0
-        for odd in [*np.flatnonzero(~ok).tolist(), n]:  # not batched: every message
+        odd_ones = ~ok if is_mot is None else ~ok | is_mot
+        for odd in [*np.flatnonzero(odd_ones).tolist(), n]:  # not batched: every message
             if odd > start:  # the messages read at once: one batch
                 part = pipe.on_batch(
                     is_cmd[start:odd], heads[start:odd], values[start:odd], log[start:odd]
@@ -333,6 +342,12 @@ class _Feed:
                     outputs.setdefault(start + k, []).append(out)
             if odd == n:
                 break
+            if is_mot is not None and is_mot[odd]:
+                more = self._motor(items[odd])
+                if more:
+                    outputs[odd] = more
+                start = odd + 1
+                continue
             outs = self._one(items[odd], bool(is_cmd[odd]), heads, values, ok, odd)
             if outs is not None:
                 taken, more = outs
@@ -342,7 +357,7 @@ class _Feed:
                 if more:
                     outputs[odd] = more
             start = odd + 1
-        enc = np.flatnonzero(~is_cmd & ok)
+        enc = np.flatnonzero(~is_cmd & ok if is_mot is None else ~is_cmd & ~is_mot & ok)
         if fits:  # the log times as int64
             stamped = heads[enc] if self.use_header else np.zeros(enc.size, dtype=np.int64)
             history.encoder_t.extend(np.where(stamped != 0, stamped, log[enc]).tolist())
@@ -381,6 +396,18 @@ class _Feed:
                 records += self.publish(due, item.log_time_ns)
         records += items[done:]
         writer.write_messages(records)
+
+    def _motor(self, item: RawMessage) -> list[Output]:
+        """A motor encoder message through the per-message path (rejected when its bytes
+        do not decode)."""
+        assert self.read_motor is not None
+        try:
+            header_ns, value = self.read_motor.read(item.raw)
+        except MessageError as err:
+            self.pipeline.reject("motor", str(err))
+            self.corrupt.note(err, item.topic, item.log_time_ns)
+            return []
+        return self.pipeline.on_motor_value(header_ns, value, item.log_time_ns)
 
     def _one(
         self,
@@ -447,6 +474,8 @@ def replay(
     method: str | None = None,
     progress: bool = False,
     batched: bool = True,
+    motor_topic: str | None = None,
+    motor_joint: str | None = None,
 ) -> ReplayResult:
     """Replay ``bag`` through one :class:`BacklashPipeline` and write ``output``.
 
@@ -469,6 +498,14 @@ def replay(
         Feed the pipeline blocks of messages (:meth:`BacklashPipeline.on_batch`, the fast
         path); False: one message at a time (:meth:`~BacklashPipeline.on_command_value`,
         :meth:`~BacklashPipeline.on_encoder_value`). The outputs are the same.
+    motor_topic : str, optional
+        A motor encoder's topic (JointState or Float64; dual encoders): the gear's input
+        (``gear_input = "motor_encoder"``, ``motor_encoder_type`` from its type), copied to
+        the output like the others. The pipeline then takes every message by itself (its
+        per-message path), a few times slower than the block path.
+    motor_joint : str, optional
+        The motor encoder JointState's joint (None: the parameter ``motor_joint``, else
+        ``joint``).
 
     Returns
     -------
@@ -499,6 +536,15 @@ def replay(
             "nb": nb,
             "method": method,
         }
+        mot_type = ""
+        if motor_topic is not None:
+            try:
+                mot_type = reader.topic(motor_topic, ENCODER_MSGTYPES).msgtype
+            except BagError as err:
+                raise BagError(f"motor encoder: {err}") from err
+            overrides["gear_input"] = "motor_encoder"
+            overrides["motor_encoder_type"] = ENCODER_MSGTYPES[mot_type]
+            overrides["motor_joint"] = motor_joint
         run_params = _replay_params(params, cmd_info.msgtype, enc_info.msgtype, overrides)
         # a joint, an index or a topic that matches nothing stops here, before any output
         check_selection(
@@ -508,6 +554,20 @@ def replay(
             joint=run_params.joint,
             command_index=run_params.command_index,
         )
+        topics = [command_topic, encoder_topic]
+        motor: tuple[str, RawValueReader] | None = None
+        if motor_topic is not None:
+            check_motor(reader, motor_topic, topics, joint=run_params.motor_joint_name)
+            motor = (
+                motor_topic,
+                RawValueReader(mot_type, "encoder", joint=run_params.motor_joint_name),
+            )
+            topics.append(motor_topic)
+        elif run_params.motor_input:
+            raise BagError(
+                "the parameters say gear_input motor_encoder: name the motor encoder's topic "
+                "with --motor-encoder TOPIC"
+            )
         pipeline = BacklashPipeline(run_params)
         history = ReplayHistory(names=run_params.structure().names())
         index, joint_name = run_params.command_index, run_params.joint
@@ -515,10 +575,12 @@ def replay(
         error = ""
         count = 0
         last_log = 0
-        bar = _Progress(reader.count([command_topic, encoder_topic]), progress)
+        bar = _Progress(reader.count(topics), progress)
         with BagWriter(output) as writer:
             writer.add_topic(command_topic, cmd_info.msgtype)
             writer.add_topic(encoder_topic, enc_info.msgtype)
+            if motor_topic is not None:
+                writer.add_topic(motor_topic, mot_type)
             writer.add_topic(OUTPUT_TOPICS["estimate"], Float64MultiArray.ros_type)
             writer.add_topic(OUTPUT_TOPICS["compensated_command"], cmd_info.msgtype)
             writer.add_topic(OUTPUT_TOPICS["diagnostics"], DiagnosticArray.ros_type)
@@ -566,9 +628,10 @@ def replay(
                 publish,
                 use_header,
                 batched,
+                motor,
             )
             block: list[RawMessage] = []
-            stream = reader.raw_messages([command_topic, encoder_topic])
+            stream = reader.raw_messages(topics)
             size = _BLOCK if batched else 1
             try:
                 while True:

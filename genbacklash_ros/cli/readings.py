@@ -28,12 +28,13 @@ from genbacklash_ros.cli.joints import per_joint
 from genbacklash_ros.cli.replay import (
     add_bag_input_options,
     add_node_parameter_options,
+    motor_selection,
     node_parameters,
 )
 
 __all__ = ["add_parser", "cmd_readings", "rows_differ"]
 
-_USED = ("joint", "command_index", "settle_time")
+_USED = ("joint", "command_index", "settle_time", "gear_input", "motor_joint")
 
 
 def rows_differ(bag: AlignedSeries, csv: Series) -> int:
@@ -53,6 +54,7 @@ def cmd_readings(args: argparse.Namespace) -> int:
     params = node_parameters(args, _USED).params
     joint = args.joint if args.joint is not None else params.joint
     index = args.command_index if args.command_index is not None else params.command_index
+    motor_topic, motor_joint = motor_selection(args, params, joint)
 
     def rows(bridge: bool, settle_ns: int) -> AlignedSeries:
         return read_aligned(
@@ -63,15 +65,22 @@ def cmd_readings(args: argparse.Namespace) -> int:
             command_index=index,
             bridge=bridge,
             settle_ns=settle_ns,
+            motor_topic=motor_topic,
+            motor_joint=motor_joint,
         )
 
     every = rows(False, 0)  # every reading after the first command, no rule applied
     try:
-        write_readings_csv(args.output, every.t, every.u, every.y)
+        write_readings_csv(args.output, every.t, every.u, every.y, motor=motor_topic is not None)
     except OSError as err:
         raise GenBacklashError(f"cannot write {args.output}: {err.strerror or err}") from err
     print(
-        f"wrote {args.output}: {every.t.size} readings (t in ns, u the command held, y)"
+        f"wrote {args.output}: {every.t.size} readings (t in ns, "
+        + (
+            "motor the motor reading of the stamp, y; readings without one left out)"
+            if motor_topic is not None
+            else "u the command held, y)"
+        )
         + (
             f"; {every.skipped} readings before the first command left out" if every.skipped else ""
         ),
@@ -111,7 +120,9 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
             "command. identify and diagnose apply the same row rules to it as to the bag "
             "(the servo's settling rule, lost readings bridged), so a CSV and a bag of the "
             "same readings give the same answer; the command reads the CSV back and says "
-            "whether its rows are the bag's."
+            "whether its rows are the bag's. With --motor-encoder the input column is "
+            "'motor' (the motor encoder's reading of each stamp; readings without one are "
+            "left out), which identify and diagnose take as the gear's input."
         ),
     )
     parser.add_argument("bag", metavar="BAG", help="rosbag2 directory or .mcap file")

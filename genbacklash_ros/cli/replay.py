@@ -125,6 +125,45 @@ def add_bag_input_options(parser: argparse.ArgumentParser, *, required: bool) ->
         help="bag input: element of a Float64MultiArray command (default 0; one beyond the "
         "array stops with its length); with several --joint, one per joint in the same order",
     )
+    parser.add_argument(
+        "--motor-encoder",
+        metavar="TOPIC",
+        dest="motor_topic",
+        default=None,
+        help="bag input: a motor encoder's topic (sensor_msgs/JointState or std_msgs/Float64; "
+        "dual encoders, e.g. an ODrive's or moteus's own): its reading, paired with the "
+        "encoder reading of the same stamp, is the gear's input instead of the command "
+        "(the node's gear_input motor_encoder; no settle_time); the commands are still read "
+        "and compensated",
+    )
+    parser.add_argument(
+        "--motor-joint",
+        metavar="NAME",
+        dest="motor_joint",
+        default=None,
+        help="bag input: joint name in the motor encoder's JointState (default: the "
+        "parameter motor_joint, else --joint)",
+    )
+
+
+def motor_selection(
+    args: argparse.Namespace, params: NodeParameters | None, joint: str
+) -> tuple[str | None, str]:
+    """The motor encoder's topic (None: the command is the gear's input) and joint of a bag
+    command line: ``--motor-encoder``, ``--motor-joint`` (else the parameter ``motor_joint``,
+    else ``joint``). Parameters that say ``gear_input`` motor_encoder need the topic."""
+    topic = getattr(args, "motor_topic", None)
+    chosen = getattr(args, "motor_joint", None)
+    if chosen is None:
+        chosen = params.motor_joint if params is not None else ""
+    if topic is None and params is not None and params.motor_input:
+        raise BagError(
+            "the parameters say gear_input motor_encoder: name the motor encoder's topic with "
+            "--motor-encoder TOPIC"
+        )
+    if topic is None and getattr(args, "motor_joint", None) is not None:
+        raise BagError("--motor-joint needs --motor-encoder TOPIC (the motor encoder's topic)")
+    return topic, chosen or joint
 
 
 def load_bag_series(
@@ -146,6 +185,7 @@ def load_bag_series(
     index = args.command_index
     if index is None:
         index = params.command_index if params else 0
+    motor_topic, motor_joint = motor_selection(args, params, joint)
     series = read_aligned(
         args.data,
         args.command_topic,
@@ -155,6 +195,8 @@ def load_bag_series(
         bridge=bridge,
         settle_ns=params.settle_ns if params is not None else 0,
         servo=params.servo() if params is not None else None,
+        motor_topic=motor_topic,
+        motor_joint=motor_joint,
     )
     if series.skipped:
         print(
@@ -217,6 +259,11 @@ def load_series(
     file = Path(args.data)
     if is_bag(file):
         return load_bag_series(args, params, bridge=bridge)
+    if getattr(args, "motor_topic", None) is not None:
+        raise GenBacklashError(
+            f"--motor-encoder is a bag option; {file} is a CSV: name its motor column "
+            "'motor' instead of 'u' (genbacklash readings --motor-encoder writes one)"
+        )
     if not file.exists():
         raise GenBacklashError(f"{file} does not exist")
     drop = bool(getattr(args, "drop_nonfinite", False))
@@ -240,10 +287,16 @@ BATCH_PARAMETERS = ("model", "degree", "na", "nb")
 # ... and the rule for which samples are rows (genbacklash_core.settling), on bags and on
 # a CSV with t (the same rule: genbacklash_ros.node.sample_rule.select_rows)
 _ROW_PARAMETERS = ("settle_time", "servo_model", "servo_dead_time", "servo_time_constant")
-_BAG_PARAMETERS = ("joint", "command_index")
+_BAG_PARAMETERS = ("joint", "command_index", "gear_input", "motor_joint")
 # set by the replay itself (genbacklash_ros.bags.replay): the bag's message types, the recorded
 # command, no checkpoint
-_SET_BY_REPLAY = ("command_type", "encoder_type", "compensation_in_loop", "checkpoint_file")
+_SET_BY_REPLAY = (
+    "command_type",
+    "encoder_type",
+    "motor_encoder_type",
+    "compensation_in_loop",
+    "checkpoint_file",
+)
 
 
 def batch_parameters(data: str | Path) -> tuple[str, ...]:
@@ -718,11 +771,15 @@ def cmd_replay(args: argparse.Namespace) -> int:
     """Run ``genbacklash replay``."""
     used = [s.name for s in PARAMETER_SPECS if s.name not in _SET_BY_REPLAY]
     params = node_parameters(args, used).params
+    joint = args.joint if args.joint is not None else params.joint
+    motor_topic, motor_joint = motor_selection(args, params, joint)
     result = replay(
         args.bag,
         args.output,
         command_topic=args.command_topic,
         encoder_topic=args.encoder_topic,
+        motor_topic=motor_topic,
+        motor_joint=motor_joint if motor_topic is not None else None,
         params=params,
         joint=args.joint,
         command_index=args.command_index,
@@ -788,8 +845,8 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     )
     add_node_parameter_options(
         parser,
-        used="All parameters apply except command_type, encoder_type (from the bag), "
-        "compensation_in_loop (false) and checkpoint_file (none).",
+        used="All parameters apply except command_type, encoder_type, motor_encoder_type "
+        "(from the bag), compensation_in_loop (false) and checkpoint_file (none).",
         params_file=False,
     )
     parser.add_argument("--model", choices=("backlash", "cascade"), default=None)

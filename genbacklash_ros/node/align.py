@@ -12,6 +12,15 @@ nanoseconds throughout; the rules are in the notes of :mod:`genbacklash_ros.node
 * which samples are *final* (their command is known) and, on request, those samples with
   their command (:meth:`Aligner.take`), on the encoder's own times or on a fixed grid.
 
+With ``motor=True`` (the node's ``gear_input = "motor_encoder"``) the gear's input is a motor
+encoder's reading, not the command: the input stream is the motor readings
+(:meth:`Aligner.add_motor`), each encoder reading is paired with the motor reading of its
+stamp (:func:`~genbacklash_ros.node.sample_rule.paired_keep`: one taken no more than half an
+encoder period before it; a reading whose motor reading was lost is taken out as a lost
+reading is), a sample is final once a motor reading at or after it has come, and commands
+only keep their order (:meth:`Aligner.add_command` records the time). The settling rule does
+not apply: the motor's position is what the gear gets, however long the servo takes.
+
 It returns :class:`AlignedBatch` values and counts of samples taken out; it calls nothing
 downstream. Whether a sample is fed is the screen stage's concern
 (:mod:`genbacklash_ros.node.screen`).
@@ -38,7 +47,13 @@ import numpy as np
 from genbacklash_core.errors import GenBacklashError
 from genbacklash_core.servo import ServoFit, ServoModel, ServoState, estimate_servo
 from genbacklash_core.settling import SettleState, carry_marks, settling_keep
-from genbacklash_ros.node.sample_rule import EncoderPeriod, ServoChoice, keep_breaks, link_breaks
+from genbacklash_ros.node.sample_rule import (
+    EncoderPeriod,
+    ServoChoice,
+    keep_breaks,
+    link_breaks,
+    paired_keep,
+)
 
 __all__ = ["MAX_COMMANDS", "AlignedBatch", "Aligner"]
 
@@ -73,7 +88,11 @@ class AlignedBatch:
         may be bridged for a backlash alone. None on a grid (not judged).
     resumed : numpy.ndarray of bool or None
         ``resumed[k]``: samples before ``k`` were taken out while the servo settled
-        (:mod:`genbacklash_core.settling`); None when none were.
+        (:mod:`genbacklash_core.settling`), or for want of a motor reading; None when none
+        were.
+    unpaired : int
+        Samples taken out because no motor reading was taken at their stamp (a motor
+        encoder as the gear's input; counted quietly).
     """
 
     times: np.ndarray
@@ -86,6 +105,7 @@ class AlignedBatch:
     before_first_command: int = 0
     monotone: np.ndarray | None = None
     resumed: np.ndarray | None = None
+    unpaired: int = 0
 
     @property
     def size(self) -> int:
@@ -127,7 +147,7 @@ class Aligner:
     settle_ns : int
         The servo's settling time (:mod:`genbacklash_core.settling`): samples taken sooner
         after their command changed are taken out as lost readings are (0: none). Not on a
-        grid, nor with a ``servo``.
+        grid, nor with a ``servo`` or ``motor``.
     servo : ServoModel or "auto" or None
         The servo between the command and the gear (:mod:`genbacklash_core.servo`): the
         samples' input becomes its modelled output, as
@@ -135,9 +155,11 @@ class Aligner:
         (no settling rule, no bridging). ``"auto"``: the samples of the first
         ``servo_window_ns`` are held back, the servo estimated from them
         (:func:`~genbacklash_core.servo.estimate_servo`), then they and all later ones are
-        handed on with its output. Not on a grid.
+        handed on with its output. Not on a grid, nor with ``motor``.
     servo_window_ns : int
         The data time ``"auto"`` collects before it estimates.
+    motor : bool
+        The gear's input is a motor encoder's reading (see the module notes; not on a grid).
     """
 
     def __init__(
@@ -149,20 +171,23 @@ class Aligner:
         settle_ns: int = 0,
         servo: ServoChoice = None,
         servo_window_ns: int = 5_000_000_000,
+        motor: bool = False,
     ) -> None:
         self._use_header = use_header
         self._grid_ns = grid_ns
         self._wait = wait_ns
-        self._servo: ServoChoice = None if grid_ns else servo
+        self._motor = motor
+        self._servo: ServoChoice = None if grid_ns or motor else servo
         self._servo_window = servo_window_ns
         self._servo_state: ServoState | None = None
         self._servo_held: list[AlignedBatch] = []  # "auto": batches before the estimate
         self.servo_fit: ServoFit | None = None
         self.servo_note = ""  # why "auto" fell back to no servo ("" when it did not)
-        self._settle_ns = 0 if grid_ns or self._servo is not None else settle_ns
+        self._settle_ns = 0 if grid_ns or motor or self._servo is not None else settle_ns
         self._settle = SettleState()
         self._settle_tail = False  # the last batch ended with samples taken out settling
-        # streams: accepted times and values (commands: what the identifier takes)
+        # streams: accepted times and values of the identifier's input (the commands, or
+        # with ``motor`` the motor readings)
         self.cmd_t: list[int] = []
         self.cmd_u: list[float] = []
         self._enc_t: list[int] = []
@@ -173,6 +198,7 @@ class Aligner:
         self._period = EncoderPeriod()
         self._linked = False  # the next batch may link to the sample fed before it
         self.last_cmd_ns: int | None = None
+        self.last_motor_ns: int | None = None  # with ``motor``: the input stream's last time
         self.last_enc_ns: int | None = None
         self.last_y: float | None = None
         self._next_grid_k: int | None = None
@@ -195,9 +221,25 @@ class Aligner:
         """Encoder readings not yet taken."""
         return len(self._enc_t)
 
+    @property
+    def motor(self) -> bool:
+        """The gear's input is a motor encoder's reading."""
+        return self._motor
+
     def add_command(self, stamp: int, value: float) -> None:
-        """An accepted command at ``stamp``; ``value`` is what the identifier takes."""
+        """An accepted command at ``stamp``; ``value`` is what the identifier takes (with
+        ``motor`` only the time is kept: the motor readings are the input)."""
         self.last_cmd_ns = stamp
+        if self._motor:
+            return
+        self._add_input(stamp, value)
+
+    def add_motor(self, stamp: int, value: float) -> None:
+        """An accepted motor reading at ``stamp`` (with ``motor``: the identifier's input)."""
+        self.last_motor_ns = stamp
+        self._add_input(stamp, value)
+
+    def _add_input(self, stamp: int, value: float) -> None:
         self.cmd_t.append(stamp)
         self.cmd_u.append(value)
         if len(self.cmd_t) > MAX_COMMANDS:
@@ -279,10 +321,11 @@ class Aligner:
             self._servo_held = []
         if self.cmd_u:
             self.cmd_t, self.cmd_u = [stamp - 1], [self.cmd_u[-1]]
-            self.last_cmd_ns = stamp - 1
         else:
             self.cmd_t, self.cmd_u = [], []
-            self.last_cmd_ns = None
+        self.last_cmd_ns = stamp - 1 if self.cmd_u else None
+        if self._motor:  # the last motor reading is held (the pairing rule judges it)
+            self.last_motor_ns = self.last_cmd_ns
         self.last_enc_ns = None
 
     # ------------------------------------------------------------------ samples
@@ -296,8 +339,9 @@ class Aligner:
         if final:
             return last_enc
         horizon = last_enc - self._wait
-        if self.last_cmd_ns is not None and self.last_cmd_ns > horizon:
-            horizon = self.last_cmd_ns
+        last_input = self.last_motor_ns if self._motor else self.last_cmd_ns
+        if last_input is not None and last_input > horizon:
+            horizon = last_input
         return horizon
 
     @property
@@ -413,7 +457,30 @@ class Aligner:
         commands = np.array(self.cmd_u)
         us = commands[k]
         resumed = None
-        if self._settle_ns:
+        unpaired = 0
+        if self._motor:  # each reading with the motor reading of its stamp, or taken out
+            input_t = np.array(self.cmd_t, dtype=np.int64)[k]
+            paired = paired_keep(times, input_t, period)
+            tail = self._settle_tail
+            self._settle_tail = not paired[-1] or (tail and not paired.any())
+            if not paired.all() or tail:  # taken out as lost readings: bridged where monotone
+                unpaired = int(np.count_nonzero(~paired))
+                resumed = carry_marks(~paired, paired)
+                if tail and resumed.size:
+                    resumed[0] = True
+                marks = carry_marks(marks, paired)
+                k, us, ys, times, held = (
+                    k[paired],
+                    us[paired],
+                    ys[paired],
+                    times[paired],
+                    held[paired],
+                )
+                if k.size == 0:
+                    return AlignedBatch(
+                        times, us, ys, held, marks, period, linked, early, None, None, unpaired
+                    )
+        elif self._settle_ns:
             settled, self._settle = settling_keep(times, us, self._settle_ns, self._settle)
             tail = self._settle_tail
             self._settle_tail = not settled[-1] or (tail and not settled.any())
@@ -437,7 +504,9 @@ class Aligner:
             del self.cmd_t[:keep], self.cmd_u[:keep]
         self._linked = True
         self._last_time = int(times[-1])
-        return AlignedBatch(times, us, ys, held, marks, period, linked, early, monotone, resumed)
+        return AlignedBatch(
+            times, us, ys, held, marks, period, linked, early, monotone, resumed, unpaired
+        )
 
     def _monotone(self, k: np.ndarray, linked: bool) -> np.ndarray:
         """Per sample, whether the commands in force since the sample before were monotone

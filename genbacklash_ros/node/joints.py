@@ -175,6 +175,11 @@ class JointSet:
                 "with 'joints', leave 'joint' and 'command_index' unset: 'joints' and "
                 "'command_indices' say each joint's name and element"
             )
+        if base.gear_input != "command":
+            raise GenBacklashError(
+                "'joints' takes gear_input command only: a motor encoder as the gear's input "
+                "is one joint per node (run one node per joint)"
+            )
         if base.encoder_type != "joint_state":
             raise GenBacklashError(
                 "'joints' needs encoder_type joint_state (the joints' readings by name)"

@@ -22,7 +22,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-__all__ = ["DROP_KEYS", "ENCODER_REJECTS", "LIVE_ONLY_DROPS", "QUIET_DROPS", "Ledger", "Period"]
+__all__ = [
+    "DROP_KEYS",
+    "ENCODER_REJECTS",
+    "LIVE_ONLY_DROPS",
+    "MOTOR_DROPS",
+    "QUIET_DROPS",
+    "SHOWN_WHEN_ANY",
+    "Ledger",
+    "Period",
+]
 
 DROP_KEYS = (
     "command_invalid",
@@ -37,12 +46,20 @@ DROP_KEYS = (
     "encoder_stuck",
     "encoder_after_gap",
     "identifier_behind",
+    "motor_invalid",
+    "motor_out_of_order",
+    "motor_missing",
 )
 # expected at start, or reported as a fault of their own: counted, no WARN of their own
-QUIET_DROPS = frozenset({"before_first_command", "encoder_stuck", "encoder_after_gap"})
+QUIET_DROPS = frozenset(
+    {"before_first_command", "encoder_stuck", "encoder_after_gap", "motor_missing"}
+)
 ENCODER_REJECTS = frozenset({"encoder_invalid", "encoder_duplicate", "encoder_out_of_order"})
 # only a live worker that fell behind drops these: listed in a report only when there were any
 LIVE_ONLY_DROPS = frozenset({"identifier_behind"})
+# only a node whose gear input is a motor encoder (gear_input) drops these: listed likewise
+MOTOR_DROPS = frozenset({"motor_invalid", "motor_out_of_order", "motor_missing"})
+SHOWN_WHEN_ANY = LIVE_ONLY_DROPS | MOTOR_DROPS
 
 
 @dataclass

@@ -227,6 +227,11 @@ class MultiJointPipeline:
         outputs.insert(0, Output("compensated_command", out_msg, stamp))
         return outputs
 
+    def on_motor(self, msg: object, receive_ns: int) -> list[Output]:
+        """A motor encoder message: nothing (``joints`` takes no motor encoder, see
+        :class:`~genbacklash_ros.node.joints.JointSet`; one node per joint does)."""
+        return []
+
     def on_encoder(self, msg: object, receive_ns: int) -> list[Output]:
         """An encoder JointState: each joint's reading to its pipeline; the periodic outputs
         now due."""

@@ -251,6 +251,34 @@ PARAMETER_SPECS: tuple[ParameterSpec, ...] = (
         choices=ENCODER_TYPES,
     ),
     ParameterSpec(
+        "gear_input",
+        "string",
+        "command",
+        "What the identifier takes as the gear's input: the command (the servo's answer "
+        "modelled by settle_time), or the motor-side position a motor encoder publishes on "
+        "motor_encoder (dual encoders): each encoder reading is paired with the motor "
+        "reading of its stamp, and the compensated command is the inverse of the identified "
+        "motor-to-load backlash at the desired load position.",
+        choices=("command", "motor_encoder"),
+        restarts=True,
+    ),
+    ParameterSpec(
+        "motor_encoder_type",
+        "string",
+        "joint_state",
+        "Message type of the motor_encoder topic (sensor_msgs/JointState or std_msgs/Float64; "
+        "gear_input motor_encoder).",
+        choices=ENCODER_TYPES,
+        restarts=True,
+    ),
+    ParameterSpec(
+        "motor_joint",
+        "string",
+        "",
+        "Joint name in the motor_encoder JointState; empty: the joint parameter's.",
+        restarts=True,
+    ),
+    ParameterSpec(
         "compensate",
         "bool",
         True,
@@ -262,7 +290,9 @@ PARAMETER_SPECS: tuple[ParameterSpec, ...] = (
         False,
         "The compensated command drives the drivetrain, so identify from it, and judge "
         "compensation by the tracking it measures; false (and in replay): identify from the "
-        "raw command (a node whose command does drive the drivetrain says so in /diagnostics).",
+        "raw command (a node whose command does drive the drivetrain says so in /diagnostics). "
+        "With gear_input motor_encoder the identifier reads the motor either way; this then "
+        "only says whether the compensated command drives the drivetrain.",
         restarts=True,
     ),
     ParameterSpec(
@@ -335,7 +365,8 @@ PARAMETER_SPECS: tuple[ParameterSpec, ...] = (
         0.005,
         "Time a new command takes the servo to reach (its settling): samples taken sooner "
         "after the command changed are not identified from (a backlash alone, where commands "
-        "change more slowly than the encoder samples); 0: every sample.",
+        "change more slowly than the encoder samples); 0: every sample. Not applied with "
+        "gear_input motor_encoder (the motor's reading is the gear's input: nothing to settle).",
         0.0,
         1.0,
         unit="s",
@@ -451,6 +482,9 @@ class NodeParameters:
     command_index: int = 0
     command_type: CommandType = "float64_multi_array"
     encoder_type: EncoderType = "joint_state"
+    gear_input: Literal["command", "motor_encoder"] = "command"
+    motor_encoder_type: EncoderType = "joint_state"
+    motor_joint: str = ""
     compensate: bool = True
     compensation_in_loop: bool = False
     compensation_guard: bool = True
@@ -477,6 +511,12 @@ class NodeParameters:
             problem = _pair_problem(low, getattr(self, low), high, getattr(self, high))
             if problem:
                 raise GenBacklashError(problem)
+        if self.gear_input == "motor_encoder" and self.sample_period:
+            raise GenBacklashError(
+                "parameter 'gear_input' motor_encoder pairs each encoder reading with the motor "
+                "reading of its stamp: it needs sample_period 0 (one sample per encoder "
+                f"reading), got sample_period {self.sample_period:g}"
+            )
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, object]) -> NodeParameters:
@@ -593,6 +633,16 @@ class NodeParameters:
     def settle_ns(self) -> int:
         """``settle_time`` in integer nanoseconds."""
         return round(self.settle_time * 1e9)
+
+    @property
+    def motor_input(self) -> bool:
+        """The gear's input is a motor encoder's reading (``gear_input``)."""
+        return self.gear_input == "motor_encoder"
+
+    @property
+    def motor_joint_name(self) -> str:
+        """The joint read from a motor encoder JointState: ``motor_joint``, else ``joint``."""
+        return self.motor_joint or self.joint
 
     @property
     def sample_period_ns(self) -> int:

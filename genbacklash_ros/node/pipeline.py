@@ -54,7 +54,17 @@ Alignment (integer nanoseconds throughout)
   checkpoints: its compensated command costs one compensator step (tens of microseconds),
   whatever the identifier costs.
 * **Identifier input.** The raw command, or with ``compensation_in_loop`` the compensated
-  command that was sent (what the drivetrain then really gets).
+  command that was sent (what the drivetrain then really gets). With ``gear_input =
+  "motor_encoder"`` (dual encoders) the motor encoder's reading: motor messages
+  (:meth:`BacklashPipeline.on_motor`) are a third stream, each encoder reading is paired with
+  the motor reading of its stamp (:func:`~genbacklash_ros.node.sample_rule.paired_keep`; a
+  reading whose motor reading was lost is taken out as a lost reading, counted as
+  ``motor_missing``), a sample is final once a motor reading at or after it (or
+  ``command_wait_ns`` of encoder time) has come, and the settling rule (``settle_time``) does
+  not apply: the rows pair the gear's real input with its output, however long the servo
+  takes to answer a command. The commands still arrive and each is compensated: the
+  identified backlash maps the motor to the load, so the compensated command is its inverse
+  at the desired load position (the servo makes the motor follow the command).
 * **Consecutive samples.** A regression row pairs only samples that are consecutive on the
   encoder's clock (:mod:`genbacklash_core.samples`; applied by
   :mod:`genbacklash_ros.node.sample_rule`, the rule batch ``identify`` and ``diagnose`` on bags
@@ -168,7 +178,7 @@ from genbacklash_ros.node.identify import (
     Result,
     SyncWorker,
 )
-from genbacklash_ros.node.ledger import ENCODER_REJECTS, LIVE_ONLY_DROPS, QUIET_DROPS, Ledger
+from genbacklash_ros.node.ledger import ENCODER_REJECTS, QUIET_DROPS, SHOWN_WHEN_ANY, Ledger
 from genbacklash_ros.node.messages import (
     CommandMessage,
     DiagnosticArray,
@@ -418,6 +428,8 @@ class BacklashPipeline:
         self._command_kind = params.command_type
         self._command_class = _COMMAND_CLASSES[params.command_type]
         self._encoder_kind = params.encoder_type
+        self._motor_kind = params.motor_encoder_type
+        self._motor_joint = params.motor_joint_name
 
     def _checkpoint_period(self) -> int | None:
         return self._params.checkpoint_period_ns if self._checkpoint_path is not None else None
@@ -444,6 +456,7 @@ class BacklashPipeline:
             # the servo between the command and the gear, modelled (genbacklash_core.servo)
             servo=params.servo(),
             servo_window_ns=round(params.servo_window * 1e9),
+            motor=params.motor_input,  # the gear's input read by a motor encoder
         )
         self._screen = Screen(bridge=params.model == "backlash")
         self._comp = CompensateStage(params.compensator_options(), compensate=params.compensate)
@@ -708,8 +721,8 @@ class BacklashPipeline:
         clock = self._clock
         due = clock.next_due
         now = clock.now
-        if due is None or now is None or now >= due:
-            return i, False
+        if due is None or now is None or now >= due or self._align.motor:
+            return i, False  # (a motor encoder's input: every message by itself)
         self._closing = -1
         end = min(view.n, i + _STRETCH_MAX)
         feeds = view.enc_before[i] + self._to_feed() - 1
@@ -1036,7 +1049,47 @@ class BacklashPipeline:
         self._advance(stamp, outputs, heavy=True)
         return outputs
 
-    def reject(self, stream: Literal["command", "encoder"], reason: str) -> None:
+    def on_motor(self, msg: object, receive_ns: int) -> list[Output]:
+        """A motor encoder message received at ``receive_ns`` (``gear_input =
+        "motor_encoder"``; ignored otherwise): any periodic outputs now due."""
+        if not self._align.motor:
+            return []
+        try:
+            header_ns, value = read_encoder(msg, self._motor_kind, joint=self._motor_joint)
+        except MessageError as err:
+            self._drop("motor_invalid", f"motor encoder: {err}")
+            return []
+        return self.on_motor_value(header_ns, value, receive_ns)
+
+    def on_motor_value(self, header_ns: int | None, value: float, receive_ns: int) -> list[Output]:
+        """A motor encoder reading already read from its message (header stamp, 0 when
+        none): any periodic outputs now due (:meth:`on_motor` is this plus the adapters).
+
+        The reading is the identifier's input (see the module notes); readings before the
+        first command are not kept (the rows start there, as in batch). One not after the
+        last accepted motor reading is dropped (``motor_out_of_order``; a clock jump back
+        re-anchors on the command and encoder streams, the motor's following them).
+        """
+        align = self._align
+        if not align.motor:
+            return []
+        self._take_results()
+        if not math.isfinite(value):
+            self._drop("motor_invalid", f"motor encoder: value {value} is not finite")
+            return []
+        if align.last_cmd_ns is None:  # the rows start at the first command (as in batch)
+            return []
+        stamp = align.time_of(header_ns, receive_ns)
+        last = align.last_motor_ns
+        if last is not None and stamp <= last:
+            self._drop("motor_out_of_order", _order_text("motor encoder", stamp, last))
+            return []
+        align.add_motor(stamp, value)
+        outputs: list[Output] = []
+        self._advance(stamp, outputs, heavy=False)
+        return outputs
+
+    def reject(self, stream: Literal["command", "encoder", "motor"], reason: str) -> None:
         """A message of ``stream`` its transport could not read (e.g. bytes that do not
         decode): counted and reported like one the adapters reject."""
         self._drop(f"{stream}_invalid", f"{stream}: {reason}")
@@ -1149,9 +1202,7 @@ class BacklashPipeline:
             ("checkpoint_errors", str(led.checkpoint_errors)),
         ]
         extra += [
-            (f"dropped_{k}", str(n))
-            for k, n in led.dropped.items()
-            if n or k not in LIVE_ONLY_DROPS
+            (f"dropped_{k}", str(n)) for k, n in led.dropped.items() if n or k not in SHOWN_WHEN_ANY
         ]
         extra += silent.values
         saved = led.last_checkpoint_ns
@@ -1197,6 +1248,10 @@ class BacklashPipeline:
                 "before_first_command",
                 "samples before the first command",
                 batch.before_first_command,
+            )
+        if batch.unpaired:
+            self._ledger.drop(
+                "motor_missing", "encoder readings without a motor reading", batch.unpaired
             )
         if batch.size == 0:
             return

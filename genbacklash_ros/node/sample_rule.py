@@ -21,6 +21,10 @@ on a CSV with a ``t`` column):
   marks). A bag (:func:`~genbacklash_ros.bags.bagio.align`) and a CSV of the same readings
   (:func:`~genbacklash_ros.bags.csvio.read_series_csv`) both go through it, so they give the
   same rows;
+* :func:`paired_keep` -- with a motor encoder as the gear's input (the node's ``gear_input``),
+  which readings have the motor reading of their stamp: one taken no more than half an
+  encoder period before them (the drive samples both encoders together; a reading whose
+  motor reading was lost holds an older one and is taken out as a lost reading is);
 * :class:`EncoderPeriod` -- the nominal period the node learns from the stream: the median
   of the last :data:`PERIOD_WINDOW` positive stamp differences. The batch path takes the
   median over the whole record (:func:`~genbacklash_core.samples.nominal_period`), the same
@@ -64,6 +68,7 @@ __all__ = [
     "ServoChoice",
     "keep_breaks",
     "link_breaks",
+    "paired_keep",
     "record_period",
     "select_rows",
     "time_breaks",
@@ -131,6 +136,23 @@ def keep_breaks(breaks: BoolArray, keep: BoolArray) -> tuple[BoolArray, bool]:
     return out, tail
 
 
+def paired_keep(
+    stamps: npt.ArrayLike, input_stamps: npt.ArrayLike, period_ns: float | None
+) -> BoolArray:
+    """``keep[k]``: the motor reading held by the encoder reading stamped ``stamps[k]`` (the
+    latest at or before it, stamped ``input_stamps[k]``) is its own: taken no more than half
+    the encoder's nominal period before it (exactly at it while the period is unknown).
+
+    >>> paired_keep([10, 20, 30], [10, 19, 20], 10.0).tolist()
+    [True, True, False]
+    """
+    t = np.asarray(stamps, dtype=np.int64)
+    age = t - np.asarray(input_stamps, dtype=np.int64)
+    limit = 0.0 if period_ns is None else 0.5 * period_ns
+    out: BoolArray = age <= limit
+    return out
+
+
 def record_period(stamps: npt.ArrayLike) -> float | None:
     """The nominal period of a whole record (the batch path's estimate): the median of its
     positive stamp differences (:func:`~genbacklash_core.samples.nominal_period`); None with
@@ -169,7 +191,8 @@ def time_breaks(t: npt.ArrayLike) -> BoolArray | None:
 class Rows:
     """The samples :func:`select_rows` keeps: stamps ``t`` (int64 ns), the command held ``u``,
     the reading ``y``, the sample rule's ``breaks``, ``skipped``: readings before the first
-    command (they hold none), and ``index``: where each row was among the readings given.
+    command (they hold none), ``index``: where each row was among the readings given, and
+    ``unpaired``: readings taken out for want of their motor reading (:func:`paired_keep`).
     With a servo, ``u`` is the modelled servo output (:mod:`genbacklash_core.servo`),
     ``servo`` the model used and ``servo_fit`` how it was estimated (``"auto"``)."""
 
@@ -181,6 +204,7 @@ class Rows:
     index: npt.NDArray[np.intp]
     servo: ServoModel | None = None
     servo_fit: ServoFit | None = None
+    unpaired: int = 0
 
 
 def select_rows(
@@ -193,6 +217,7 @@ def select_rows(
     bridge: bool = False,
     settle_ns: int = 0,
     servo: ServoChoice = None,
+    input_stamps: npt.ArrayLike | None = None,
 ) -> Rows:
     """Which readings are identification samples, and where their chain breaks.
 
@@ -200,6 +225,10 @@ def select_rows(
     readings both come here; the node applies the same rules piece by piece in
     :class:`~genbacklash_ros.node.align.CommandHistory`):
 
+    0. with ``input_stamps`` (a motor encoder as the gear's input: ``commands`` are its
+       readings) a reading whose motor reading is not its own (:func:`paired_keep`, the
+       period that of every reading) is taken out as a lost one; the settling rule then
+       does not apply (the motor's position is what the gear gets);
     1. the servo's settling rule (:mod:`genbacklash_core.settling`, ``settle_ns``; for a
        backlash alone, ``bridge``): a reading taken as a new command lands is taken out as a
        lost one, its mark carried to the next reading kept;
@@ -235,7 +264,10 @@ def select_rows(
         The servo's settling time (applies with ``bridge`` only and without ``servo``; 0:
         off).
     servo : ServoModel or "auto" or None
-        The servo between the command and the gear (None: none, the command is the input).
+        The servo between the command and the gear (None: none, the command is the input;
+        not with ``input_stamps``: a motor encoder's readings are the gear's input).
+    input_stamps : array_like of int, shape (M,), optional
+        The stamps of ``commands`` when they are a motor encoder's readings (see above).
 
     >>> rows = select_rows([5, 10, 15, 25], [-1, 0, 0, 1], [1.0, 2.0], [0.1, 0.2, 0.3, 0.4])
     >>> rows.u.tolist(), rows.y.tolist(), rows.skipped, rows.breaks.tolist()
@@ -246,9 +278,22 @@ def select_rows(
     cmd_u = np.asarray(commands, dtype=np.float64)
     ys = np.asarray(values, dtype=np.float64)
     index = np.arange(et.size)
-    if servo is not None:
+    period_all = None
+    unpaired = 0
+    if servo is not None and input_stamps is None:
         return _servo_rows(et, k, cmd_u, ys, marks, servo)
-    if settle_ns and bridge:  # the node's settling rule (a backlash alone): as lost readings
+    if input_stamps is not None:  # a motor encoder: each reading with the motor's of its stamp
+        period_all = record_period(et)
+        on = k >= 0
+        paired = np.ones(et.size, dtype=bool)
+        in_t = np.asarray(input_stamps, dtype=np.int64)
+        paired[on] = paired_keep(et[on], in_t[k[on]], period_all)
+        if not paired.all():
+            unpaired = int(np.count_nonzero(~paired))
+            if marks is not None:
+                marks = carry_marks(marks, paired)
+            et, ys, k, index = et[paired], ys[paired], k[paired], index[paired]
+    elif settle_ns and bridge:  # the node's settling rule (a backlash alone): as lost readings
         on = k >= 0
         settled, _ = settling_keep(et[on], cmd_u[k[on]], settle_ns)
         if not settled.all():
@@ -258,7 +303,7 @@ def select_rows(
                 marks = carry_marks(marks, taken)
             et, ys, k, index = et[taken], ys[taken], k[taken], index[taken]
     keep = k >= 0
-    period = record_period(et)
+    period = record_period(et) if period_all is None else period_all
     linked = link_breaks(et, period)
     if bridge and period is not None and et.size > 1:
         monotone = np.zeros(et.size, dtype=bool)
@@ -269,7 +314,7 @@ def select_rows(
         linked |= np.asarray(marks, dtype=bool)
     breaks, _ = keep_breaks(linked, keep)
     skipped = int(np.count_nonzero(~keep))
-    return Rows(et[keep], cmd_u[k[keep]], ys[keep], breaks, skipped, index[keep])
+    return Rows(et[keep], cmd_u[k[keep]], ys[keep], breaks, skipped, index[keep], unpaired=unpaired)
 
 
 def _servo_rows(

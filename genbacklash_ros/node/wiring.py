@@ -49,6 +49,10 @@ TYPE_CHOICES: Mapping[str, Mapping[str, str]] = {
         "sensor_msgs/msg/JointState": "joint_state",
         "std_msgs/msg/Float64": "float64",
     },
+    "motor_encoder_type": {
+        "sensor_msgs/msg/JointState": "joint_state",
+        "std_msgs/msg/Float64": "float64",
+    },
 }
 
 #: History depth of the node's ``command`` and ``encoder`` subscriptions, in both transports

@@ -40,6 +40,8 @@ class Clocks:
             stamp_jitter_ns=cfg.stamp_jitter * 1e9,
         )
         self.received = np.random.default_rng([int(seed), 31]).random(self.t.size) >= cfg.loss
+        # a motor encoder's readings, lost on their own draw
+        self.motor_received = np.random.default_rng([int(seed), 32]).random(self.t.size) >= cfg.loss
         self.quantum = float(cfg.quantum)
         k = np.maximum(np.searchsorted(self.cmd_t, self.t, side="right") - 1, 0)
         self.desired = self.values[k]
@@ -62,16 +64,21 @@ def node_loop(
     guard: bool,
     delay_ns: int = 0,
     extra: dict[str, object] | None = None,
+    motor: bool = False,
 ) -> tuple[np.ndarray, Estimate, GuardVerdict, TrackingVerdict]:
     """The node's pipeline in the loop: its compensated command drives the servo,
     ``delay_ns`` after the command (a transport and a drive's loop between them);
-    ``extra``: more node parameters (e.g. ``servo_model``)."""
+    ``extra``: more node parameters (e.g. ``servo_model``); ``motor``: the node's input is
+    a motor encoder (``gear_input`` motor_encoder: the rotor read at each encoder instant,
+    quantised alike, lost on its own draw, fed just before the load's reading of the same
+    stamp)."""
     node = NodeParameters.from_mapping(
         {
             "command_type": "float64",
             "encoder_type": "float64",
-            "compensation_in_loop": True,
+            "compensation_in_loop": True,  # the compensated command drives the servo
             "compensation_guard": guard,
+            **({"gear_input": "motor_encoder", "motor_encoder_type": "float64"} if motor else {}),
             **(extra or {}),
         }
     )
@@ -97,9 +104,13 @@ def node_loop(
         if stop <= j:
             continue
         x = traj.load_at(t[j:stop])
+        m = traj.motor_at(t[j:stop]) if motor else x
         loads[j:stop] = x
         q = clocks.quantum
         for i in range(j, stop):
+            if motor and clocks.motor_received[i]:
+                r = float(np.round(m[i - j] / q) * q) if q else float(m[i - j])
+                pipe.on_motor_value(None, r, int(t[i]))
             if clocks.received[i]:
                 y = float(np.round(x[i - j] / q) * q) if q else float(x[i - j])
                 pipe.on_encoder_value(None, y, int(t[i]))

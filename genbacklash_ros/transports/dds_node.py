@@ -299,6 +299,12 @@ class DdsNode:
             raise GenBacklashError(f"receive_time must be 'source' or 'take', got {receive_time!r}")
         joints = params if isinstance(params, JointSet) else JointSet.single(params)
         params = joints.base
+        if params.motor_input:
+            raise GenBacklashError(
+                "parameter 'gear_input' motor_encoder: the DDS transport does not subscribe a "
+                "motor encoder yet; run the node with --transport rclpy (or replay the bag "
+                "with --motor-encoder)"
+            )
         self.params = params
         self.joints = joints
         self.domain_id = domain_id_from_env() if domain_id is None else int(domain_id)

@@ -10,6 +10,8 @@ what it returns. All logic is in the pipeline.
   ``encoder`` (``qos_profile_sensor_data``), each with a history of
   :data:`~genbacklash_ros.node.wiring.READER_DEPTH` samples rather than 10 (5): at 1 kHz on a
   loaded machine a depth of 10 lost 2 % of the commands while the process was descheduled;
+  with ``gear_input`` motor_encoder also ``motor_encoder`` (the ``motor_encoder_type``,
+  sensor-data QoS), the motor-side position that is the gear's input (dual encoders);
 * publishes ``~/estimate``, ``compensated_command`` (the command's type) and ``/diagnostics``
   (also on a 1 Hz timer with level STALE while no message arrives);
 * several joints (``joints``, ``command_indices``, ``<joint>.<name>``;
@@ -25,8 +27,9 @@ what it returns. All logic is in the pipeline.
   ``gate_low``/``gate_high`` follow the rule of
   :func:`~genbacklash_ros.node.parameters.resolve_requested` (a pair left inconsistent by one
   set keeps running on its last consistent values until the other set comes, and the
-  diagnostics say so under ``parameters_pending``). ``command_type`` and ``encoder_type`` are
-  read-only (they fix the subscription types: set them in the params file);
+  diagnostics say so under ``parameters_pending``). ``command_type``, ``encoder_type``,
+  ``gear_input`` and ``motor_encoder_type`` are read-only (they fix the subscriptions: set
+  them in the params file);
 * wiring: once a second the node asks discovery which types are published on its
   ``command`` and ``encoder`` topics; a publisher of another type is named in
   ``/diagnostics`` (WARN, key ``wiring``) with the parameter that selects the type;
@@ -110,7 +113,16 @@ from genbacklash_ros.transports.stop_signals import StopSignals
 __all__ = ["BacklashIdentifierNode", "descriptor", "from_ros", "main", "to_ros"]
 
 DEFAULT_DEPTH = 10  # ROS 2 default QoS: KEEP_LAST 10, RELIABLE, VOLATILE
-READ_ONLY = frozenset({"command_type", "encoder_type", "joints", "command_indices"})
+READ_ONLY = frozenset(
+    {
+        "command_type",
+        "encoder_type",
+        "gear_input",  # a motor encoder's subscription is made at start
+        "motor_encoder_type",
+        "joints",
+        "command_indices",
+    }
+)
 _ROS_COMMAND = {
     "float64": RosFloat64,
     "float64_multi_array": RosFloat64MultiArray,
@@ -297,6 +309,17 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
         self._encoder_sub = self.create_subscription(
             encoder_type, "encoder", self._on_encoder, sensor_qos
         )
+        # a motor encoder (gear_input motor_encoder, dual encoders): the gear's input
+        self._motor_sub = (
+            self.create_subscription(
+                _ROS_ENCODER[self._params.motor_encoder_type],
+                "motor_encoder",
+                self._on_motor,
+                sensor_qos,
+            )
+            if self._params.motor_input
+            else None
+        )
         self._sim_time = bool(self.get_parameter("use_sim_time").value)
         self._data_since_tick = False
         self._timer = self.create_timer(1.0, self._on_tick)
@@ -447,6 +470,15 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
             return
         self._publish(self._pipeline.on_encoder(ours, self._receive_ns(info)))
 
+    def _on_motor(self, msg: Any, info: Any) -> None:
+        self._data_since_tick = True
+        try:
+            ours = from_ros(msg)
+        except MessageError as err:
+            self.get_logger().warning(f"motor encoder: {err}", throttle_duration_sec=5.0)
+            return
+        self._publish(self._pipeline.on_motor(ours, self._receive_ns(info)))
+
     def _on_tick(self) -> None:
         """1 Hz: the wiring check, and diagnostics with level STALE when no message arrived
         during the second."""
@@ -460,10 +492,10 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
         line each (:func:`~genbacklash_ros.node.wiring.type_mismatches`), kept for the
         diagnostics and logged when new."""
         problems: list[str] = []
-        for subscription, parameter in (
-            (self._command_sub, "command_type"),
-            (self._encoder_sub, "encoder_type"),
-        ):
+        subscriptions = [(self._command_sub, "command_type"), (self._encoder_sub, "encoder_type")]
+        if self._motor_sub is not None:
+            subscriptions.append((self._motor_sub, "motor_encoder_type"))
+        for subscription, parameter in subscriptions:
             topic = subscription.topic_name
             seen = [info.topic_type for info in self.get_publishers_info_by_topic(topic)]
             expected = selected_type(parameter, getattr(self._params, parameter))
