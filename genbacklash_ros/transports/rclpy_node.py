@@ -559,8 +559,9 @@ class WaitLoop:
 
     1. takes every message pending on the two subscriptions (``take_message`` on their
        handles, at most :data:`TAKE_BATCH` each), orders them by source timestamp (a reading
-       after the command it follows, however the two topics were delivered) and calls the
-       node's ``_on_command``/``_on_encoder`` with each, as the executor did;
+       after the command it follows, however the two topics were delivered) and calls each
+       subscription's callback (the node's ``_on_command``/``_on_encoder``) with the message
+       and its info, as the executor did;
     2. when anything else in the wait set is ready, or :data:`WAKE_S` has passed since it
        last did, runs the ``executor`` without waiting until it has nothing ready (parameter
        services, the timer, QoS events, guard conditions and waitables, which are not in the
@@ -577,10 +578,8 @@ class WaitLoop:
     def __init__(self, node: BacklashIdentifierNode, executor: Any) -> None:
         self._node = node
         self._executor = executor
-        self._hot = (
-            (node._command_sub, node._on_command),
-            (node._encoder_sub, node._on_encoder),
-        )
+        # each with the callback an executor would call (the node's, taking the message info)
+        self._hot = tuple((sub, sub.callback) for sub in (node._command_sub, node._encoder_sub))
         self._hot_ids = {id(sub) for sub, _ in self._hot}
         node._hot_group.claimed.update(self._hot_ids)
         self._context = node.context
