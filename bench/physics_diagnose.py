@@ -45,6 +45,8 @@ from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
+from _common import printed_section
+
 from genbacklash_core.diagnose import DiagnoseSettings, diagnose, operation_case
 from genbacklash_core.diagnose.physics import PHYSICS_NAMES
 from genbacklash_core.scenarios import OperationSettings
@@ -122,7 +124,7 @@ def _operation(job: tuple[tuple[str, ...], int, int]) -> str:
     )
 
 
-def main(argv: Sequence[str] | None = None) -> None:
+def _arguments(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument("--bandwidths", type=float, nargs="+", default=[20.0, 60.0, 100.0])
@@ -138,7 +140,29 @@ def main(argv: Sequence[str] | None = None) -> None:
     )
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--operation-seeds", type=int, nargs="*", default=[0, 1, 2])
+    parser.add_argument("--quick", action="store_true", help="smaller settings (smoke test)")
     args = parser.parse_args(argv)
+    if args.quick:
+        args.seeds, args.bandwidths, args.variants, args.duration = (
+            [0],
+            [60.0],
+            ["near_ideal"],
+            10.0,
+        )
+        args.motor_bandwidths, args.operation_seeds = [], []
+    return args
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    args = _arguments(argv)
+    with printed_section(
+        "physics_diagnose",
+        "### diagnose names the dominant effect (issue 23, deliverable 4)",
+    ):
+        _tables(args)
+
+
+def _tables(args: argparse.Namespace) -> None:
     print(
         "| variant | bandwidth (Hz) | seed | input | named | dominant first | misfit before "
         "| misfit after | floor | s |"

@@ -649,7 +649,8 @@ class WaitLoop:
         ws.wait(int(timeout_s * 1e9))
         if not self._context.ok():
             raise ExternalShutdownException()
-        taken = self.take_pending()
+        ready = [ws.is_ready("subscription", i) for i in range(len(self._hot))]
+        taken = self.take_pending(ready) if any(ready) else 0
         others = (
             any(ws.is_ready("subscription", i) for i in range(len(self._hot), len(self._subs)))
             or ws.get_ready_entities("timer")
@@ -660,11 +661,13 @@ class WaitLoop:
             self.run_executor()
         return taken
 
-    def take_pending(self) -> int:
-        """Take what is pending on the two subscriptions, in source-timestamp order, into
-        the node; the number taken."""
+    def take_pending(self, ready: Sequence[bool] = (True, True)) -> int:
+        """Take what is pending on the two subscriptions (those ``ready`` says have
+        something), in source-timestamp order, into the node; the number taken."""
         events: list[tuple[int, int, Any, Any, Any]] = []
-        for sub, callback in self._hot:
+        for (sub, callback), pending in zip(self._hot, ready, strict=True):
+            if not pending:
+                continue
             handle, msg_type, raw = sub.handle, sub.msg_type, sub.raw
             for _ in range(TAKE_BATCH):
                 got = handle.take_message(msg_type, raw)
