@@ -48,6 +48,7 @@ BENCHMARKS = (
     "shutdown",
     "shutdown_dds",
     "six_joint_rclpy",
+    "take_cost",
     "fleet",
     "fleet_kill",
 )
@@ -79,7 +80,7 @@ RUNS = {
 
 # sections no script writes, by the start of their heading: kept from the BENCHMARKS.md being
 # replaced, each after the section of the benchmark named here
-HAND_KEPT = {"## Live demo": "six_joint_rclpy"}
+HAND_KEPT = {"## Live demo": "take_cost"}
 
 
 def hand_kept(text: str) -> dict[str, list[str]]:
@@ -87,7 +88,7 @@ def hand_kept(text: str) -> dict[str, list[str]]:
     follow.
 
     >>> hand_kept("# t\\n\\n## A\\na\\n\\n## Live demo (x)\\nd\\n\\n## B\\nb\\n")
-    {'six_joint_rclpy': ['## Live demo (x)\\nd']}
+    {'take_cost': ['## Live demo (x)\\nd']}
     """
     kept: dict[str, list[str]] = {}
     for part in ("\n" + text).split("\n## ")[1:]:
