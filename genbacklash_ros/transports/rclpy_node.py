@@ -728,8 +728,8 @@ def main(
 
     Signals: rclpy's own handlers are not installed; ``stop`` (else one of this call's own,
     released when it returns: ignored from then on when ``exiting``, else restored) only
-    sets a flag, which the spin loop reads at its next wake-up (a message, or at most
-    :data:`WAKE_S`). Then, in order: the node finishes (pending samples, final refit and
+    sets a flag, which the wait loop (:class:`WaitLoop`) reads at its next wake-up (a
+    message, or at most :data:`WAKE_S`). Then, in order: the node finishes (pending samples, final refit and
     estimate, checkpoint), the executor and the node are destroyed, rclpy shuts down.
     """
     owned = stop is None
