@@ -139,7 +139,10 @@ _ROS_COMMAND = {
 _ROS_ENCODER = {"joint_state": RosJointState, "float64": RosFloat64}
 _SPECS = {spec.name: spec for spec in PARAMETER_SPECS}
 WAKE_S = 0.1  # longest wait: a stop request is seen within this, the executor run this often
-TAKE_BATCH = 512  # messages taken per subscription and wake-up (the rest at the next one)
+# messages taken per subscription and wake-up at most: a reader's whole history, so that a
+# node behind takes both streams whole and orders them (a smaller cap took 512 commands
+# and readings that a lost stretch had left far apart); the rest at the next wake-up
+TAKE_BATCH = READER_DEPTH
 PENDING_KEY = "parameters_pending"  # diagnostics key: pairs held at their last consistent values
 
 
@@ -558,7 +561,8 @@ class WaitLoop:
     ``timeout_s``), then
 
     1. takes every message pending on the two subscriptions (``take_message`` on their
-       handles, at most :data:`TAKE_BATCH` each), orders them by source timestamp (a reading
+       handles, at most :data:`TAKE_BATCH` each: their whole histories, as the DDS
+       transport takes everything available), orders them by source timestamp (a reading
        after the command it follows, however the two topics were delivered) and calls each
        subscription's callback (the node's ``_on_command``/``_on_encoder``) with the message
        and its info, as the executor did;
@@ -729,8 +733,9 @@ def main(
     Signals: rclpy's own handlers are not installed; ``stop`` (else one of this call's own,
     released when it returns: ignored from then on when ``exiting``, else restored) only
     sets a flag, which the wait loop (:class:`WaitLoop`) reads at its next wake-up (a
-    message, or at most :data:`WAKE_S`). Then, in order: the node finishes (pending samples, final refit and
-    estimate, checkpoint), the executor and the node are destroyed, rclpy shuts down.
+    message, or at most :data:`WAKE_S`). Then, in order: the node finishes (pending samples,
+    final refit and estimate, checkpoint), the executor and the node are destroyed, rclpy
+    shuts down.
     """
     owned = stop is None
     signals = StopSignals().install() if stop is None else stop
