@@ -9,7 +9,7 @@ outputs. "Before" is the CSV read as the CSV path read it before the rows had on
 stamps' breaks only: no settling rule, no bridging; ``read_series_csv`` without the rules),
 identified the same way.
 
-Run: ``python bench/csv_vs_bag.py [--seeds 0 1 2] [--variants ...] [--duration 40]``
+Run: ``python bench/csv_vs_bag.py [--quick] [--seeds 0 1 2] [--variants ...] [--duration 40]``
 """
 
 from __future__ import annotations

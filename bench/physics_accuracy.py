@@ -12,7 +12,7 @@ and the play of each is compared with the geometric play of the slot (and with e
 other). The CLI is run in process (``genbacklash_ros.cli.main.main``) so the numbers are the
 commands' own.
 
-Run: ``python bench/physics_accuracy.py [--seeds 0 1 2] [--bandwidths 20 60 100]
+Run: ``python bench/physics_accuracy.py [--quick] [--seeds 0 1 2] [--bandwidths 20 60 100]
 [--variants ...] [--duration 40] [--param NAME=VALUE ...]``
 """
 

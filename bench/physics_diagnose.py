@@ -30,7 +30,7 @@ first round with its tie-break; the pairs' look-ahead needs two steps): the targ
 the first name, and later rounds cost minutes a record on this machine. ``--max-steps 6`` is
 the command's own setting.
 
-Run: ``python bench/physics_diagnose.py [--seeds 0 1 2] [--bandwidths 20 60 100]
+Run: ``python bench/physics_diagnose.py [--quick] [--seeds 0 1 2] [--bandwidths 20 60 100]
 [--variants ...] [--duration 30] [--max-steps 1] [--jobs 2] [--operation-seeds 0 1 2]
 [--motor-bandwidths 20 60 100]`` (records run seed by seed, bandwidth by bandwidth, and print
 as they finish)

@@ -16,7 +16,7 @@ instant) and each compensator's cut against ``none`` in percent, over the whole 
 over its second half (the node learns in the first); the node's final play ``c_L + c_R``
 against the geometric play; the guard's final trust and error ratio.
 
-Run: ``python bench/physics_loop.py [--seeds 0 1 2] [--bandwidths 20 60 100]
+Run: ``python bench/physics_loop.py [--quick] [--seeds 0 1 2] [--bandwidths 20 60 100]
 [--variants ...] [--duration 40] [--guard on|off]``
 """
 

@@ -1,6 +1,6 @@
 """The encoder spike screen on clean and on spiked records (issue 22, deliverable 3).
 
-    python bench/spike_screen.py [--seeds 20] [--duration 40] [--kinds ...] [--jobs 2]
+    python bench/spike_screen.py [--quick] [--seeds 20] [--duration 40] [--kinds ...] [--jobs 2]
 
 For every simulated scenario and seed, a bag is written the way ``genbacklash simulate``
 writes it (the operation-shaped scenarios of :mod:`genbacklash_core.scenarios`:
