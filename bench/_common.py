@@ -10,12 +10,14 @@ another process hits all of them alike and the ratios stay meaningful.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import gc
+import io
 import os
 import platform
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -181,6 +183,39 @@ def write_section(name: str, text: str) -> Path:
     path.write_text(text.rstrip() + "\n", encoding="utf-8")
     print(f"wrote {path.relative_to(ROOT)}", file=sys.stderr)
     return path
+
+
+class _Tee(io.StringIO):
+    """Keeps what is written and passes it on to ``out``."""
+
+    def __init__(self, out: Any) -> None:
+        super().__init__()
+        self._out = out
+
+    def write(self, text: str) -> int:
+        self._out.write(text)
+        return super().write(text)
+
+    def flush(self) -> None:
+        self._out.flush()
+
+
+@contextlib.contextmanager
+def printed_section(name: str, heading: str, intro: str = "") -> Iterator[None]:
+    """For a script that prints its tables as it goes: print as usual, and when the block
+    ends write what it printed as the section ``bench/output/<name>.md`` (``heading``, the
+    command line, the machine and its load, ``intro``, then the printed text), so that
+    ``run_all.py`` puts it into ``BENCHMARKS.md`` like every other section."""
+    started = time.perf_counter()
+    machine = machine_description()
+    tee = _Tee(sys.stdout)
+    with contextlib.redirect_stdout(tee):
+        yield
+    head = f"{heading}\n\n`{command_line()}`. Machine: {machine}."
+    head += f" Run time {time.perf_counter() - started:.0f} s."
+    if intro:
+        head += "\n\n" + intro.strip()
+    write_section(name, head + "\n\n" + tee.getvalue().strip())
 
 
 INVALID_RESIDUAL = 1e3  # residual value returned at invalid parameter points

@@ -19,7 +19,10 @@ import contextlib
 import io
 import json
 import tempfile
+from collections.abc import Sequence
 from pathlib import Path
+
+from _common import printed_section
 
 from genbacklash_core import identify_backlash
 from genbacklash_core.scenarios import OperationSettings
@@ -62,7 +65,7 @@ def _max_difference(a: object, b: object) -> float:
     return 0.0 if a == b else float("inf")
 
 
-def main() -> None:
+def _arguments(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument("--variants", nargs="+", default=list(VARIANTS))
@@ -75,7 +78,20 @@ def main() -> None:
         metavar="NAME=VALUE",
         help="a node parameter for both identify runs (e.g. servo_model=auto)",
     )
-    args = parser.parse_args()
+    parser.add_argument("--quick", action="store_true", help="smaller settings (smoke test)")
+    args = parser.parse_args(argv)
+    if args.quick:
+        args.seeds, args.variants, args.duration = [0], ["near_ideal"], 10.0
+    return args
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    args = _arguments(argv)
+    with printed_section("csv_vs_bag", "### CSV vs bag"):
+        _tables(args)
+
+
+def _tables(args: argparse.Namespace) -> None:
     extra = [w for p in args.param for w in ("--param", p)]
     print(
         "| variant | seed | play, bag (mrad) | play, CSV (mrad) | max abs difference, any "

@@ -30,7 +30,7 @@ first round with its tie-break; the pairs' look-ahead needs two steps): the targ
 the first name, and later rounds cost minutes a record on this machine. ``--max-steps 6`` is
 the command's own setting.
 
-Run: ``python bench/physics_diagnose.py [--seeds 0 1 2] [--bandwidths 20 60 100]
+Run: ``python bench/physics_diagnose.py [--quick] [--seeds 0 1 2] [--bandwidths 20 60 100]
 [--variants ...] [--duration 30] [--max-steps 1] [--jobs 2] [--operation-seeds 0 1 2]
 [--motor-bandwidths 20 60 100]`` (records run seed by seed, bandwidth by bandwidth, and print
 as they finish)
@@ -52,6 +52,8 @@ import time
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
+
+from _common import printed_section
 
 from genbacklash_core.diagnose import DiagnoseSettings, diagnose, operation_case
 from genbacklash_core.diagnose.physics import PHYSICS_NAMES
@@ -130,7 +132,7 @@ def _operation(job: tuple[tuple[str, ...], int, int]) -> str:
     )
 
 
-def main(argv: Sequence[str] | None = None) -> None:
+def _arguments(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument("--bandwidths", type=float, nargs="+", default=[20.0, 60.0, 100.0])
@@ -146,7 +148,29 @@ def main(argv: Sequence[str] | None = None) -> None:
     )
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--operation-seeds", type=int, nargs="*", default=[0, 1, 2])
+    parser.add_argument("--quick", action="store_true", help="smaller settings (smoke test)")
     args = parser.parse_args(argv)
+    if args.quick:
+        args.seeds, args.bandwidths, args.variants, args.duration = (
+            [0],
+            [60.0],
+            ["near_ideal"],
+            10.0,
+        )
+        args.motor_bandwidths, args.operation_seeds = [], []
+    return args
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    args = _arguments(argv)
+    with printed_section(
+        "physics_diagnose",
+        "### diagnose names the dominant effect (issue 23, deliverable 4)",
+    ):
+        _tables(args)
+
+
+def _tables(args: argparse.Namespace) -> None:
     print(
         "| variant | bandwidth (Hz) | seed | input | named | dominant first | misfit before "
         "| misfit after | floor | s |"

@@ -28,8 +28,10 @@ from __future__ import annotations
 
 import argparse
 import time
+from collections.abc import Sequence
 
 import numpy as np
+from _common import printed_section
 
 from genbacklash_core import compensate
 from genbacklash_core.scenarios import OperationSettings
@@ -50,7 +52,7 @@ def _rms(e: np.ndarray) -> float:
     return float(np.sqrt(np.mean(e * e)))
 
 
-def main() -> None:
+def _arguments(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument("--bandwidths", type=float, nargs="+", default=[20.0, 60.0, 100.0])
@@ -73,7 +75,28 @@ def main() -> None:
     parser.add_argument(
         "--motor-encoder", action="store_true", help="the node's input: a motor encoder"
     )
-    args = parser.parse_args()
+    parser.add_argument("--quick", action="store_true", help="smaller settings (smoke test)")
+    args = parser.parse_args(argv)
+    if args.quick:
+        args.seeds, args.bandwidths, args.variants, args.duration = (
+            [0],
+            [60.0],
+            ["near_ideal"],
+            10.0,
+        )
+    return args
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    args = _arguments(argv)
+    with printed_section(
+        "physics_loop",
+        "### Compensation in closed loop, driven by the node's own compensated command",
+    ):
+        _tables(args)
+
+
+def _tables(args: argparse.Namespace) -> None:
     extra = {k: _value(v) for k, _, v in (p.partition("=") for p in args.param)}
     print(
         "| variant | bandwidth (Hz) | seed | rms none (mrad) | cut true (%) | cut node (%) "

@@ -4,6 +4,10 @@
 
 Each benchmark runs in its own process (``python bench/<name>.py``) and writes its section to
 ``bench/output/<name>.md``; this script concatenates them under a title and an introduction.
+The scripts that print their tables as they go (the physics ones, ``csv_vs_bag``,
+``spike_screen``) write theirs through ``_common.printed_section``. A section no script writes
+(:data:`HAND_KEPT`, e.g. the live demo's, written by hand from ``genbacklash demo --live``) is
+carried over from the ``BENCHMARKS.md`` being replaced, so that a full run drops nothing.
 """
 
 from __future__ import annotations
@@ -22,6 +26,13 @@ BENCHMARKS = (
     "online",
     "operation",
     "closed_loop",
+    "physics_accuracy",
+    "csv_vs_bag",
+    "physics_loop",
+    "physics_diagnose",
+    "coverage",
+    "spike_screen",
+    "spike_screen_physics",
     "diagnose",
     "replay",
     "dds_latency",
@@ -37,12 +48,26 @@ BENCHMARKS = (
     "shutdown",
     "shutdown_dds",
     "six_joint_rclpy",
+    "take_cost",
     "fleet",
     "fleet_kill",
 )
 # sections written by another script's run with arguments (the ROS 2 ones need `ros2 launch`,
 # a sourced ROS 2 installation: not on PyPI; without it they write a section that says so)
 RUNS = {
+    # the settings BENCHMARKS.md's physics_diagnose and spike screen sections were made with
+    "physics_diagnose": (
+        "physics_diagnose",
+        [
+            *("--seeds", "0", "--bandwidths", "60", "20", "100"),
+            *("--motor-bandwidths", "100", "--operation-seeds", "0"),
+        ],
+    ),
+    "spike_screen": ("spike_screen", ["--seeds", "20", "--duration", "40"]),
+    "spike_screen_physics": (
+        "spike_screen",
+        ["--seeds", "5", "--duration", "40", "--kinds", "--physics"],
+    ),
     "ros_latency_load": ("ros_latency", ["--load", "--rate", "500", "--warmup", "4"]),
     "shutdown_dds": ("shutdown", ["--transport", "dds"]),
     "six_joint_rclpy": ("six_joint", []),
@@ -52,6 +77,26 @@ RUNS = {
         ["--scenario", "operation", "--load", "--seeds", "0", "1", "2"],
     ),
 }
+
+# sections no script writes, by the start of their heading: kept from the BENCHMARKS.md being
+# replaced, each after the section of the benchmark named here
+HAND_KEPT = {"## Live demo": "take_cost"}
+
+
+def hand_kept(text: str) -> dict[str, list[str]]:
+    """The :data:`HAND_KEPT` sections of a ``BENCHMARKS.md`` text, by the benchmark they
+    follow.
+
+    >>> hand_kept("# t\\n\\n## A\\na\\n\\n## Live demo (x)\\nd\\n\\n## B\\nb\\n")
+    {'take_cost': ['## Live demo (x)\\nd']}
+    """
+    kept: dict[str, list[str]] = {}
+    for part in ("\n" + text).split("\n## ")[1:]:
+        section = ("## " + part).strip()
+        for prefix, after in HAND_KEPT.items():
+            if section.startswith(prefix):
+                kept.setdefault(after, []).append(section)
+    return kept
 
 
 def main() -> None:
@@ -72,9 +117,12 @@ def main() -> None:
         durations[name] = time.perf_counter() - t0
     total = time.perf_counter() - started
 
-    sections = [
-        (OUTPUT_DIR / f"{name}.md").read_text(encoding="utf-8").strip() for name in BENCHMARKS
-    ]
+    target = ROOT / "BENCHMARKS.md"
+    kept = hand_kept(target.read_text(encoding="utf-8")) if target.exists() else {}
+    sections = []
+    for name in BENCHMARKS:
+        sections.append((OUTPUT_DIR / f"{name}.md").read_text(encoding="utf-8").strip())
+        sections.extend(kept.get(name, []))
     command = " ".join(["python", "bench/run_all.py", *extra])
     timing = ", ".join(f"{name} {seconds:.0f} s" for name, seconds in durations.items())
     mode = (
@@ -90,12 +138,12 @@ another developer's test runs, so absolute times are noisy: compute times are be
 DDS latency and soak sections report distributions and per-quarter times instead) and the
 ratios, measured in the same run with the compared functions timed round-robin, are the numbers
 to rely on. All data are seeded. Each section below is also written on its own to
-`bench/output/<name>.md`, and the plots to `bench/output/*.png` (that directory is not under
-version control; run the command above to produce them). Run one section with
+`bench/output/<name>.md` (but the live demo's, kept by hand), and the plots to
+`bench/output/*.png` (that directory is not under version control; run the command above to
+produce them). Run one section with
 `python bench/<name>.py [--quick]`.
 """
     text = header + "\n" + "\n\n".join(sections) + "\n"
-    target = ROOT / "BENCHMARKS.md"
     target.write_text(text, encoding="utf-8")
     print(f"wrote {target} in {total:.0f} s", file=sys.stderr)
 

@@ -1,6 +1,6 @@
 """The encoder spike screen on clean and on spiked records (issue 22, deliverable 3).
 
-    python bench/spike_screen.py [--seeds 20] [--duration 40] [--kinds ...] [--jobs 2]
+    python bench/spike_screen.py [--quick] [--seeds 20] [--duration 40] [--kinds ...] [--jobs 2]
 
 For every simulated scenario and seed, a bag is written the way ``genbacklash simulate``
 writes it (the operation-shaped scenarios of :mod:`genbacklash_core.scenarios`:
@@ -29,12 +29,14 @@ import math
 import sys
 import tempfile
 import time
+from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from _common import printed_section
 
 from genbacklash_core.scenarios import PHASE_KINDS, OperationSettings
 from genbacklash_ros.bags.bagio import BagReader, BagWriter
@@ -156,7 +158,7 @@ def _task(job: tuple[str, int, bool, float]) -> Outcome:
     return run_one(*job)
 
 
-def main(argv: list[str] | None = None) -> None:
+def _arguments(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     parser.add_argument("--seeds", type=int, default=20, help="seeds 0..N-1 (default 20)")
     parser.add_argument("--duration", type=float, default=40.0, help="seconds (default 40)")
@@ -164,7 +166,23 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--physics", nargs="*", default=None, help="physics variants too")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--clean-only", action="store_true")
+    parser.add_argument("--quick", action="store_true", help="smaller settings (smoke test)")
     args = parser.parse_args(argv)
+    if args.quick:
+        args.seeds, args.duration = 2, 10.0
+    return args
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    args = _arguments(argv)
+    with printed_section(
+        "spike_screen_physics" if args.physics is not None and not args.kinds else "spike_screen",
+        "## Spike screen (issue 22)" if args.kinds else "### Spike screen: the physics drivetrains",
+    ):
+        _tables(args)
+
+
+def _tables(args: argparse.Namespace) -> None:
     kinds = list(args.kinds)
     if args.physics is not None:
         from genbacklash_ros.physics.variants import VARIANTS

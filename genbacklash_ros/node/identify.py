@@ -55,6 +55,7 @@ __all__ = [
     "EstimateInUse",
     "Identified",
     "IdentifierWorker",
+    "IdentifyThread",
     "Refused",
     "Result",
     "Skipped",
@@ -200,8 +201,55 @@ class SyncWorker:
         """Nothing to stop."""
 
 
+class IdentifyThread:
+    """One daemon thread that runs the batches of any number of :class:`ThreadWorker`, one
+    worker's at a time, in the order they became ready (round robin under load).
+
+    A live node of several joints has one worker per joint; each on a thread of its own, six
+    of them busy in a cold start (the first seconds, when every refit is costly) took the
+    interpreter lock in turn with the message thread, which then ran one switch interval in
+    seven and fell seconds behind. On one thread they take it in turn with the message thread
+    only. :func:`live_worker` puts every live worker of the process on one.
+    """
+
+    def __init__(self, name: str = "genbacklash-identify") -> None:
+        self._cond = threading.Condition()
+        self._ready: deque[ThreadWorker] = deque()
+        self._closed = False
+        self._thread = threading.Thread(target=self._loop, name=name, daemon=True)
+        self._thread.start()
+
+    @property
+    def thread(self) -> threading.Thread:
+        return self._thread
+
+    def wake(self, worker: ThreadWorker) -> None:
+        """``worker`` has batches queued: run them when its turn comes."""
+        with self._cond:
+            if worker not in self._ready:
+                self._ready.append(worker)
+            self._cond.notify()
+
+    def close(self) -> None:
+        """End the thread after the batch it may be running."""
+        with self._cond:
+            self._closed = True
+            self._cond.notify_all()
+
+    def _loop(self) -> None:
+        cond = self._cond
+        while True:
+            with cond:
+                cond.wait_for(lambda: self._closed or bool(self._ready))
+                if self._closed:
+                    return
+                worker = self._ready.popleft()
+            worker._work()
+
+
 class ThreadWorker:
-    """Identifies on a daemon thread of its own (live transports).
+    """Identifies on a daemon thread (live transports): a thread of its own, or ``thread``,
+    an :class:`IdentifyThread` it shares with other workers.
 
     Parameters
     ----------
@@ -209,6 +257,9 @@ class ThreadWorker:
         Called from the worker's thread only, while the worker runs.
     max_backlog : int
         Samples kept queued at most; the oldest batches go beyond it (:class:`Skipped`).
+    thread : IdentifyThread, optional
+        Shared with other workers (closed with them by its owner); default one of its own,
+        closed with the worker.
 
     Examples
     --------
@@ -222,7 +273,13 @@ class ThreadWorker:
     >>> worker.close()
     """
 
-    def __init__(self, identifier: OnlineIdentifier, *, max_backlog: int = MAX_BACKLOG) -> None:
+    def __init__(
+        self,
+        identifier: OnlineIdentifier,
+        *,
+        max_backlog: int = MAX_BACKLOG,
+        thread: IdentifyThread | None = None,
+    ) -> None:
         if isinstance(max_backlog, bool) or not isinstance(max_backlog, int) or max_backlog < 1:
             raise GenBacklashError(f"max_backlog must be a whole number >= 1, got {max_backlog!r}")
         self._run = _Identify(identifier)
@@ -233,8 +290,8 @@ class ThreadWorker:
         self._stop = False
         self._results: deque[Result] = deque()
         self._cond = threading.Condition()
-        self._thread = threading.Thread(target=self._loop, name="genbacklash-identify", daemon=True)
-        self._thread.start()
+        self._own = thread is None
+        self._thread = IdentifyThread() if thread is None else thread
 
     @property
     def identifier(self) -> OnlineIdentifier:
@@ -261,7 +318,7 @@ class ThreadWorker:
                 b0 = b0.copy()
                 b0[0] = True
                 self._queue[0] = (us0, ys0, b0)
-            self._cond.notify()
+        self._thread.wake(self)
 
     def poll(self) -> list[Result]:
         """The results since the last call (a deque's pops: no lock, no wait)."""
@@ -289,40 +346,54 @@ class ThreadWorker:
                 self._cond.notify_all()
 
     def close(self, *, wait: bool = False) -> None:
-        """Stop the thread (what is queued is not identified); it ends after the call to the
-        identifier it may be in (``wait``: wait for that; a restart does not)."""
+        """Stop identifying (what is queued is not identified); the call to the identifier
+        it may be in finishes (``wait``: wait for that; a restart does not)."""
         with self._cond:
             self._stop = True
             self._cond.notify_all()
-        if wait and self._thread is not threading.current_thread():
-            self._thread.join()
+        if self._own:
+            self._thread.close()
+        if wait and self._thread.thread is not threading.current_thread():
+            with self._cond:
+                self._cond.wait_for(lambda: not self._busy)
 
-    def _loop(self) -> None:
+    def _work(self) -> None:
+        """Identify everything queued, in one call (on the worker's thread)."""
         cond = self._cond
-        while True:
-            with cond:
-                cond.wait_for(lambda: self._stop or bool(self._queue))
-                if self._stop:
-                    return
-                batches = list(self._queue)
-                self._queue.clear()
-                self._queued = 0
-                self._busy = True
+        with cond:
+            if self._stop or not self._queue:
+                return
+            batches = list(self._queue)
+            self._queue.clear()
+            self._queued = 0
+            self._busy = True
+        try:
             if len(batches) == 1:
                 us, ys, breaks = batches[0]
             else:
                 us = np.concatenate([b[0] for b in batches])
                 ys = np.concatenate([b[1] for b in batches])
                 breaks = np.concatenate([b[2] for b in batches])
-            result = self._run.update(us, ys, breaks)
+            try:
+                result: Result = self._run.update(us, ys, breaks)
+            except Exception as err:  # a bug: refused, and the (shared) thread goes on
+                self._run.skipped()
+                result = Refused(int(us.size), f"identifier: {type(err).__name__}: {err}")
             with cond:
                 self._results.append(result)
+        finally:
+            with cond:
                 self._busy = False
                 cond.notify_all()
 
 
+_LIVE_THREAD: IdentifyThread | None = None
+_LIVE_LOCK = threading.Lock()
+
+
 def live_worker(identifier: OnlineIdentifier) -> ThreadWorker:
-    """The worker of a live transport: a :class:`ThreadWorker`, with the interpreter's GIL
+    """The worker of a live transport: a :class:`ThreadWorker` on the process's one live
+    :class:`IdentifyThread` (every joint's, every restart's), with the interpreter's GIL
     switch interval at most :data:`SWITCH_INTERVAL_S` (process-wide), so that a message
     handler waiting for the GIL while the worker runs per-sample Python waits at most that
     long (the default, 5 ms, would be half the latency budget).
@@ -331,11 +402,18 @@ def live_worker(identifier: OnlineIdentifier) -> ThreadWorker:
     >>> worker = live_worker(WindowedIdentifier(3))
     >>> sys.getswitchinterval() <= SWITCH_INTERVAL_S
     True
+    >>> live_worker(WindowedIdentifier(2))._thread is worker._thread  # one thread for all
+    True
     >>> worker.close()
     """
+    global _LIVE_THREAD
     if sys.getswitchinterval() > SWITCH_INTERVAL_S:
         sys.setswitchinterval(SWITCH_INTERVAL_S)
-    return ThreadWorker(identifier)
+    with _LIVE_LOCK:
+        if _LIVE_THREAD is None:
+            _LIVE_THREAD = IdentifyThread("genbacklash-identify-live")
+        thread = _LIVE_THREAD
+    return ThreadWorker(identifier, thread=thread)
 
 
 class EstimateInUse:

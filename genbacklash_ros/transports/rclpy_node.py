@@ -40,7 +40,17 @@ what it returns. All logic is in the pipeline.
   is pending, refits, writes its final checkpoint and shuts rclpy down, and, when run as a
   program, until the process has exited;
 * checkpoints are written on a background thread (atomic file writes);
-* everything runs on one thread (a ``SingleThreadedExecutor`` spun once at a time).
+* the loop (:class:`WaitLoop`): one thread waits on an rcl wait set of its own holding the
+  ``command`` and ``encoder`` subscriptions, the parameter services and the 1 Hz timer; at each
+  wake-up it takes every message pending on the two subscriptions straight from their handles
+  (no executor, no task per message), orders them by source timestamp (as the DDS
+  transport does) and hands them to the pipeline. A ``SingleThreadedExecutor`` still serves
+  everything else (parameter services, the timer, QoS events, a ``/clock`` subscription with
+  ``use_sim_time``), run without waiting only when one of those is ready and at least every
+  :data:`WAKE_S`. rclpy's executor cost 0.9 of a core at 1 kHz for what the loop does in
+  less (BENCHMARKS.md, "Six joints through one node"). A node added to any other executor
+  (a test, a component container) is served by it as usual: the two subscriptions are only
+  withheld from executors while a :class:`WaitLoop` runs.
 
 rclpy is imported here only, and this module only when the rclpy transport is chosen.
 Run it with ``ros2 run genbacklash_ros backlash_identifier --ros-args --params-file
@@ -52,7 +62,9 @@ from __future__ import annotations
 
 import math
 import sys
+import time
 from collections.abc import Sequence
+from contextlib import ExitStack
 from typing import Any
 
 import rclpy
@@ -67,7 +79,15 @@ from rcl_interfaces.msg import (
     ParameterDescriptor,
     SetParametersResult,
 )
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.executors import (
+    ConditionReachedException,
+    ExternalShutdownException,
+    ShutdownException,
+    SingleThreadedExecutor,
+    TimeoutException,
+)
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
@@ -110,7 +130,7 @@ from genbacklash_ros.node.wiring import (
 )
 from genbacklash_ros.transports.stop_signals import StopSignals
 
-__all__ = ["BacklashIdentifierNode", "descriptor", "from_ros", "main", "to_ros"]
+__all__ = ["BacklashIdentifierNode", "WaitLoop", "descriptor", "from_ros", "main", "to_ros"]
 
 DEFAULT_DEPTH = 10  # ROS 2 default QoS: KEEP_LAST 10, RELIABLE, VOLATILE
 READ_ONLY = frozenset(
@@ -130,7 +150,11 @@ _ROS_COMMAND = {
 }
 _ROS_ENCODER = {"joint_state": RosJointState, "float64": RosFloat64}
 _SPECS = {spec.name: spec for spec in PARAMETER_SPECS}
-WAKE_S = 0.1  # longest executor wait: a stop request is seen within this
+WAKE_S = 0.1  # longest wait: a stop request is seen within this, the executor run this often
+# messages taken per subscription and wake-up at most: a reader's whole history, so that a
+# node behind takes both streams whole and orders them (a smaller cap took 512 commands
+# and readings that a lost stretch had left far apart); the rest at the next wake-up
+TAKE_BATCH = READER_DEPTH
 PENDING_KEY = "parameters_pending"  # diagnostics key: pairs held at their last consistent values
 
 
@@ -297,8 +321,14 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
             for joint in (self._joints.joints or ("",))
         }
         # deep histories: the same QoS as ROS 2's defaults for matching, more room while busy
+        # the two hot subscriptions: taken by a WaitLoop while one runs (any executor otherwise)
+        self._hot_group = _LoopGroup()
         self._command_sub = self.create_subscription(
-            command_type, "command", self._on_command, QoSProfile(depth=READER_DEPTH)
+            command_type,
+            "command",
+            self._on_command,
+            QoSProfile(depth=READER_DEPTH),
+            callback_group=self._hot_group,
         )
         sensor_qos = QoSProfile(
             history=qos_profile_sensor_data.history,
@@ -307,7 +337,7 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
             durability=qos_profile_sensor_data.durability,
         )
         self._encoder_sub = self.create_subscription(
-            encoder_type, "encoder", self._on_encoder, sensor_qos
+            encoder_type, "encoder", self._on_encoder, sensor_qos, callback_group=self._hot_group
         )
         # a motor encoder (gear_input motor_encoder, dual encoders): the gear's input
         self._motor_sub = (
@@ -535,6 +565,182 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
         self._checkpoints.close()
 
 
+# --------------------------------------------------------------------------- the loop
+
+
+class _LoopGroup(ReentrantCallbackGroup):  # type: ignore[misc]
+    """The callback group of the two hot subscriptions: executors take them as any other
+    until a :class:`WaitLoop` claims them (their QoS event handlers, in the same group, stay
+    the executors')."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.claimed: set[int] = set()  # id() of the entities a WaitLoop takes itself
+
+    def can_execute(self, entity: Any) -> bool:
+        return id(entity) not in self.claimed
+
+    def beginning_execution(self, entity: Any) -> bool:
+        return id(entity) not in self.claimed
+
+
+class WaitLoop:
+    """The node's own wait loop: the hot subscriptions taken without an executor.
+
+    On construction it claims the node's ``command`` and ``encoder`` subscriptions (executors
+    no longer wait on them) and builds one rcl wait set holding them, the node's other
+    subscriptions, its timers, clients and services. :meth:`run_once` waits on it (at most
+    ``timeout_s``), then
+
+    1. takes every message pending on the two subscriptions (``take_message`` on their
+       handles, at most :data:`TAKE_BATCH` each: their whole histories, as the DDS
+       transport takes everything available), orders them by source timestamp (a reading
+       after the command it follows, however the two topics were delivered) and calls each
+       subscription's callback (the node's ``_on_command``/``_on_encoder``) with the message
+       and its info, as the executor did;
+    2. when anything else in the wait set is ready, or :data:`WAKE_S` has passed since it
+       last did, runs the ``executor`` without waiting until it has nothing ready (parameter
+       services, the timer, QoS events, guard conditions and waitables, which are not in the
+       wait set: their readiness is taken by the wait that sees it).
+
+    The wait set is rebuilt when the node's entities change (a ``/clock`` subscription made
+    when ``use_sim_time`` is set at run time). :meth:`close` gives the two subscriptions back
+    to executors. rclpy's executor makes a new wait set, a task and a coroutine per message;
+    this does one wait per wake-up and nothing per message but the take.
+
+    Raises ``ExternalShutdownException`` when the context is shut down from elsewhere.
+    """
+
+    def __init__(self, node: BacklashIdentifierNode, executor: Any) -> None:
+        self._node = node
+        self._executor = executor
+        # each with the callback an executor would call (the node's, taking the message info)
+        self._hot = tuple((sub, sub.callback) for sub in (node._command_sub, node._encoder_sub))
+        self._hot_ids = {id(sub) for sub, _ in self._hot}
+        node._hot_group.claimed.update(self._hot_ids)
+        self._context = node.context
+        self._stack = ExitStack()
+        self._wait_set: Any = None
+        self._signature: tuple[int, ...] = ()
+        self._subs: list[Any] = []
+        self._timers: list[Any] = []
+        self._clients: list[Any] = []
+        self._services: list[Any] = []
+        self._last_executor = time.monotonic()
+        self._seq = 0
+        self.taken = 0  # messages taken from the hot subscriptions
+        self.executor_runs = 0  # times the executor was run
+        self._build()
+
+    def _entity_signature(self) -> tuple[int, ...]:
+        node = self._node
+        return tuple(
+            len(list(entities))
+            for entities in (node.subscriptions, node.timers, node.clients, node.services)
+        )
+
+    def _build(self) -> None:
+        """(Re)make the wait set from the node's entities, holding their handles (an entity
+        is not destroyed under a wait)."""
+        self._stack.close()
+        self._stack = ExitStack()
+        node = self._node
+        hot = [sub for sub, _ in self._hot]
+        self._subs = hot + [s for s in node.subscriptions if id(s) not in self._hot_ids]
+        self._timers = list(node.timers)
+        self._clients = list(node.clients)
+        self._services = list(node.services)
+        for entity in (*self._subs, *self._timers, *self._clients, *self._services):
+            self._stack.enter_context(entity.handle)
+        self._stack.enter_context(self._context.handle)
+        self._wait_set = _rclpy.WaitSet(
+            len(self._subs),
+            0,
+            len(self._timers),
+            len(self._clients),
+            len(self._services),
+            0,
+            self._context.handle,
+        )
+        self._signature = self._entity_signature()
+
+    def close(self) -> None:
+        """Release the handles; executors take the two subscriptions again."""
+        self._stack.close()
+        self._wait_set = None
+        self._node._hot_group.claimed.difference_update(self._hot_ids)
+
+    def run_once(self, timeout_s: float = WAKE_S) -> int:
+        """One wait (at most ``timeout_s``) and what it found; the messages taken."""
+        ws = self._wait_set
+        ws.clear_entities()
+        for sub in self._subs:
+            ws.add_subscription(sub.handle)
+        for tmr in self._timers:
+            ws.add_timer(tmr.handle)
+        for cli in self._clients:
+            ws.add_client(cli.handle)
+        for srv in self._services:
+            ws.add_service(srv.handle)
+        ws.wait(int(timeout_s * 1e9))
+        if not self._context.ok():
+            raise ExternalShutdownException()
+        ready = [ws.is_ready("subscription", i) for i in range(len(self._hot))]
+        taken = self.take_pending(ready) if any(ready) else 0
+        others = (
+            any(ws.is_ready("subscription", i) for i in range(len(self._hot), len(self._subs)))
+            or ws.get_ready_entities("timer")
+            or ws.get_ready_entities("service")
+            or ws.get_ready_entities("client")
+        )
+        if others or time.monotonic() - self._last_executor >= WAKE_S:
+            self.run_executor()
+        return taken
+
+    def take_pending(self, ready: Sequence[bool] = (True, True)) -> int:
+        """Take what is pending on the two subscriptions (those ``ready`` says have
+        something), in source-timestamp order, into the node; the number taken."""
+        events: list[tuple[int, int, Any, Any, Any]] = []
+        for (sub, callback), pending in zip(self._hot, ready, strict=True):
+            if not pending:
+                continue
+            handle, msg_type, raw = sub.handle, sub.msg_type, sub.raw
+            for _ in range(TAKE_BATCH):
+                got = handle.take_message(msg_type, raw)
+                if got is None:
+                    break
+                msg, info = got
+                self._seq += 1
+                source = int(info.get("source_timestamp") or 0) if isinstance(info, dict) else 0
+                events.append((source, self._seq, callback, msg, info))
+        if not events:
+            return 0
+        if len(events) > 1:
+            events.sort(key=lambda e: (e[0], e[1]))
+        for _, _, callback, msg, info in events:
+            callback(msg, info)
+        self.taken += len(events)
+        return len(events)
+
+    def run_executor(self) -> None:
+        """Run the executor without waiting until nothing is ready."""
+        self._last_executor = time.monotonic()
+        self.executor_runs += 1
+        executor = self._executor
+        while True:
+            try:
+                handler, _, _ = executor.wait_for_ready_callbacks(timeout_sec=0)
+            except (TimeoutException, ShutdownException, ConditionReachedException):
+                break
+            handler()
+            error = handler.exception()
+            if error is not None:
+                raise error
+            handler.result()
+        if self._entity_signature() != self._signature:
+            self._build()
+
+
 def _spec_of(name: str) -> ParameterSpec | None:
     """The spec of a parameter name: its own, or a joint's override's (``<joint>.<name>``)."""
     spec = _SPECS.get(name)
@@ -558,9 +764,10 @@ def main(
 
     Signals: rclpy's own handlers are not installed; ``stop`` (else one of this call's own,
     released when it returns: ignored from then on when ``exiting``, else restored) only
-    sets a flag, which the spin loop reads at its next wake-up (a message, or at most
-    :data:`WAKE_S`). Then, in order: the node finishes (pending samples, final refit and
-    estimate, checkpoint), the executor and the node are destroyed, rclpy shuts down.
+    sets a flag, which the wait loop (:class:`WaitLoop`) reads at its next wake-up (a
+    message, or at most :data:`WAKE_S`). Then, in order: the node finishes (pending samples,
+    final refit and estimate, checkpoint), the executor and the node are destroyed, rclpy
+    shuts down.
     """
     owned = stop is None
     signals = StopSignals().install() if stop is None else stop
@@ -592,8 +799,12 @@ def _run(argv: list[str], stop: StopSignals) -> int:
         node = BacklashIdentifierNode()
         executor = SingleThreadedExecutor()
         executor.add_node(node)
-        while not stop.requested:
-            executor.spin_once(timeout_sec=WAKE_S)
+        loop = WaitLoop(node, executor)
+        try:
+            while not stop.requested:
+                loop.run_once(WAKE_S)
+        finally:
+            loop.close()
     except ExternalShutdownException:
         pass
     except GenBacklashError as err:  # invalid parameters at start

@@ -18,6 +18,7 @@ import pytest
 from genbacklash_core import Estimate, EstimatorState, GenBacklashError, Structure, paper_example
 from genbacklash_ros.node.identify import (
     Identified,
+    IdentifyThread,
     Refused,
     Skipped,
     SyncWorker,
@@ -160,6 +161,51 @@ def test_a_worker_far_behind_lets_the_oldest_batches_go() -> None:
     finally:
         ident.gate.set()
         run.close()
+
+
+class Boom(GatedIdentifier):
+    """Raises what no identifier should (a bug), on its first call."""
+
+    def update_many(self, u: Any, y: Any, breaks: Any = None) -> Estimate:
+        if not self.calls:
+            self.calls.append((int(np.size(u)), True))
+            raise RuntimeError("a bug")
+        return super().update_many(u, y, breaks)
+
+
+def test_workers_on_one_thread_take_turns_and_a_bug_in_one_stops_none() -> None:
+    """Six joints' live workers share one thread (a cold start of six, each on its own
+    thread, starved the message thread of the interpreter lock): while one worker's
+    identifier is busy the other's batch waits for its turn; an exception from one
+    identifier is that worker's Refused result, and the thread goes on for both."""
+    thread = IdentifyThread("test-identify")
+    slow, broken = GatedIdentifier(), Boom()
+    first = ThreadWorker(slow, thread=thread)
+    second = ThreadWorker(broken, thread=thread)
+    try:
+        ones = np.ones(4)
+        first.submit(ones, ones, np.array([True, False, False, False]))
+        assert slow.entered.wait(WAIT_S)
+        second.submit(ones, ones, np.array([True, False, False, False]))
+        assert not second.poll() and broken.calls == []  # waits for its turn
+        slow.gate.set()
+        first.flush()
+        second.flush()
+        (done,) = first.poll()
+        (refused,) = second.poll()
+        assert isinstance(done, Identified) and done.samples == 4
+        assert isinstance(refused, Refused) and "RuntimeError: a bug" in refused.reason
+        broken.gate.set()
+        second.submit(ones, ones, np.array([False, False, False, False]))
+        second.flush()
+        (after,) = second.poll()
+        assert isinstance(after, Identified)
+        assert broken.calls[-1] == (4, True)  # the refused batch broke the chain
+        assert first._thread is second._thread and thread.thread.is_alive()
+    finally:
+        first.close(wait=True)
+        second.close(wait=True)
+        thread.close()
 
 
 def test_pipeline_rejects_a_worker_that_is_not_callable() -> None:

@@ -1,0 +1,46 @@
+"""``bench/run_all.py`` assembles every section: a full run must not drop one.
+
+Every benchmark script in ``bench/`` is run by it (under its own name or, with arguments, under
+a section name of :data:`RUNS`), and the sections no script writes (the live demo's) are carried
+over from the ``BENCHMARKS.md`` being replaced.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+from types import ModuleType
+
+import pytest
+
+BENCH = Path(__file__).resolve().parents[1] / "bench"
+
+
+@pytest.fixture(scope="module")
+def run_all() -> Iterator[ModuleType]:
+    sys.path.insert(0, str(BENCH))
+    try:
+        yield importlib.import_module("run_all")
+    finally:
+        sys.path.remove(str(BENCH))
+
+
+def test_every_benchmark_script_is_run(run_all: ModuleType) -> None:
+    scripts = {p.stem for p in BENCH.glob("*.py") if not p.stem.startswith("_")} - {"run_all"}
+    run = {run_all.RUNS.get(name, (name, []))[0] for name in run_all.BENCHMARKS}
+    assert scripts - run == set(), "scripts whose sections a full run would drop"
+    assert run - scripts == set()
+    for name in ("physics_accuracy", "physics_loop", "physics_diagnose", "csv_vs_bag"):
+        assert name in run_all.BENCHMARKS
+    assert {"coverage", "spike_screen", "spike_screen_physics"} <= set(run_all.BENCHMARKS)
+
+
+def test_hand_kept_sections_are_carried_over(run_all: ModuleType) -> None:
+    text = (BENCH.parent / "BENCHMARKS.md").read_text(encoding="utf-8")
+    kept = run_all.hand_kept(text)
+    assert set(kept) <= set(run_all.BENCHMARKS)
+    (demo,) = kept["take_cost"]
+    assert demo.startswith("## Live demo") and "\n## " not in demo
+    assert run_all.hand_kept("# t\n\n## A\na\n") == {}
