@@ -458,50 +458,32 @@ class Aligner:
         us = commands[k]
         resumed = None
         unpaired = 0
+        keep: np.ndarray | None = None  # the samples kept; the others are taken out
         if self._motor:  # each reading with the motor reading of its stamp, or taken out
             input_t = np.array(self.cmd_t, dtype=np.int64)[k]
-            paired = paired_keep(times, input_t, period)
+            keep = paired_keep(times, input_t, period)
+            unpaired = int(np.count_nonzero(~keep))
+        elif self._settle_ns:  # not while the servo settles
+            keep, self._settle = settling_keep(times, us, self._settle_ns, self._settle)
+        if keep is not None:
             tail = self._settle_tail
-            self._settle_tail = not paired[-1] or (tail and not paired.any())
-            if not paired.all() or tail:  # taken out as lost readings: bridged where monotone
-                unpaired = int(np.count_nonzero(~paired))
-                resumed = carry_marks(~paired, paired)
+            self._settle_tail = not keep[-1] or (tail and not keep.any())
+            if not keep.all() or tail:  # taken out as lost readings: bridged where monotone
+                resumed = carry_marks(~keep, keep)
                 if tail and resumed.size:
                     resumed[0] = True
-                marks = carry_marks(marks, paired)
-                k, us, ys, times, held = (
-                    k[paired],
-                    us[paired],
-                    ys[paired],
-                    times[paired],
-                    held[paired],
-                )
+                marks = carry_marks(marks, keep)
+                k, us, ys, times, held = (k[keep], us[keep], ys[keep], times[keep], held[keep])
                 if k.size == 0:
+                    if not unpaired:
+                        return None
                     return AlignedBatch(
                         times, us, ys, held, marks, period, linked, early, None, None, unpaired
                     )
-        elif self._settle_ns:
-            settled, self._settle = settling_keep(times, us, self._settle_ns, self._settle)
-            tail = self._settle_tail
-            self._settle_tail = not settled[-1] or (tail and not settled.any())
-            if not settled.all() or tail:  # taken out as lost readings: bridged where monotone
-                resumed = carry_marks(~settled, settled)
-                if tail and resumed.size:
-                    resumed[0] = True
-                marks = carry_marks(marks, settled)
-                k, us, ys, times, held = (
-                    k[settled],
-                    us[settled],
-                    ys[settled],
-                    times[settled],
-                    held[settled],
-                )
-                if k.size == 0:
-                    return None
         monotone = None if self._grid_ns else self._monotone(k, linked)
-        keep = int(k[-1])  # the command holding at the last sample, and later ones
-        if keep:
-            del self.cmd_t[:keep], self.cmd_u[:keep]
+        held_from = int(k[-1])  # the command holding at the last sample, and later ones
+        if held_from:
+            del self.cmd_t[:held_from], self.cmd_u[:held_from]
         self._linked = True
         self._last_time = int(times[-1])
         return AlignedBatch(
