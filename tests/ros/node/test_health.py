@@ -277,6 +277,22 @@ def test_spikes_are_still_caught_on_a_lagging_band() -> None:
     assert _screen_steps(StreamHealth(), times, u, y, resumed) == sorted(spikes)
 
 
+def test_no_spike_is_judged_while_the_guard_says_the_model_does_not_fit() -> None:
+    """A reading far from the prediction of a model that does not describe the drivetrain
+    (the compensation guard off) is no evidence of a spike: nothing is taken out then, and
+    the same readings are screened again once the model fits."""
+    times, u, y, resumed = _jogs(20, 4 * COUNT)
+    spikes = {200: 20, 420: -10, 675: 40, 995: -25, 1100: 15}
+    for k, counts in spikes.items():
+        y[k] += counts * COUNT
+    health = StreamHealth()
+    health.model_fits = False
+    assert _screen_steps(health, times, u, y, resumed) == []
+    health = StreamHealth()
+    assert health.model_fits  # the default: screened
+    assert _screen_steps(health, times, u, y, resumed) == sorted(spikes)
+
+
 def test_a_spike_judged_by_the_band_alone_does_not_take_the_readings_after_it() -> None:
     """A reading after samples taken out while the servo settled is judged by the band
     alone: a spike that stays inside the band passes that test. The readings after it do
