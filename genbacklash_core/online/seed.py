@@ -95,7 +95,13 @@ def seed_prior(template: Structure, sign_known: bool, estimate: Estimate) -> See
             f"cannot seed: the estimate's residual {estimate.residual!r} is not a positive number"
         )
     p = np.array(estimate.parameters, dtype=np.float64)
-    theta = saved.theta(p)
+    with np.errstate(over="ignore", invalid="ignore"):  # checked just below
+        theta = saved.theta(p)  # eq. (23): products m c may overflow float64
+    if not np.all(np.isfinite(theta)):
+        raise GenBacklashError(
+            "cannot seed: the estimate's parameters are too large to use (their products "
+            "overflow float64)"
+        )
     inverse = scaled_inverse(np.array(estimate.covariance, dtype=np.float64))
     bad = "cannot seed: the estimate's covariance is not finite and positive definite"
     if inverse is None:

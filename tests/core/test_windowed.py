@@ -479,3 +479,12 @@ def test_refit_at_the_end_of_a_record_at_rest_keeps_a_converged_estimate(resting
     ident.update_many(np.full(resting, data.u[end - 1]), np.full(resting, data.y[end - 1]))
     final = ident.refit()
     assert final.state is EstimatorState.CONVERGED, final.reason
+
+
+def test_seed_with_parameters_whose_products_overflow_is_refused_clearly() -> None:
+    # found by hypothesis in CI: m_L1 = 1e300 and c_L = 1e300 made eq. (23)'s m_L1 c_L
+    # overflow with a RuntimeWarning instead of a refusal
+    p = np.array([1e300, 0.0, 0.0, 1e300, 1.0, 0.0, 0.0, 1.0])
+    est = Estimate(Structure(3), p, np.eye(8) * 1e-6, 1.0, 0.0, "warming_up", 0.0, 0)
+    with np.errstate(over="raise"), pytest.raises(GenBacklashError, match="too large"):
+        WindowedIdentifier(3).seed(est)
