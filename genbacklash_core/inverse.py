@@ -605,8 +605,8 @@ class _InverseTable:
         if not usable.all() or np.any(np.diff(g) <= 0.0):
             keep = usable & (slope > 0.0)
             u, g, slope = u[keep], g[keep], slope[keep]
-            rising = np.concatenate(([True], np.diff(g) > 0.0))
-            u, g, slope = u[rising], g[rising], slope[rising]
+            rising = np.concatenate((np.ones(min(g.size, 1), dtype=bool), np.diff(g) > 0.0))
+            u, g, slope = u[rising], g[rising], slope[rising]  # none usable: an empty table
         self.u = u
         self.g = g
         with np.errstate(divide="ignore"):

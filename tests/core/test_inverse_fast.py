@@ -202,3 +202,20 @@ def test_steps_forget_a_settled_step_when_the_model_or_state_changes() -> None:
     assert comp.steps([1.0]) == [1.2]
     comp.state = ref.state = InverseBacklash(narrow, x0=2.0, u0=2.0).state  # another state
     assert comp.steps([1.0]) == [ref.step(1.0)] == [0.8]
+
+
+def test_a_branch_with_no_usable_node_gives_an_empty_table() -> None:
+    # found by hypothesis (test_fuzz::test_inverse_backlash): a branch whose values all
+    # overflow left no node, and the table's rising filter raised an IndexError
+    from genbacklash_core.inverse import _InverseTable
+
+    class Overflowing:
+        a, b, shift, sense = -1.0, 1.0, 0.0, 1.0
+
+        def values_and_slopes(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            return np.full(u.shape, np.inf), np.full(u.shape, np.nan)
+
+    table = _InverseTable(Overflowing())  # type: ignore[arg-type]
+    assert table.g.size == 0
+    assert math.isnan(table.guess(0.1))
+    assert np.isnan(table.guesses(np.array([0.1]))).all()
