@@ -234,3 +234,16 @@ def simulation_residual(structure: Any, u: Any, y: Any, x0: float) -> Any:
         return simulate_parameters(structure, p, u, x0)[1] - y
 
     return residual
+
+
+def parse_physics_arguments(
+    parser: argparse.ArgumentParser, argv: Sequence[str] | None
+) -> argparse.Namespace:
+    """Add ``--quick`` to a physics bench's ``parser`` and parse ``argv``; ``--quick``: seed
+    0, near_ideal at 60 Hz, 10 s records (a smoke test)."""
+    parser.add_argument("--quick", action="store_true", help="smaller settings (smoke test)")
+    args = parser.parse_args(argv)
+    if args.quick:
+        args.seeds, args.bandwidths = [0], [60.0]
+        args.variants, args.duration = ["near_ideal"], 10.0
+    return args

@@ -32,7 +32,7 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from _common import printed_section
+from _common import parse_physics_arguments, printed_section
 
 from genbacklash_core.scenarios import OperationSettings
 from genbacklash_ros.cli.main import main as genbacklash
@@ -98,15 +98,7 @@ def _arguments(argv: Sequence[str] | None = None) -> argparse.Namespace:
         action="store_true",
         help="the motor encoder as the gear's input (replay and identify --motor-encoder)",
     )
-    parser.add_argument("--quick", action="store_true", help="smaller settings (smoke test)")
-    args = parser.parse_args(argv)
-    if args.quick:
-        args.seeds, args.bandwidths, args.variants, args.duration = (
-            [0],
-            [60.0],
-            ["near_ideal"],
-            10.0,
-        )
+    args = parse_physics_arguments(parser, argv)
     return args
 
 

@@ -53,7 +53,7 @@ from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
-from _common import printed_section
+from _common import parse_physics_arguments, printed_section
 
 from genbacklash_core.diagnose import DiagnoseSettings, diagnose, operation_case
 from genbacklash_core.diagnose.physics import PHYSICS_NAMES
@@ -148,15 +148,8 @@ def _arguments(argv: Sequence[str] | None = None) -> argparse.Namespace:
     )
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--operation-seeds", type=int, nargs="*", default=[0, 1, 2])
-    parser.add_argument("--quick", action="store_true", help="smaller settings (smoke test)")
-    args = parser.parse_args(argv)
+    args = parse_physics_arguments(parser, argv)
     if args.quick:
-        args.seeds, args.bandwidths, args.variants, args.duration = (
-            [0],
-            [60.0],
-            ["near_ideal"],
-            10.0,
-        )
         args.motor_bandwidths, args.operation_seeds = [], []
     return args
 

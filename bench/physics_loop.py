@@ -31,7 +31,7 @@ import time
 from collections.abc import Sequence
 
 import numpy as np
-from _common import printed_section
+from _common import parse_physics_arguments, printed_section
 
 from genbacklash_core import compensate
 from genbacklash_core.scenarios import OperationSettings
@@ -75,15 +75,7 @@ def _arguments(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser.add_argument(
         "--motor-encoder", action="store_true", help="the node's input: a motor encoder"
     )
-    parser.add_argument("--quick", action="store_true", help="smaller settings (smoke test)")
-    args = parser.parse_args(argv)
-    if args.quick:
-        args.seeds, args.bandwidths, args.variants, args.duration = (
-            [0],
-            [60.0],
-            ["near_ideal"],
-            10.0,
-        )
+    args = parse_physics_arguments(parser, argv)
     return args
 
 
