@@ -13,6 +13,7 @@ import argparse
 import contextlib
 import gc
 import io
+import json
 import os
 import platform
 import sys
@@ -247,3 +248,26 @@ def parse_physics_arguments(
         args.seeds, args.bandwidths = [0], [60.0]
         args.variants, args.duration = ["near_ideal"], 10.0
     return args
+
+
+PHYSICS_TOPICS = ["--command", "/command", "--encoder", "/encoder", "--joint", "drive_joint"]
+"""The topics and joint of a physics bag (``genbacklash simulate --physics``)."""
+
+
+def cli_json(args: list[str]) -> dict[str, object]:
+    """Run ``genbacklash ARGS`` (with ``--json``) in process, its output silenced; its JSON."""
+    from genbacklash_ros.cli.main import main as genbacklash
+
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
+        genbacklash(args)
+    return dict(json.loads(out.getvalue()))
+
+
+def json_play(result: dict[str, object]) -> float:
+    """c_L + c_R of identify's JSON or of replay's (its ``model`` holds the same shape)."""
+    shape = result.get("model") if "backlash" not in result else result
+    assert isinstance(shape, dict)
+    bl = shape["backlash"]
+    assert isinstance(bl, dict)
+    return float(bl["c_left"]) + float(bl["c_right"])

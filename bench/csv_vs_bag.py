@@ -17,12 +17,11 @@ from __future__ import annotations
 import argparse
 import contextlib
 import io
-import json
 import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
-from _common import printed_section
+from _common import PHYSICS_TOPICS, cli_json, json_play, printed_section
 
 from genbacklash_core import identify_backlash
 from genbacklash_core.scenarios import OperationSettings
@@ -30,21 +29,6 @@ from genbacklash_ros.bags.csvio import read_series_csv
 from genbacklash_ros.cli.main import main as genbacklash
 from genbacklash_ros.physics.bag import write_physics_bag
 from genbacklash_ros.physics.variants import VARIANTS, variant
-
-TOPICS = ["--command", "/command", "--encoder", "/encoder", "--joint", "drive_joint"]
-
-
-def _run(args: list[str]) -> dict[str, object]:
-    out = io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
-        genbacklash(args)
-    return dict(json.loads(out.getvalue()))
-
-
-def _play(result: dict[str, object]) -> float:
-    bl = result["backlash"]
-    assert isinstance(bl, dict)
-    return float(bl["c_left"]) + float(bl["c_right"])
 
 
 def _max_difference(a: object, b: object) -> float:
@@ -109,12 +93,12 @@ def _tables(args: argparse.Namespace) -> None:
                 csv = Path(tmp) / f"{name}-{seed}.csv"
                 write_physics_bag(bag, params, OperationSettings(duration=args.duration), seed)
                 with contextlib.redirect_stderr(io.StringIO()):
-                    genbacklash(["readings", str(bag), *TOPICS, "-o", str(csv)])
-                from_bag = _run(["identify", str(bag), *TOPICS, "--json", *extra])
-                from_csv = _run(["identify", str(csv), "--json", *extra])
+                    genbacklash(["readings", str(bag), *PHYSICS_TOPICS, "-o", str(csv)])
+                from_bag = cli_json(["identify", str(bag), *PHYSICS_TOPICS, "--json", *extra])
+                from_csv = cli_json(["identify", str(csv), "--json", *extra])
                 old = read_series_csv(csv)  # the stamps' breaks only: the CSV path before
                 before = identify_backlash(old.u, old.y, 3, breaks=old.breaks).model
-                play_bag, play_csv = _play(from_bag), _play(from_csv)
+                play_bag, play_csv = json_play(from_bag), json_play(from_csv)
                 play_before = before.c_left + before.c_right
                 worst_play = max(worst_play, abs(play_csv - play_bag))
                 worst_any = max(worst_any, _max_difference(from_bag, from_csv))

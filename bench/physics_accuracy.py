@@ -24,18 +24,14 @@ Run: ``python bench/physics_accuracy.py [--seeds 0 1 2] [--bandwidths 20 60 100]
 from __future__ import annotations
 
 import argparse
-import contextlib
-import io
-import json
 import tempfile
 import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from _common import parse_physics_arguments, printed_section
+from _common import PHYSICS_TOPICS, cli_json, json_play, parse_physics_arguments, printed_section
 
 from genbacklash_core.scenarios import OperationSettings
-from genbacklash_ros.cli.main import main as genbacklash
 from genbacklash_ros.physics.bag import write_physics_bag
 from genbacklash_ros.physics.variants import VARIANTS, variant
 
@@ -66,24 +62,6 @@ is compared with the geometric play.
 """
 
 SUBSECTION = "### The play found, online and in batch (no compensation in the record)"
-
-TOPICS = ["--command", "/command", "--encoder", "/encoder", "--joint", "drive_joint"]
-
-
-def _run(args: list[str]) -> dict[str, object]:
-    out = io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
-        genbacklash(args)
-    return dict(json.loads(out.getvalue()))
-
-
-def _play(result: dict[str, object]) -> float:
-    """c_L + c_R of identify's JSON or of replay's (its ``model`` holds the same shape)."""
-    shape = result.get("model") if "backlash" not in result else result
-    assert isinstance(shape, dict)
-    bl = shape["backlash"]
-    assert isinstance(bl, dict)
-    return float(bl["c_left"]) + float(bl["c_right"])
 
 
 def _arguments(argv: Sequence[str] | None = None) -> argparse.Namespace:
@@ -136,12 +114,12 @@ def _tables(args: argparse.Namespace) -> None:
                         seed,
                         motor_encoder=args.motor_encoder,
                     )
-                    online = _play(
-                        _run(
+                    online = json_play(
+                        cli_json(
                             [
                                 "replay",
                                 str(bag),
-                                *TOPICS,
+                                *PHYSICS_TOPICS,
                                 "-o",
                                 str(bag) + "-out",
                                 "--json",
@@ -150,7 +128,9 @@ def _tables(args: argparse.Namespace) -> None:
                             ]
                         )
                     )
-                    batch = _play(_run(["identify", str(bag), *TOPICS, "--json", *extra]))
+                    batch = json_play(
+                        cli_json(["identify", str(bag), *PHYSICS_TOPICS, "--json", *extra])
+                    )
                     print(
                         f"| {name} | {bw:g} | {seed} | {1e3 * geometric:.1f} "
                         f"| {online / geometric:.3f} | {batch / geometric:.3f} "

@@ -293,10 +293,14 @@ class TrackingJudge:
         if trial:
             self._trial_done = False
 
+    def _ratio(self) -> tuple[float, float, float]:
+        """``(rms(e_on), rms(e_off), their ratio)`` (NaN where a kind has no readings)."""
+        on_rms, off_rms = self._on.rms(), self._off.rms()
+        return on_rms, off_rms, on_rms / off_rms if off_rms > 0.0 else math.nan
+
     def _verdict(self, trust: float, state: str, why: str) -> TrackingVerdict:
         on, off = self._on, self._off
-        on_rms, off_rms = on.rms(), off.rms()
-        ratio = on_rms / off_rms if off_rms > 0.0 else math.nan
+        on_rms, off_rms, ratio = self._ratio()
         numbers = (
             f"(measured tracking error {on_rms:.3g} rad rms compensating over {on.time:.0f} s, "
             f"{off_rms:.3g} rad without over {off.time:.0f} s)"
@@ -310,8 +314,7 @@ class TrackingJudge:
         or ended, harm judged, a trial passed)."""
         s = self.settings
         on, off = self._on, self._off
-        on_rms, off_rms = on.rms(), off.rms()
-        ratio = on_rms / off_rms if off_rms > 0.0 else math.nan
+        ratio = self._ratio()[2]
         if not s.in_loop:
             if on.time >= s.min_time and off.time >= s.min_time and ratio < s.ratio_wiring:
                 return self._verdict(

@@ -973,10 +973,10 @@ class BacklashPipeline:
             align.add_readings(t[e0:e1], y[e0:e1], gaps)
             led.encoders += e1 - e0
         self._tracking.stretch(
-            list(view.cmd_pos[c0:c1]) if values else [],
+            view.cmd_pos[c0:c1],
             values,
             self._comp.last_weight,
-            list(view.enc_pos[e0:e1]),
+            view.enc_pos[e0:e1],
             view.enc_t[e0:e1],
             view.enc_y[e0:e1],
         )
