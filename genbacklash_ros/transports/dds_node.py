@@ -16,7 +16,9 @@ Interface (GUIDE §4; every name remappable, see :class:`Topics`)
 -----------------------------------------------------------------
 * subscribes ``command`` (default QoS: RELIABLE, VOLATILE) and ``encoder`` (sensor-data QoS:
   BEST_EFFORT, VOLATILE), each reader with a history of :data:`READER_DEPTH` samples rather than
-  ROS 2's 10 and 5, so that a busy loop does not lose messages; the readers are created once
+  ROS 2's 10 and 5, so that a busy loop does not lose messages; with ``gear_input``
+  motor_encoder also ``motor_encoder`` (the ``motor_encoder_type``, sensor-data QoS), the
+  motor-side position that is the gear's input (dual encoders); the readers are created once
   discovery has settled (:func:`~genbacklash_ros.transports.ros_graph.await_discovery`, 0.5-3 s
   after the start), so that a publisher already running loses nothing after it matches them;
 * publishes ``~/estimate`` (``/backlash_identifier/estimate``), ``compensated_command`` (the
@@ -31,7 +33,7 @@ The loop
 One thread runs everything: it waits on a WaitSet holding a ReadCondition (not-read samples)
 per reader and a GuardCondition for :meth:`DdsNode.stop`, at most until the next wall-clock
 tick (and at most 0.1 s, so that a signal handler runs promptly). On a wake-up it takes every
-available sample of both readers, orders them by source timestamp, converts them
+available sample of every reader, orders them by source timestamp, converts them
 (:mod:`genbacklash_ros.transports.dds_convert`) and calls the pipeline, then publishes the
 pipeline's outputs. Once per wall-clock second it publishes ``/diagnostics`` with level STALE
 when no message arrived during that second (while data flow, the pipeline reports every second of
@@ -140,6 +142,7 @@ def _deep(qos: Qos) -> Qos:
 
 
 ReceiveTime = Literal["source", "take"]
+_Kind = Literal["command", "encoder", "motor_encoder"]
 
 _COMMAND_ROS_TYPES = {
     "float64": Float64.ros_type,
@@ -181,6 +184,7 @@ class Topics:
 
     command: str = "command"
     encoder: str = "encoder"
+    motor_encoder: str = "motor_encoder"
     estimate: str = "~/estimate"
     compensated_command: str = "compensated_command"
     diagnostics: str = "/diagnostics"
@@ -244,7 +248,9 @@ def domain_id_from_env(environ: Mapping[str, str] | None = None) -> int:
 class NodeStats:
     """Counters of a :class:`DdsNode` (messages taken and published, by topic key)."""
 
-    received: dict[str, int] = field(default_factory=lambda: {"command": 0, "encoder": 0})
+    received: dict[str, int] = field(
+        default_factory=lambda: {"command": 0, "encoder": 0, "motor_encoder": 0}
+    )
     published: dict[str, int] = field(
         default_factory=lambda: {"compensated_command": 0, "estimate": 0, "diagnostics": 0}
     )
@@ -256,7 +262,7 @@ class NodeStats:
 class _Event:
     order_ns: int
     seq: int
-    kind: Literal["command", "encoder"]
+    kind: _Kind
     message: Message
 
 
@@ -299,12 +305,6 @@ class DdsNode:
             raise GenBacklashError(f"receive_time must be 'source' or 'take', got {receive_time!r}")
         joints = params if isinstance(params, JointSet) else JointSet.single(params)
         params = joints.base
-        if params.motor_input:
-            raise GenBacklashError(
-                "parameter 'gear_input' motor_encoder: the DDS transport does not subscribe a "
-                "motor encoder yet; run the node with --transport rclpy (or replay the bag "
-                "with --motor-encoder)"
-            )
         self.params = params
         self.joints = joints
         self.domain_id = domain_id_from_env() if domain_id is None else int(domain_id)
@@ -319,7 +319,7 @@ class DdsNode:
         self.pipeline = make_pipeline(
             joints, checkpoint_writer=self._checkpoints, worker=live_worker
         )
-        self._last_receive = {"command": -1, "encoder": -1}
+        self._last_receive: dict[_Kind, int] = {"command": -1, "encoder": -1, "motor_encoder": -1}
         self._seq = 0
 
         qos_participant = Qos(Policy.EntityName(NODE_NAME), Policy.Userdata(PARTICIPANT_USER_DATA))
@@ -350,6 +350,18 @@ class DdsNode:
             Topic(dp, dds_topic(t["encoder"]), encoder_type),
             qos=endpoint_qos(_deep(SENSOR_QOS), encoder_ros),
         )
+        # a motor encoder (gear_input motor_encoder, dual encoders): the gear's input
+        self._readers: dict[_Kind, DataReader[Any]] = {
+            "command": self._command_reader,
+            "encoder": self._encoder_reader,
+        }
+        if params.motor_input:
+            motor_ros = _ENCODER_ROS_TYPES[params.motor_encoder_type]
+            self._readers["motor_encoder"] = DataReader(
+                dp,
+                Topic(dp, dds_topic(t["motor_encoder"]), DDS_TYPES[motor_ros]),
+                qos=endpoint_qos(_deep(SENSOR_QOS), motor_ros),
+            )
         self._writers: dict[str, DataWriter[Any]] = {
             "compensated_command": DataWriter(
                 dp,
@@ -375,7 +387,7 @@ class DdsNode:
             )
         self._graph = GraphAnnouncer(dp, NODE_NAME, namespace)
         self._graph.announce(
-            (self._command_reader, self._encoder_reader),
+            self._readers.values(),
             [*self._writers.values(), *self._estimate_writers.values()],
         )
         self._watch = PublicationWatch(
@@ -391,14 +403,24 @@ class DdsNode:
                     "encoder_type",
                     tuple(_ENCODER_ROS_TYPES.items()),
                 ),
-            },
+            }
+            | (
+                {
+                    dds_topic(t["motor_encoder"]): Subscribed(
+                        DDS_TYPES[_ENCODER_ROS_TYPES[params.motor_encoder_type]].__idl_typename__,
+                        "motor_encoder_type",
+                        tuple(_ENCODER_ROS_TYPES.items()),
+                    )
+                }
+                if params.motor_input
+                else {}
+            ),
         )
         mask = SampleState.NotRead | ViewState.Any | InstanceState.Any
-        self._command_ready = ReadCondition(self._command_reader, mask)
-        self._encoder_ready = ReadCondition(self._encoder_reader, mask)
+        self._ready = {kind: ReadCondition(r, mask) for kind, r in self._readers.items()}
         self._guard = GuardCondition(dp)
         self._waitset = _WaitSet(dp)
-        for condition in (self._command_ready, self._encoder_ready, self._guard):
+        for condition in (*self._ready.values(), self._guard):
             self._waitset.attach(condition)
         if self.pipeline.warm_start_note:
             _LOG.info("%s", self.pipeline.warm_start_note)
@@ -492,18 +514,14 @@ class DdsNode:
 
     # ------------------------------------------------------------------ the loop body
 
-    def _receive_ns(self, kind: Literal["command", "encoder"], source_ns: int, now: int) -> int:
+    def _receive_ns(self, kind: _Kind, source_ns: int, now: int) -> int:
         base = now if self._receive_time == "take" or source_ns <= 0 else min(source_ns, now)
         stamp = max(base, self._last_receive[kind] + 1)
         self._last_receive[kind] = stamp
         return stamp
 
-    def _take(self, kind: Literal["command", "encoder"], events: list[_Event]) -> None:
-        reader, condition = (
-            (self._command_reader, self._command_ready)
-            if kind == "command"
-            else (self._encoder_reader, self._encoder_ready)
-        )
+    def _take(self, kind: _Kind, events: list[_Event]) -> None:
+        reader, condition = self._readers[kind], self._ready[kind]
         while True:
             samples = reader.take(TAKE_BATCH, condition=condition)
             for sample in samples:
@@ -524,8 +542,8 @@ class DdsNode:
     def _process_available(self) -> bool:
         """Take, order and process every available sample; True when there were any."""
         events: list[_Event] = []
-        self._take("command", events)
-        self._take("encoder", events)
+        for kind in self._readers:
+            self._take(kind, events)
         if not events:
             return False
         events.sort(key=lambda e: (e.order_ns, e.seq))
@@ -536,8 +554,10 @@ class DdsNode:
             self.stats.received[event.kind] += 1
             if event.kind == "command":
                 outputs = pipe.on_command(event.message, receive_ns)  # type: ignore[arg-type]
-            else:
+            elif event.kind == "encoder":
                 outputs = pipe.on_encoder(event.message, receive_ns)
+            else:
+                outputs = pipe.on_motor(event.message, receive_ns)
             if outputs:
                 self._publish(outputs)
         return True

@@ -1,12 +1,12 @@
 """A motor encoder as the gear's input (``gear_input: motor_encoder``), as real processes: the
-rclpy node and a player publishing a MuJoCo drivetrain over rclpy (``motor_player.py``: a
+node (rclpy, and the plain-DDS transport on cyclonedds) and a player publishing a MuJoCo drivetrain over rclpy (``motor_player.py``: a
 Float64 command at 100 Hz, the load's and the rotor's JointState at 1 kHz, stamped together).
 
 Checked: the node's third subscription (``motor_encoder``, sensor-data QoS) exists only with
 ``gear_input: motor_encoder``; live, every command is answered with one compensated command,
 the estimate's play c_L + c_R lies near the geometric play (the motor's reading is the gear's
-input: no servo lag in the rows), and the node exits cleanly. The DDS transport refuses the
-parameter with the reason (it does not subscribe a motor encoder).
+input: no servo lag in the rows), and the node exits cleanly. The DDS transport's node reads
+the player's Fast DDS writers as the rclpy node does.
 """
 
 from __future__ import annotations
@@ -22,7 +22,6 @@ from typing import Any
 import numpy as np
 import pytest
 
-from genbacklash_core import GenBacklashError
 from genbacklash_ros.node.parameters import NodeParameters
 
 from ._dds import stop_node
@@ -52,15 +51,20 @@ def _params(path: Path) -> Path:
     return path
 
 
-@pytest.fixture(scope="module")
-def played(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Played]:
+@pytest.fixture(scope="module", params=["rclpy", "dds"])
+def played(
+    tmp_path_factory: pytest.TempPathFactory, request: pytest.FixtureRequest
+) -> Iterator[Played]:
     pytest.importorskip("mujoco", reason="mujoco is not installed (pip install .[physics])")
     if rclpy_missing():
         pytest.skip(rclpy_missing())
-    tmp = tmp_path_factory.mktemp("motor_rclpy")
+    transport = request.param
+    if transport == "dds":
+        pytest.importorskip("cyclonedds", reason="cyclonedds is not installed (pip install .[dds])")
+    tmp = tmp_path_factory.mktemp(f"motor_{transport}")
     domain = domain_id()
     log = tmp / "node.log"
-    cmd = [sys.executable, "-m", "genbacklash_ros.cli.node", "--transport", "rclpy"]
+    cmd = [sys.executable, "-m", "genbacklash_ros.cli.node", "--transport", transport]
     cmd += ["--params-file", str(_params(tmp / "motor.yaml")), "--domain-id", str(domain)]
     node = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=log.open("wb"))
     try:
@@ -153,9 +157,19 @@ def test_the_node_exits_cleanly(played: Played) -> None:
     assert "Traceback" not in played.log
 
 
-def test_the_dds_transport_refuses_a_motor_input() -> None:
+def test_the_dds_transport_reads_a_motor_encoder_only_with_a_motor_input() -> None:
     pytest.importorskip("cyclonedds", reason="cyclonedds is not installed (pip install .[dds])")
     from genbacklash_ros.transports.dds_node import DdsNode
 
-    with pytest.raises(GenBacklashError, match="DDS transport does not subscribe a motor"):
-        DdsNode(NodeParameters(gear_input="motor_encoder"))
+    for params, topics in (
+        (NodeParameters(), {"rt/command", "rt/encoder"}),
+        (
+            NodeParameters(gear_input="motor_encoder"),
+            {"rt/command", "rt/encoder", "rt/motor_encoder"},
+        ),
+    ):
+        node = DdsNode(params, domain_id=domain_id())
+        try:
+            assert {r.topic.name for r in node._readers.values()} == topics
+        finally:
+            node.pipeline.close()
