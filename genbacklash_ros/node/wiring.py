@@ -63,6 +63,15 @@ TYPE_CHOICES: Mapping[str, Mapping[str, str]] = {
 #: not part of QoS matching, so peers match as before.
 READER_DEPTH = 2000
 
+#: History depth of the node's ``compensated_command`` writer, in both transports. A reliable
+#: writer resends only what its history still holds: with ROS 2's depth of 10, a subscriber
+#: descheduled while the node answers a backlog (the node catching up after a stall publishes
+#: hundreds of answers at once) overflowed its socket buffer (about 270 small packets) and
+#: lost every answer beyond it for good; measured, a Fast DDS subscriber stopped 0.3 s during
+#: a burst of 3,000 got 266 (depth 10) and 3,000 (depth 3,000). Depth is local to the
+#: writer, not part of QoS matching, so peers match as before.
+ANSWER_DEPTH = READER_DEPTH
+
 #: The diagnostics key that carries the wiring problems (``ok`` when there are none).
 WIRING_KEY = "wiring"
 

@@ -22,7 +22,9 @@ Interface (GUIDE §4; every name remappable, see :class:`Topics`)
   discovery has settled (:func:`~genbacklash_ros.transports.ros_graph.await_discovery`, 0.5-3 s
   after the start), so that a publisher already running loses nothing after it matches them;
 * publishes ``~/estimate`` (``/backlash_identifier/estimate``), ``compensated_command`` (the
-  command's type) and ``/diagnostics``, all with the default QoS.
+  command's type) and ``/diagnostics``, all with the default QoS, ``compensated_command`` with
+  a writer history of :data:`~genbacklash_ros.node.wiring.ANSWER_DEPTH` samples (a subscriber
+  descheduled while the node answers a backlog gets every answer resent).
 * with several joints (a :class:`~genbacklash_ros.node.joints.JointSet` with ``joints``) the
   same pipeline as the rclpy node's (:func:`~genbacklash_ros.node.multijoint.make_pipeline`):
   ``~/<joint>/estimate`` per joint instead of ``~/estimate``, one compensated array, one
@@ -88,7 +90,7 @@ from genbacklash_ros.node.messages import (
 from genbacklash_ros.node.multijoint import make_pipeline
 from genbacklash_ros.node.parameters import NODE_NAME, NodeParameters
 from genbacklash_ros.node.pipeline import Output
-from genbacklash_ros.node.wiring import READER_DEPTH
+from genbacklash_ros.node.wiring import ANSWER_DEPTH, READER_DEPTH
 from genbacklash_ros.transports.dds_convert import DDS_TYPES, from_dds, to_dds
 from genbacklash_ros.transports.dds_types import dds_topic
 from genbacklash_ros.transports.ros_graph import (
@@ -135,9 +137,9 @@ SENSOR_QOS = Qos(
 """ROS 2's sensor-data QoS (``qos_profile_sensor_data``): KEEP_LAST 5, BEST_EFFORT."""
 
 
-def _deep(qos: Qos) -> Qos:
+def _deep(qos: Qos, depth: int = READER_DEPTH) -> Qos:
     return Qos(*(p for p in qos if not isinstance(p, Policy.History.KeepLast))) + Qos(
-        Policy.History.KeepLast(READER_DEPTH)
+        Policy.History.KeepLast(depth)
     )
 
 
@@ -333,10 +335,11 @@ class DdsNode:
         # the readers only once this participant knows the endpoints of those running already:
         # else a Fast DDS publisher matches them first and its first second of samples is lost
         self.discovered = await_discovery(dp)
-        if self.discovered.without_endpoints:
+        if self.discovered.incomplete:
             _LOG.warning(
-                "discovery: %d of %d participants announced no endpoint in %.1f s",
-                self.discovered.without_endpoints,
+                "discovery: %d of %d participants had not announced both a writer and a reader "
+                "in %.1f s; a publisher among them may lose its first messages to this node",
+                self.discovered.incomplete,
                 self.discovered.participants,
                 self.discovered.waited_s,
             )
@@ -366,7 +369,7 @@ class DdsNode:
             "compensated_command": DataWriter(
                 dp,
                 Topic(dp, dds_topic(t["compensated_command"]), command_type),
-                endpoint_qos(DEFAULT_QOS, command_ros),
+                endpoint_qos(_deep(DEFAULT_QOS, ANSWER_DEPTH), command_ros),
             ),
             "diagnostics": DataWriter(
                 dp,

@@ -12,8 +12,10 @@ what it returns. All logic is in the pipeline.
   loaded machine a depth of 10 lost 2 % of the commands while the process was descheduled;
   with ``gear_input`` motor_encoder also ``motor_encoder`` (the ``motor_encoder_type``,
   sensor-data QoS), the motor-side position that is the gear's input (dual encoders);
-* publishes ``~/estimate``, ``compensated_command`` (the command's type) and ``/diagnostics``
-  (also on a 1 Hz timer with level STALE while no message arrives);
+* publishes ``~/estimate``, ``compensated_command`` (the command's type; a writer history of
+  :data:`~genbacklash_ros.node.wiring.ANSWER_DEPTH`, so that a subscriber descheduled while
+  the node answers a backlog gets every answer resent) and ``/diagnostics`` (also on a 1 Hz
+  timer with level STALE while no message arrives);
 * several joints (``joints``, ``command_indices``, ``<joint>.<name>``;
   :mod:`~genbacklash_ros.node.joints`): still one subscription each, one compensated array,
   ``~/<joint>/estimate`` per joint and one ``/diagnostics`` status per joint, all from one
@@ -123,6 +125,7 @@ from genbacklash_ros.node.parameters import (
 )
 from genbacklash_ros.node.pipeline import Output
 from genbacklash_ros.node.wiring import (
+    ANSWER_DEPTH,
     READER_DEPTH,
     annotate,
     selected_type,
@@ -307,7 +310,7 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
         # destroy_node() walks it (a dict there ends every shutdown in a KeyError)
         self._outputs = {
             "compensated_command": self.create_publisher(
-                command_type, "compensated_command", DEFAULT_DEPTH
+                command_type, "compensated_command", ANSWER_DEPTH
             ),
             "diagnostics": self.create_publisher(RosDiagnosticArray, "/diagnostics", DEFAULT_DEPTH),
         }

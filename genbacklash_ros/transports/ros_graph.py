@@ -92,8 +92,9 @@ DISCOVERY_MIN_S = 0.5
 participant's announcement within milliseconds; this leaves room for a loaded machine."""
 
 DISCOVERY_MAX_S = 3.0
-"""Longest wait of :func:`await_discovery` (a participant that announces no endpoint at all
-holds it this long). Fast DDS resends its endpoints at its discovery heartbeat, once a second."""
+"""Longest wait of :func:`await_discovery` (a participant that never announces both a writer
+and a reader holds it this long). Fast DDS resends its endpoints at its discovery heartbeat,
+once a second."""
 
 _DISCOVERY_POLL_S = 0.01
 
@@ -287,11 +288,12 @@ class PublicationWatch:
 
 @dataclass(frozen=True)
 class Discovered:
-    """What :func:`await_discovery` saw: the other participants, how many of them had announced
-    no endpoint when it returned (0 unless it timed out), and how long it waited."""
+    """What :func:`await_discovery` saw: the other participants, how many of them had not
+    announced both a writer and a reader when it returned (0 unless it timed out), and how long
+    it waited."""
 
     participants: int
-    without_endpoints: int
+    incomplete: int
     waited_s: float
 
 
@@ -302,7 +304,8 @@ def await_discovery(
     max_s: float = DISCOVERY_MAX_S,
     stop: Callable[[], bool] = lambda: False,
 ) -> Discovered:
-    """Wait until this new participant knows the endpoints of every participant it discovered.
+    """Wait until this new participant knows the writers and readers of every participant it
+    discovered.
 
     Call it before creating the readers. A Fast DDS participant (rclpy from the ROS 2 wheels)
     that is already running hears the new participant's announcement, sends its own and, at
@@ -314,9 +317,17 @@ def await_discovery(
     a publisher that starts writing when its subscription count rises lost its first 0.02-1 s
     of messages. Readers created once the writers are known are matched from both sides at once.
 
+    Fast DDS announces its writers and its readers on two separate discovery writers, each with
+    its own heartbeat, so the race above can lose either announcement alone: a participant
+    whose readers are known is not yet one whose writers are (seen: the readers of a running
+    rclpy publisher known 0.1 s after the start, its writers 1.1 s after, and 247 commands lost
+    by readers created at 0.6 s). Every ROS 2 participant has both (rmw's
+    ``ros_discovery_info`` writer and reader, besides its nodes' endpoints), so both are
+    awaited.
+
     Returns after at least ``min_s`` seconds, once every other participant discovered has
-    announced at least one endpoint (every ROS 2 participant has some), or after ``max_s``,
-    or when ``stop()`` is true.
+    announced at least one writer and one reader, or after ``max_s``, or when ``stop()`` is
+    true.
     """
     start = time.monotonic()
     own = participant.guid
@@ -326,7 +337,7 @@ def await_discovery(
         "subscriptions": BuiltinDataReader(participant, BuiltinTopicDcpsSubscription),
     }
     participants: set[uuid.UUID] = set()
-    announcing: set[uuid.UUID] = set()
+    announced: dict[str, set[uuid.UUID]] = {"publications": set(), "subscriptions": set()}
     try:
         while True:
             for kind, reader in readers.items():
@@ -336,8 +347,9 @@ def await_discovery(
                     if kind == "participants":
                         participants.add(sample.key)
                     else:
-                        announcing.add(sample.participant_key)
-            waiting = participants - announcing - {own}
+                        announced[kind].add(sample.participant_key)
+            complete = announced["publications"] & announced["subscriptions"]
+            waiting = participants - complete - {own}
             waited = time.monotonic() - start
             if (waited >= min_s and not waiting) or waited >= max_s or stop():
                 return Discovered(len(participants - {own}), len(waiting), waited)

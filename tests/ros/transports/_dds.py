@@ -13,6 +13,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -90,9 +91,11 @@ class Subscriber:
         self._thread.join(5)
 
 
-def start_node(params: Path, log: Path, domain: int) -> subprocess.Popen[bytes]:
-    """The DDS node as users run it, its stderr in ``log``."""
-    cmd = [sys.executable, "-m", "genbacklash_ros.cli.node", "--transport", "dds"]
+def start_node(
+    params: Path, log: Path, domain: int, transport: str = "dds"
+) -> subprocess.Popen[bytes]:
+    """The node as users run it (the DDS transport unless told), its stderr in ``log``."""
+    cmd = [sys.executable, "-m", "genbacklash_ros.cli.node", "--transport", transport]
     cmd += ["--params-file", str(params), "--domain-id", str(domain)]
     return subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=log.open("wb"))
 
@@ -125,11 +128,20 @@ def diagnostic_values(diag: Any) -> dict[str, str]:
 
 
 def match_trial(
-    domain: int, params: Path, log: Path, *, rate: float, seconds: float, lead: float = 0.5
+    domain: int,
+    params: Path,
+    log: Path,
+    *,
+    rate: float,
+    seconds: float,
+    lead: float = 0.5,
+    during: Callable[[], None] | None = None,
+    transport: str = "dds",
 ) -> tuple[dict[str, Any], int]:
     """One run of ``match_player.py`` (rclpy, already publishing) and then the DDS node: the
     player's JSON summary (what was lost after it matched the node) and the node's exit status.
-    ``lead``: seconds the player runs before the node is started."""
+    ``lead``: seconds the player runs before the node is started; ``during``: run on a thread
+    once the node is started (joined before returning); ``transport``: the node's."""
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain), "PYTHONUNBUFFERED": "1"}
     here = Path(__file__).resolve().parent
     cmd = [sys.executable, str(here / "match_player.py"), "--rate", str(rate)]
@@ -149,8 +161,13 @@ def match_trial(
             _, err = player.communicate()
             raise RuntimeError(f"match_player did not start: {first!r} {err[-2000:]}")
         time.sleep(lead)
-        node = start_node(params, log, domain)
+        node = start_node(params, log, domain, transport)
+        aside = threading.Thread(target=during) if during is not None else None
+        if aside is not None:
+            aside.start()
         out, err = player.communicate(timeout=120)
+        if aside is not None:
+            aside.join(60)
         lines = out.strip().splitlines()
         if player.returncode != 0 or not lines:
             raise RuntimeError(f"match_player failed ({player.returncode}): {out} {err[-2000:]}")

@@ -216,3 +216,39 @@ def test_a_publisher_of_another_type_is_named_in_the_diagnostics(
     del wrong
     del wrong_dp
     assert wait_for(lambda: node.check_wiring() == (), 10), node.wiring_mismatches
+
+
+def test_discovery_waits_for_the_writers_of_a_participant_whose_readers_are_known() -> None:
+    """Fast DDS announces its writers and its readers separately, and a new cyclonedds
+    participant can learn the readers a second before the writers (seen: 247 commands lost by
+    readers created in between). A participant whose readers alone are known holds
+    ``await_discovery`` until its first writer is announced (here 0.4 s after its reader), not
+    only until ``min_s``."""
+    from genbacklash_ros.transports.ros_graph import await_discovery
+
+    other = DomainParticipant(DOMAIN)
+    _reader = DataReader(other, Topic(other, "rt/graph_test_in", Float64_))
+    writers: list[Any] = []
+
+    def announce_a_writer() -> None:
+        time.sleep(0.4)
+        writers.append(DataWriter(other, Topic(other, "rt/graph_test_out", Float64_)))
+
+    late = threading.Thread(target=announce_a_writer)
+    late.start()
+    try:
+        seen = await_discovery(DomainParticipant(DOMAIN), min_s=0.05, max_s=5.0)
+    finally:
+        late.join()
+    assert seen.incomplete == 0 and seen.participants >= 1
+    assert 0.4 <= seen.waited_s < 5.0, seen
+
+
+def test_discovery_gives_up_on_a_participant_that_never_announces_a_writer() -> None:
+    """A participant with readers only holds the wait to ``max_s`` and is counted incomplete."""
+    from genbacklash_ros.transports.ros_graph import await_discovery
+
+    other = DomainParticipant(DOMAIN)
+    _reader = DataReader(other, Topic(other, "rt/graph_test_only_in", Float64_))
+    seen = await_discovery(DomainParticipant(DOMAIN), min_s=0.05, max_s=0.6)
+    assert seen.incomplete >= 1 and seen.waited_s >= 0.6, seen

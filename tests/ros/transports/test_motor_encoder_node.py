@@ -1,6 +1,7 @@
 """A motor encoder as the gear's input (``gear_input: motor_encoder``), as real processes: the
-node (rclpy, and the plain-DDS transport on cyclonedds) and a player publishing a MuJoCo drivetrain over rclpy (``motor_player.py``: a
-Float64 command at 100 Hz, the load's and the rotor's JointState at 1 kHz, stamped together).
+node (rclpy, and the plain-DDS transport on cyclonedds) and a player publishing a MuJoCo
+drivetrain over rclpy (``motor_player.py``: a Float64 command at 100 Hz, the load's and the
+rotor's JointState at 1 kHz, stamped together).
 
 Checked: the node's third subscription (``motor_encoder``, sensor-data QoS) exists only with
 ``gear_input: motor_encoder``; live, every command is answered with one compensated command,
