@@ -19,7 +19,7 @@ Interface (GUIDE §4; every name remappable, see :class:`Topics`)
   ROS 2's 10 and 5, so that a busy loop does not lose messages; with ``gear_input``
   motor_encoder also ``motor_encoder`` (the ``motor_encoder_type``, sensor-data QoS), the
   motor-side position that is the gear's input (dual encoders); the readers are created once
-  discovery has settled (:func:`~genbacklash_ros.transports.ros_graph.await_discovery`, 0.5-3 s
+  discovery has settled (:func:`~genbacklash_ros.transports.ros_graph.await_discovery`, 1-3 s
   after the start), so that a publisher already running loses nothing after it matches them;
 * publishes ``~/estimate`` (``/backlash_identifier/estimate``), ``compensated_command`` (the
   command's type) and ``/diagnostics``, all with the default QoS, ``compensated_command`` with

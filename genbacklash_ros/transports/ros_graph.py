@@ -87,9 +87,11 @@ DISCOVERY_QOS = Qos(
 """rmw's QoS for ``ros_discovery_info``: RELIABLE, TRANSIENT_LOCAL, KEEP_LAST 1 (late joiners
 get the last message), with its type hash."""
 
-DISCOVERY_MIN_S = 0.5
+DISCOVERY_MIN_S = 1.0
 """Shortest wait of :func:`await_discovery`: the participants already running answer a new
-participant's announcement within milliseconds; this leaves room for a loaded machine."""
+participant's announcement within milliseconds on an idle machine; on one at load 13 a Fast DDS
+player answered after 0.64 s, past the 0.5 s this was, and the readers created before its
+answer lost 29 commands. A participant not heard of by then is taken as not running."""
 
 DISCOVERY_MAX_S = 3.0
 """Longest wait of :func:`await_discovery` (a participant that never announces both a writer

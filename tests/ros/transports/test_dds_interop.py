@@ -366,14 +366,15 @@ def test_a_running_rclpy_publisher_loses_nothing_after_the_node_matches(
 ) -> None:
     """Issue 24: the node joins a graph where an rclpy (Fast DDS) publisher is already writing
     and keeps writing from the moment it counts the node's subscription: every command from
-    that one on is answered. (Before the node let discovery settle, cyclonedds learnt the
-    publisher's writers a second after Fast DDS had matched its readers and dropped what came
-    meanwhile: 490-511 of the 1000 commands of 2 s at 500 Hz, in 3 of 3 runs.)
+    that one on is answered.
 
-    Asserted: nothing lost in the first second after the match, the defect this fixed. Seen
-    once in six CI-like runs (2026-11-27) and NOT fixed: a later stretch lost mid-run (281
-    commands, 1.4-1.96 s after the match) -- an open defect of issue 24, printed here when
-    it happens, not asserted until it is understood."""
+    Two causes of loss, each found on a failing run of this test with a cyclonedds trace: the
+    node learnt the publisher's readers 0.1 s after its start but its writers only at Fast DDS's
+    next discovery heartbeat, 1.1 s after, and readers created in between lost 247 commands
+    (``await_discovery`` now waits for a writer and a reader of every participant); and a burst
+    of answers to a descheduled player overflowed its socket buffer, which a writer history of
+    10 could not repair (139-742 answers lost mid-run; the writer now keeps ``ANSWER_DEPTH``,
+    see test_a_descheduled_rclpy_subscriber_gets_every_answer). Asserted: nothing lost."""
     params = tmp_path / "params.yaml"
     params.write_text(
         "/**:\n  ros__parameters:\n    command_type: float64_multi_array\n    joint: j\n"
@@ -385,8 +386,7 @@ def test_a_running_rclpy_publisher_loses_nothing_after_the_node_matches(
     print(f"{len(lost)} of {sent} commands lost after the match (first lost: {lost[:5]})")
     assert sent >= 0.8 * 2.0 * RATE_HZ, summary
     assert status == 0, log.read_text()
-    first_second = [k for k in lost if k - summary["k_match"] < RATE_HZ]
-    assert first_second == [], f"{len(first_second)} lost in the first second: {lost[:20]} ..."
+    assert lost == [], f"{len(lost)} lost, from the match on: {lost[:20]} ..."
 
 
 @pytest.mark.parametrize("transport", ["dds", "rclpy"])
