@@ -128,6 +128,7 @@ from genbacklash_ros.node.wiring import (
     selected_type,
     type_mismatches,
 )
+from genbacklash_ros.transports.blas_threads import one_blas_thread
 from genbacklash_ros.transports.stop_signals import StopSignals
 
 __all__ = ["BacklashIdentifierNode", "WaitLoop", "descriptor", "from_ros", "main", "to_ros"]
@@ -765,14 +766,16 @@ def main(
     Signals: rclpy's own handlers are not installed; ``stop`` (else one of this call's own,
     released when it returns: ignored from then on when ``exiting``, else restored) only
     sets a flag, which the wait loop (:class:`WaitLoop`) reads at its next wake-up (a
-    message, or at most :data:`WAKE_S`). Then, in order: the node finishes (pending samples,
-    final refit and estimate, checkpoint), the executor and the node are destroyed, rclpy
-    shuts down.
+    message, or at most :data:`WAKE_S`). The node runs with one BLAS thread
+    (:func:`~genbacklash_ros.transports.blas_threads.one_blas_thread`). Then, in order: the
+    node finishes (pending samples, final refit and estimate, checkpoint), the executor and
+    the node are destroyed, rclpy shuts down.
     """
     owned = stop is None
     signals = StopSignals().install() if stop is None else stop
     try:
-        return _run(list(sys.argv if args is None else args), signals)
+        with one_blas_thread():
+            return _run(list(sys.argv if args is None else args), signals)
     finally:
         if owned:
             signals.release(exiting=exiting)
