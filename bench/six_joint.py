@@ -46,6 +46,7 @@ import numpy as np
 from _common import command_line, machine_description, md_table, write_section
 
 from genbacklash_core.scenarios import OPERATION_BACKLASH, OperationSettings, arm_records, worn
+from genbacklash_ros.transports.blas_threads import one_blas_thread
 
 JOINTS = tuple(f"joint_{i + 1}" for i in range(6))
 FACTORS = (0.6, 0.8, 1.0, 1.2, 1.5, 2.0)
@@ -290,7 +291,8 @@ def run(seconds: float, seed: int, transport: str) -> str:
             code = node.wait(timeout=60)
             echo_proc.wait(timeout=30)
         node_log = log.read_text()
-    alone = pipeline_cost(u, y)
+    with one_blas_thread():  # as the node runs
+        alone = pipeline_cost(u, y)
     return report(played, models, seconds, seed, transport, code, node_log, alone)
 
 
@@ -367,7 +369,8 @@ status {code}{", no traceback" if "Traceback" not in log else ", with a tracebac
 
 Node CPU: {p.cpu_s:.1f} s over {p.wall_s:.1f} s (first command to last reply) =
 **{cpu:.2f} of a core**. The pipeline alone, the same messages fed in process with no
-middleware (after the run; CPU time per second of data, every identification in line):
+middleware (after the run; CPU time per second of data, every identification in line, one
+BLAS thread as in the node):
 {alone:.2f} of a core. The element no joint uses came back unchanged in every answered
 array: {passed}. Faults the joints' diagnostics reported (their elements pass through
 while one is active): {", ".join(sorted(p.faults)) or "none"}. Diagnostics statuses seen:
