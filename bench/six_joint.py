@@ -25,6 +25,11 @@ the pong in the same run, the node's CPU fraction (``utime + stime`` from
 and each joint's largest |parameter error| of its last estimate against its truth.
 Targets (issue 24): every estimate within 0.05, 100 % answered with all six compensated, at
 most 0.6 of a core, median and p99 within 1.5x the echo's.
+
+``--blas ROUNDS`` measures instead what one BLAS thread saves the node: the six-joint pipeline
+with its live identify thread fed the same data in process at 1 kHz in real time, numpy's
+default BLAS threads against one (the node's, :mod:`genbacklash_ros.transports.blas_threads`),
+round robin; CPU per thread from ``/proc/self/task``. Printed only.
 """
 
 from __future__ import annotations
@@ -46,6 +51,7 @@ import numpy as np
 from _common import command_line, machine_description, md_table, write_section
 
 from genbacklash_core.scenarios import OPERATION_BACKLASH, OperationSettings, arm_records, worn
+from genbacklash_ros.transports.blas_threads import one_blas_thread
 
 JOINTS = tuple(f"joint_{i + 1}" for i in range(6))
 FACTORS = (0.6, 0.8, 1.0, 1.2, 1.5, 2.0)
@@ -233,17 +239,99 @@ def pipeline_cost(u: np.ndarray, y: np.ndarray) -> float:
     return cpu / (n * TICK_NS / 1e9)
 
 
-def latency(sent: np.ndarray, back: np.ndarray) -> tuple[int, float, float, float]:
-    """(answered, median ms, p99 ms, max ms) over the answered ones."""
-    ok = back > 0
-    ms = (back[ok] - sent[ok]) / 1e6
-    if not ms.size:
-        return 0, float("nan"), float("nan"), float("nan")
-    return int(ok.sum()), float(np.median(ms)), float(np.percentile(ms, 99)), float(ms.max())
+def _thread_cpu() -> dict[str, float]:
+    """CPU seconds (``utime + stime``) of each thread of this process (Linux ``/proc``)."""
+    tick = os.sysconf("SC_CLK_TCK")
+    out: dict[str, float] = {}
+    for tid in os.listdir("/proc/self/task"):
+        try:
+            fields = Path(f"/proc/self/task/{tid}/stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:  # the thread ended
+            continue
+        out[tid] = (int(fields[11]) + int(fields[12])) / tick
+    return out
 
 
-def run(seconds: float, seed: int, transport: str) -> str:
+def paced_threads(u: np.ndarray, y: np.ndarray, one_thread: bool) -> tuple[float, float, float]:
+    """The six-joint pipeline with its live identify thread (as the node runs it), fed in
+    process at 1 kHz in real time (sleeping to each tick): (process, message thread, other
+    threads) CPU per second of data, with one BLAS thread or numpy's default."""
+    from threadpoolctl import threadpool_limits
+
+    from genbacklash_ros.node.identify import live_worker
+    from genbacklash_ros.node.joints import JointSet
+    from genbacklash_ros.node.messages import Float64MultiArray, Header, JointState, Time
+    from genbacklash_ros.node.multijoint import MultiJointPipeline
+
+    joints = JointSet.from_mapping(
+        {"joints": list(JOINTS), "command_indices": list(range(len(JOINTS)))}
+    )
+    n = u.shape[1]
+    rows = np.vstack([u, np.arange(n, dtype=np.float64)]).T.tolist()
+    readings = y.T.tolist()
+    t0 = 1_700_000_000 * 1_000_000_000
+    own = str(threading.get_native_id())
+    with threadpool_limits(limits=1 if one_thread else None, user_api="blas"):
+        pipe = MultiJointPipeline(joints, worker=live_worker)
+        try:
+            before, start = _thread_cpu(), time.monotonic_ns()
+            for k in range(n):
+                tick = start + k * TICK_NS
+                while (wait := tick - time.monotonic_ns()) > 0:
+                    time.sleep(wait / 1e9)
+                at = t0 + k * TICK_NS
+                pipe.on_command(Float64MultiArray(data=tuple(rows[k])), at)
+                reading = JointState(Header(Time.from_ns(at + 100_000)), JOINTS, tuple(readings[k]))
+                pipe.on_encoder(reading, at + 200_000)
+            after, wall = _thread_cpu(), (time.monotonic_ns() - start) / 1e9
+        finally:
+            pipe.close()
+    used = {tid: after[tid] - before.get(tid, 0.0) for tid in after}
+    total = sum(used.values())
+    return total / wall, used.get(own, 0.0) / wall, (total - used.get(own, 0.0)) / wall
+
+
+def blas_comparison(seconds: float, seed: int, rounds: int) -> str:
+    """:func:`paced_threads` with numpy's default BLAS threads and with one, round robin."""
     models = [worn(OPERATION_BACKLASH, f) for f in FACTORS]
+    u, y = arm_data(models, seconds, seed)
+    rows = []
+    for r in range(rounds):
+        for one in (False, True):
+            load = os.getloadavg()[0]
+            proc, msg, other = paced_threads(u, y, one)
+            rows.append(
+                [
+                    str(r + 1),
+                    "one" if one else "default",
+                    f"{load:.1f}",
+                    f"{proc:.3f}",
+                    f"{msg:.3f}",
+                    f"{other:.3f}",
+                ]
+            )
+    table = md_table(
+        [
+            "round",
+            "BLAS threads",
+            "1-min load",
+            "process (of a core)",
+            "message thread",
+            "other threads",
+        ],
+        rows,
+    )
+    return f"""`{command_line()}`. Machine: {machine_description()}.
+
+The six-joint pipeline with its live identify thread, fed {seconds:g} s of the arm's data in
+process at 1 kHz in real time (no middleware); CPU of each thread from `/proc/self/task`:
+
+{table}
+"""
+
+
+def arm_data(models: list[Any], seconds: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """The arm's commands and readings (joints x samples), 1 kHz, no jitter, no loss."""
     settings = OperationSettings(
         duration=seconds,
         command_rate=1000.0,
@@ -256,7 +344,21 @@ def run(seconds: float, seed: int, transport: str) -> str:
     u = np.stack([r.command_u for r in records])
     y = np.stack([r.y_all for r in records])
     n = min(u.shape[1], y.shape[1])
-    u, y = u[:, :n], y[:, :n]
+    return u[:, :n], y[:, :n]
+
+
+def latency(sent: np.ndarray, back: np.ndarray) -> tuple[int, float, float, float]:
+    """(answered, median ms, p99 ms, max ms) over the answered ones."""
+    ok = back > 0
+    ms = (back[ok] - sent[ok]) / 1e6
+    if not ms.size:
+        return 0, float("nan"), float("nan"), float("nan")
+    return int(ok.sum()), float(np.median(ms)), float(np.percentile(ms, 99)), float(ms.max())
+
+
+def run(seconds: float, seed: int, transport: str) -> str:
+    models = [worn(OPERATION_BACKLASH, f) for f in FACTORS]
+    u, y = arm_data(models, seconds, seed)
     domain = str(random.randint(201, 231))
     env = {**os.environ, "ROS_DOMAIN_ID": domain}
     with tempfile.TemporaryDirectory(prefix="six_joint_") as tmp:
@@ -290,7 +392,8 @@ def run(seconds: float, seed: int, transport: str) -> str:
             code = node.wait(timeout=60)
             echo_proc.wait(timeout=30)
         node_log = log.read_text()
-    alone = pipeline_cost(u, y)
+    with one_blas_thread():  # as the node runs
+        alone = pipeline_cost(u, y)
     return report(played, models, seconds, seed, transport, code, node_log, alone)
 
 
@@ -367,7 +470,8 @@ status {code}{", no traceback" if "Traceback" not in log else ", with a tracebac
 
 Node CPU: {p.cpu_s:.1f} s over {p.wall_s:.1f} s (first command to last reply) =
 **{cpu:.2f} of a core**. The pipeline alone, the same messages fed in process with no
-middleware (after the run; CPU time per second of data, every identification in line):
+middleware (after the run; CPU time per second of data, every identification in line, one
+BLAS thread as in the node):
 {alone:.2f} of a core. The element no joint uses came back unchanged in every answered
 array: {passed}. Faults the joints' diagnostics reported (their elements pass through
 while one is active): {", ".join(sorted(p.faults)) or "none"}. Diagnostics statuses seen:
@@ -393,11 +497,22 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--transport", choices=("rclpy", "dds"), default="rclpy")
     parser.add_argument("--quick", action="store_true", help="5 s (a smoke test)")
+    parser.add_argument(
+        "--blas",
+        type=int,
+        metavar="ROUNDS",
+        default=0,
+        help="instead: the pipeline and its identify thread paced at 1 kHz in process, numpy's "
+        "default BLAS threads against one, ROUNDS rounds (printed, no section written)",
+    )
     args = parser.parse_args(argv)
     if args.quick:
         args.seconds = 5.0
     if args.role == "echo":
         return echo(args.lifetime)
+    if args.blas:
+        print(blas_comparison(args.seconds, args.seed, args.blas))
+        return 0
     text = run(args.seconds, args.seed, args.transport)
     print(text)
     write_section(f"six_joint_{args.transport}", text)

@@ -3,17 +3,19 @@
     python bench/take_cost.py [--messages N] [--rounds K] [--quick]
 
 The six-joint node (``BacklashIdentifierNode`` with ``joints: [joint_1 .. joint_6]``, the
-pipeline and its live workers as ``genbacklash node`` runs them) in a process of its own, on a
-DDS domain of its own, with a peer node in the same process that publishes N commands (a
-7-element ``Float64MultiArray``) and N six-joint ``JointState`` readings into the node's reader
-histories before anything is taken (reliable, so none is lost). Then the draining thread's
-CPU time (``thread_time``) and the process's (``process_time``) while the node takes and
-handles all 2 N messages, per message, three ways:
+pipeline and its live workers as ``genbacklash node`` runs them, one BLAS thread) in a
+process of its own, on a DDS domain of its own, with a peer node in the same process that
+publishes N commands (a 7-element ``Float64MultiArray``) and N six-joint ``JointState``
+readings into the node's reader histories before anything is taken (reliable, so none is
+lost). Then the draining thread's CPU time (``thread_time``) and the process's
+(``process_time``) while the node takes and handles all 2 N messages, per message, three
+ways:
 
 * ``executor``: what ``genbacklash node --transport rclpy`` did before, a
   ``SingleThreadedExecutor`` spun once at a time (one message per ``spin_once``);
 * ``loop``: the node's own wait loop (``WaitLoop``), one message per subscription and
-  wake-up (``TAKE_BATCH`` 1), as at 1 kHz where each wake-up finds one or two;
+  wake-up (``TAKE_BATCH`` 1, ``DRAIN_ROUNDS`` 0), as at 1 kHz where each wake-up finds one
+  or two;
 * ``pipeline``: the same messages (taken by the loop first) handed to the node's callbacks
   with nothing else: the floor.
 
@@ -94,6 +96,9 @@ def child(mode: str, n: int) -> int:
             time.sleep(0.02)  # let the reader keep up: none lost
     time.sleep(1.0)
     rclpy_node.TAKE_BATCH = 1
+    # one wake-up per message: the loop's drain (take again before waiting) would find the
+    # whole pre-filled history and take it without waiting, which at 1 kHz it does not
+    rclpy_node.DRAIN_ROUNDS = 0
     loop = rclpy_node.WaitLoop(node, executor) if mode != "executor" else None
     deadline = time.monotonic() + 300
     c0, p0 = time.thread_time(), time.process_time()
@@ -184,7 +189,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--quick", action="store_true", help="500 messages, 1 round")
     args = parser.parse_args(argv)
     if args.child:
-        return child(args.child, args.messages)
+        from genbacklash_ros.transports.blas_threads import one_blas_thread
+
+        with one_blas_thread():  # as `genbacklash node` runs the node
+            return child(args.child, args.messages)
     if args.quick:
         args.messages, args.rounds = 500, 1
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))

@@ -21,6 +21,7 @@ from typing import Any
 from genbacklash_core import GenBacklashError
 from genbacklash_ros.node.joints import JointSet, load_joint_set
 from genbacklash_ros.node.parameters import NODE_NAME
+from genbacklash_ros.transports.blas_threads import one_blas_thread
 from genbacklash_ros.transports.stop_signals import StopSignals
 
 __all__ = ["add_parser", "choose_transport", "main", "ros2_main", "run_node"]
@@ -192,8 +193,9 @@ def run_node(args: argparse.Namespace) -> int:
             else None
         )
         if transport == "rclpy":
-            return _run_rclpy(args, stop)
-        return _run_dds(args, params or JointSet(), stop)
+            return _run_rclpy(args, stop)  # with one BLAS thread (rclpy_node.main)
+        with one_blas_thread():
+            return _run_dds(args, params or JointSet(), stop)
     finally:
         stop.release(exiting=bool(getattr(args, "entry_point", False)))
 

@@ -116,6 +116,56 @@ def test_the_loop_takes_both_topics_in_source_order_and_executors_do_not(
         node.destroy_node()
 
 
+def test_a_reading_that_comes_while_a_command_is_handled_is_taken_in_the_same_wake_up(
+    ros_context: Callable[..., Any],
+) -> None:
+    """The loop takes again before it waits (``WaitLoop._drain``): at 1 kHz the reading
+    published right after a command is handed on in the wake-up that took the command."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import qos_profile_sensor_data
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray
+
+    from genbacklash_ros.transports import rclpy_node
+
+    ros_context()
+    node = rclpy_node.BacklashIdentifierNode()
+    peer = rclpy.create_node("wait_loop_drain_peer")
+    command = peer.create_publisher(Float64MultiArray, "/command", 10)
+    encoder = peer.create_publisher(JointState, "/encoder", qos_profile_sensor_data)
+    seen: list[tuple[str, float]] = []
+
+    def on_command(msg: Any, info: Any) -> None:
+        seen.append(("command", msg.data[0]))
+        encoder.publish(_reading(0.25, 2))  # comes while the command is being handled
+        time.sleep(0.05)
+
+    node._command_sub.callback = on_command
+    node._encoder_sub.callback = lambda msg, info: seen.append(("encoder", msg.position[0]))
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    loop = rclpy_node.WaitLoop(node, executor)
+    try:
+        _until(
+            lambda: command.get_subscription_count() and encoder.get_subscription_count(),
+            lambda: time.sleep(0.05),
+            15.0,
+        )
+        time.sleep(0.5)  # both directions of discovery
+        command.publish(Float64MultiArray(data=[1.0]))
+        time.sleep(0.05)  # delivered, not taken
+        assert loop.run_once(1.0) == 2
+        assert seen == [("command", 1.0), ("encoder", 0.25)]
+        assert loop.taken == 2
+    finally:
+        loop.close()
+        executor.shutdown()
+        peer.destroy_node()
+        node.finish()
+        node.destroy_node()
+
+
 def test_services_timer_and_a_clock_made_at_run_time_are_served(
     ros_context: Callable[..., Any],
 ) -> None:
