@@ -1,16 +1,16 @@
 """BLAS on one thread while a replay runs (process-wide, undone when the last replay ends).
 
 A replay's linear algebra is small (the identifier's windows, the guard's sums over a few
-thousand samples), and OpenBLAS hands vectors above a few thousand elements to a thread per
-core, which spin while they wait. On the 60 s operation bag a replay used about 1.7 times
-the CPU time with OpenBLAS's default threads as with one (BENCHMARKS.md "Replay
-throughput"), and more wall time wherever the cores are busy. Dask's fleet workers already
-start with ``OPENBLAS_NUM_THREADS=1`` (tests/ros/fleet/conftest.py).
+thousand samples), but OpenBLAS runs the larger of those products on a thread per core, and
+its threads spin while they wait for the next. On the 60 s operation bag a replay used 1.7-2
+times the CPU time with OpenBLAS's default threads as with one (2 cores, a loaded machine;
+BENCHMARKS.md "Replay throughput"), and the output bags were byte for byte the same. Dask's
+fleet workers already start with ``OPENBLAS_NUM_THREADS=1`` (tests/ros/fleet/conftest.py).
 
 The limit is :mod:`threadpoolctl`'s, set when the first replay of the process starts and
 restored when the last one ends (fleet threads run several at once). Without threadpoolctl
-(a ROS install that has no rosdep key for it) the replay runs with the default threads: the
-same results, only slower.
+(a ROS install that has no rosdep key for it) the replay runs with the default threads,
+slower (its output bags were byte for byte the same on the bags measured).
 """
 
 from __future__ import annotations
