@@ -16,7 +16,7 @@ read+write floor measured in the same run. One run measures, round-robin, best o
 * the pipeline alone on values read beforehand: per message and in batches;
 * the compensator: a compensated command with the table inverse against the root solve;
 * a cProfile of one in-process replay, split by stage;
-* **bag shapes** (issue 24: "on bags of other shapes too"; `bench/replay_shapes.py`): the
+* **bag shapes** (issue 24: "on bags of other shapes too"; `bench/_replay_shapes.py`): the
   operation bag, Float64 commands with a JointState 0.2 ms after each command and no loss,
   a six-joint arm replayed for one joint, and the MuJoCo drivetrain `near_ideal`: the CLI
   and the floor as processes, round-robin, wall time and CPU time (user + system of the
@@ -49,7 +49,7 @@ from pathlib import Path
 
 import numpy as np
 from _common import command_line, machine_description, md_table, write_section
-from replay_shapes import SHAPES, Shape
+from _replay_shapes import SHAPES, Shape
 
 from genbacklash_core import GeneralBacklash, InverseBacklash
 from genbacklash_core.inverse import _Branch, _plan
@@ -601,7 +601,7 @@ def shapes_section(duration: float, root: Path, before: Path | None) -> tuple[st
     )
     text = f"""### Bag shapes (issue 24)
 
-Each a {duration:g} s bag (seed {SEED}), written by `bench/replay_shapes.py`:
+Each a {duration:g} s bag (seed {SEED}), written by `bench/_replay_shapes.py`:
 
 {described}
 

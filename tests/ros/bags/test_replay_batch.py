@@ -81,7 +81,7 @@ def test_blocks_give_the_per_message_estimates_and_commands(bag: str, tmp_path: 
 def _write_float64_bag(path: Path, seconds: float, seed: int) -> None:
     """Float64 commands at 100 Hz and a one-joint JointState at 1 kHz stamped and logged
     0.2 ms after each 1 ms tick (so 0.2 ms after each command), none lost (issue 24's
-    other bag shape; bench/replay_shapes.py)."""
+    other bag shape; bench/_replay_shapes.py)."""
     cfg = OperationSettings(duration=seconds, loss=0.0, stamp_jitter=0.0, command_jitter=0.0)
     rec = operation_record(cfg, seed)
     cmd_log = START_NS + rec.command_t_ns
