@@ -1,6 +1,6 @@
 """Replay throughput (issue 13, item 4): `genbacklash replay` end to end on a 5-minute bag.
 
-    python bench/replay.py [--quick]
+    python bench/replay.py [--quick] [--before DIR] [--shapes-only]
 
 Targets (BENCHMARKS.md): replay >= 100k encoder messages/s end to end (process start
 included) on a 5-minute bag of a drivetrain in operation, and >= 0.8x the rosbags raw
@@ -15,16 +15,29 @@ read+write floor measured in the same run. One run measures, round-robin, best o
   rosbags, the `mcap` library, pybag-sdk and foxglove-sdk (write only: it has no reader);
 * the pipeline alone on values read beforehand: per message and in batches;
 * the compensator: a compensated command with the table inverse against the root solve;
-* a cProfile of one in-process replay, split by stage.
+* a cProfile of one in-process replay, split by stage;
+* **bag shapes** (issue 24: "on bags of other shapes too"; `bench/_replay_shapes.py`): the
+  operation bag, Float64 commands with a JointState 0.2 ms after each command and no loss,
+  a six-joint arm replayed for one joint, and the MuJoCo drivetrain `near_ideal`: the CLI
+  and the floor as processes, round-robin, wall time and CPU time (user + system of the
+  child: steadier than wall time on a shared machine), and with ``--before DIR`` (a copy
+  of ``genbacklash_core`` and ``genbacklash_ros`` from before, e.g. ``git archive main
+  genbacklash_core genbacklash_ros | tar -x -C DIR``) the CLI of that code too, in the same
+  rounds (``PYTHONPATH=DIR``).
+
+``--quick``: 30 s bags, no other seeds. ``--shapes-only``: only the shapes' table (the
+section ``replay_shapes``). ``--duration S``: bags of S seconds.
 """
 
 from __future__ import annotations
 
+import argparse
 import compileall
 import cProfile
 import json
 import os
 import pstats
+import resource
 import shutil
 import subprocess
 import sys
@@ -35,7 +48,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
-from _common import command_line, machine_description, md_table, parse_args, write_section
+from _common import command_line, machine_description, md_table, write_section
+from _replay_shapes import SHAPES, Shape
 
 from genbacklash_core import GeneralBacklash, InverseBacklash
 from genbacklash_core.inverse import _Branch, _plan
@@ -57,6 +71,7 @@ OTHER_SEEDS = (4401, 4402)  # the same scenario: CLI against the floor only
 ROUNDS = 3
 TOPICS = [COMMAND_TOPIC, ENCODER_TOPIC]
 CLI = [str(Path(sys.executable).parent / "genbacklash"), "replay"]
+SELECTION = ("--command", COMMAND_TOPIC, "--encoder", ENCODER_TOPIC, "--joint", JOINT)
 
 # The IO floor as its own process: rosbags reads the raw input and writes N raw messages
 FLOOR_SCRIPT = textwrap.dedent(
@@ -95,14 +110,25 @@ def timed(fn: Callable[[], object]) -> float:
     return time.perf_counter() - started
 
 
-def run_cli(bag: Path, out: Path) -> float:
+def run_cli(bag: Path, out: Path, selection: tuple[str, ...] = SELECTION) -> float:
     shutil.rmtree(out, ignore_errors=True)
-    cmd = [*CLI, str(bag), "--command", COMMAND_TOPIC, "--encoder", ENCODER_TOPIC, "--joint", JOINT]
+    cmd = [*CLI, str(bag), *selection]
     started = time.perf_counter()
     subprocess.run(
         [*cmd, "-o", str(out), "--no-progress", "--json"], check=True, stdout=subprocess.DEVNULL
     )
     return time.perf_counter() - started
+
+
+def run_timed(cmd: list[str], env: dict[str, str] | None = None) -> tuple[float, float]:
+    """Run ``cmd`` as a process: (wall seconds, its CPU seconds: user + system)."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    started = time.perf_counter()
+    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, env=env)
+    wall = time.perf_counter() - started
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return wall, cpu
 
 
 def run_floor_process(bag: Path, out: Path, n_out: int) -> float:
@@ -467,13 +493,159 @@ def seed_ratio(seed: int, settings: object, root: Path) -> tuple[int, int, float
     return seed, n_enc, best(cli), best(floor)
 
 
+# --------------------------------------------------------------------------- shapes
+
+# what the `genbacklash` script runs, for the code in --before (on PYTHONPATH)
+BEFORE_CLI = [
+    sys.executable,
+    "-c",
+    "import sys; from genbacklash_ros.cli.main import main; sys.exit(main())",
+    "replay",
+]
+
+
+def shape_times(
+    shape: Shape, duration: float, root: Path, before: Path | None
+) -> dict[str, object]:
+    """One shape's bag, then ROUNDS rounds of: the CLI, the CLI of ``before`` (if given)
+    and the floor, each as a process; best wall and best CPU time of each."""
+    bag = root / f"shape-{shape.name}"
+    shape.write(bag, duration, SEED)
+    with BagReader(bag) as reader:
+        n_in = sum(reader.topics[t].count for t in TOPICS)
+        n_enc = reader.topics[ENCODER_TOPIC].count
+        msgtypes = {t: reader.topics[t].msgtype.split("/")[-1] for t in TOPICS}
+    out = root / "shape-out"
+    args = [str(bag), *shape.args, "-o", str(out), "--no-progress", "--json"]
+    shutil.rmtree(out, ignore_errors=True)
+    subprocess.run([*CLI, *args], check=True, stdout=subprocess.DEVNULL)  # warm the cache
+    with BagReader(out) as reader:
+        n_out = sum(t.count for t in reader.topics.values())
+    floor = [sys.executable, "-c", FLOOR_SCRIPT, str(bag), str(root / "shape-floor"), str(n_out)]
+    runs: dict[str, list[tuple[float, float]]] = {"cli": [], "floor": []}
+    env = None
+    if before is not None:
+        runs["before"] = []
+        env = {**os.environ, "PYTHONPATH": str(before)}
+    for _ in range(ROUNDS):
+        shutil.rmtree(out, ignore_errors=True)
+        runs["cli"].append(run_timed([*CLI, *args]))
+        if before is not None:
+            shutil.rmtree(out, ignore_errors=True)
+            runs["before"].append(run_timed([*BEFORE_CLI, *args], env))
+        shutil.rmtree(root / "shape-floor", ignore_errors=True)
+        runs["floor"].append(run_timed(floor))
+    shutil.rmtree(bag)
+    result: dict[str, object] = {
+        "shape": shape.name,
+        "types": msgtypes,
+        "n_in": n_in,
+        "n_enc": n_enc,
+        "n_out": n_out,
+    }
+    for key, values in runs.items():
+        result[key] = min(w for w, _ in values)
+        result[f"{key}_cpu"] = min(c for _, c in values)
+    return result
+
+
+def shapes_table(rows: list[dict[str, object]], before: bool) -> str:
+    headers = [
+        "shape",
+        "messages in / out",
+        "CLI (s)",
+        "floor (s)",
+        "floor / CLI (wall)",
+        "CLI CPU (s)",
+        "floor CPU (s)",
+        "floor / CLI (CPU)",
+    ]
+    if before:
+        headers += ["before: CLI (s)", "floor / before (wall)", "floor / before (CPU)"]
+    table = []
+    for r in rows:
+        cli, floor = float(r["cli"]), float(r["floor"])  # type: ignore[arg-type]
+        cli_cpu, floor_cpu = float(r["cli_cpu"]), float(r["floor_cpu"])  # type: ignore[arg-type]
+        row = [
+            f"`{r['shape']}`",
+            f"{r['n_in']:,} / {r['n_out']:,}",
+            f"{cli:.2f}",
+            f"{floor:.2f}",
+            f"**{floor / cli:.2f}**",
+            f"{cli_cpu:.2f}",
+            f"{floor_cpu:.2f}",
+            f"{floor_cpu / cli_cpu:.2f}",
+        ]
+        if before:
+            old, old_cpu = float(r["before"]), float(r["before_cpu"])  # type: ignore[arg-type]
+            row += [f"{old:.2f}", f"{floor / old:.2f}", f"{floor_cpu / old_cpu:.2f}"]
+        table.append(row)
+    return md_table(headers, table)
+
+
+def shapes_section(duration: float, root: Path, before: Path | None) -> tuple[str, float]:
+    """The shapes' part of the section, and the lowest floor / CLI (wall) ratio."""
+    if before is not None:
+        compileall.compile_dir(before, quiet=1)
+    rows = []
+    for shape in SHAPES.values():
+        print(f"shape {shape.name}", file=sys.stderr, flush=True)
+        rows.append(shape_times(shape, duration, root, before))
+    lowest = min(float(r["floor"]) / float(r["cli"]) for r in rows)  # type: ignore[arg-type]
+    verdict = "met" if lowest >= 0.8 else "NOT met"
+    described = "\n".join(f"* `{s.name}`: {s.description}." for s in SHAPES.values())
+    before_note = (
+        f" The before columns run the code in `{before}` (`PYTHONPATH`), in the same rounds."
+        if before is not None
+        else ""
+    )
+    text = f"""### Bag shapes (issue 24)
+
+Each a {duration:g} s bag (seed {SEED}), written by `bench/_replay_shapes.py`:
+
+{described}
+
+The CLI (`genbacklash replay` with the shape's topics and joint) and the floor, each as a
+process, round-robin, best of {ROUNDS}; CPU time is the child's user + system time (less
+disturbed by other processes on a shared machine than wall time).{before_note}
+
+{shapes_table(rows, before is not None)}
+
+Target >= 0.8x the floor (wall, as processes) on every shape: **{verdict}** (lowest
+{lowest:.2f}x).
+"""
+    return text, lowest
+
+
 # --------------------------------------------------------------------------- main
 
 
+def parse_args(argv: list[str]) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="30 s bags, no other seeds")
+    parser.add_argument(
+        "--before", type=Path, help="a copy of the packages from before (their CLI measured too)"
+    )
+    parser.add_argument("--shapes-only", action="store_true", help="only the bag shapes")
+    parser.add_argument("--duration", type=float, help="seconds of each bag (default 300)")
+    return parser.parse_args(argv)
+
+
 def main() -> None:
-    args = parse_args(__doc__.splitlines()[0], sys.argv[1:])
-    duration = 30.0 if args.quick else 300.0
+    args = parse_args(sys.argv[1:])
+    duration = args.duration if args.duration else 30.0 if args.quick else 300.0
     machine = machine_description()
+    if args.shapes_only:
+        with tempfile.TemporaryDirectory() as tmp:
+            shapes_text, lowest = shapes_section(duration, Path(tmp), args.before)
+        text = (
+            f"## Replay throughput: bag shapes\n\n`{command_line()}`. Machine: {machine}.\n\n"
+            + shapes_text
+        )
+        path = write_section("replay_shapes", text)
+        print(text)
+        print(json.dumps({"section": str(path), "lowest": lowest}), file=sys.stderr)
+        return
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
         bag = root / "operation"
@@ -540,6 +712,7 @@ def main() -> None:
         profiled, split = profile_split(bag, root / "profiled")
         with BagReader(root / "cli") as reader:  # the CLI's output, read back
             assert sum(t.count for t in reader.topics.values()) == n_out
+        shapes_text, lowest = shapes_section(duration, root, args.before)
     b = {key: best(values) for key, values in rows.items()}
     rate = {key: n_enc / value for key, value in b.items()}
     n_msgs = len(msgs)
@@ -696,10 +869,12 @@ starts, the replay takes {b["cli"] - b["start"]:.2f} s against the floor's
 Of the replay itself ({profiled:.2f} s under cProfile, which inflates Python-heavy parts):
 
 {split_table}
-"""
+
+{shapes_text}"""
     path = write_section("replay", text)
     print(text)
-    print(json.dumps({"section": str(path), "rate": rate["cli"], "ratio": ratio}), file=sys.stderr)
+    summary = {"section": str(path), "rate": rate["cli"], "ratio": ratio, "lowest_shape": lowest}
+    print(json.dumps(summary), file=sys.stderr)
 
 
 if __name__ == "__main__":

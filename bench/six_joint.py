@@ -28,7 +28,7 @@ most 0.6 of a core, median and p99 within 1.5x the echo's.
 
 ``--blas ROUNDS`` measures instead what one BLAS thread saves the node: the six-joint pipeline
 with its live identify thread fed the same data in process at 1 kHz in real time, numpy's
-default BLAS threads against one (the node's, :mod:`genbacklash_ros.transports.blas_threads`),
+default BLAS threads against one (the node's, :mod:`genbacklash_ros.blas_threads`),
 round robin; CPU per thread from ``/proc/self/task``. Printed only.
 """
 
@@ -51,7 +51,7 @@ import numpy as np
 from _common import command_line, machine_description, md_table, write_section
 
 from genbacklash_core.scenarios import OPERATION_BACKLASH, OperationSettings, arm_records, worn
-from genbacklash_ros.transports.blas_threads import one_blas_thread
+from genbacklash_ros.blas_threads import one_blas_thread
 
 JOINTS = tuple(f"joint_{i + 1}" for i in range(6))
 FACTORS = (0.6, 0.8, 1.0, 1.2, 1.5, 2.0)

@@ -189,7 +189,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--quick", action="store_true", help="500 messages, 1 round")
     args = parser.parse_args(argv)
     if args.child:
-        from genbacklash_ros.transports.blas_threads import one_blas_thread
+        from genbacklash_ros.blas_threads import one_blas_thread
 
         with one_blas_thread():  # as `genbacklash node` runs the node
             return child(args.child, args.messages)

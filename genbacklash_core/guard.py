@@ -161,6 +161,9 @@ class CompensationGuard:
 
     def __init__(self, settings: GuardSettings | None = None) -> None:
         self.settings = settings or GuardSettings()
+        # decay**k for k = 0, 1, ... (the window's weights, :meth:`_weights`), and its decay
+        self._powers: FloatArray = np.ones(0)
+        self._powers_decay = math.nan
         self.reset()
 
     def reset(self) -> None:
@@ -299,13 +302,28 @@ class CompensationGuard:
         if n == 0:
             return
         decay = math.exp(-1.0 / self.settings.window)
-        # weights of the batch's samples, newest 1: decay**(n-1-k)
-        w = decay ** np.arange(n - 1, -1, -1, dtype=np.float64)
+        w = self._weights(decay, n)
         old = decay**n
         self._sum_model = self._sum_model * old + float(w @ (e_model * e_model))
         self._sum_none = self._sum_none * old + float(w @ (e_none * e_none))
         self._weight = self._weight * old + float(w.sum())
         self._samples += n
+
+    def _weights(self, decay: float, n: int) -> FloatArray:
+        """The weights of a batch of ``n`` samples, newest 1: ``decay**(n-1-k)``.
+
+        The powers are computed once per decay (``decay ** arange``, element by element the
+        same numbers as computing them for each batch: tests/core/test_guard.py) and each
+        batch takes a reversed copy of their first ``n``: a new model is judged on every
+        sample remembered, and the power of each was most of the cost
+        (BENCHMARKS.md "Replay throughput").
+        """
+        powers = self._powers
+        if decay != self._powers_decay or powers.size < n:
+            size = max(n, 2 * powers.size) if decay == self._powers_decay else n
+            powers = decay ** np.arange(size, dtype=np.float64)
+            self._powers, self._powers_decay = powers, decay
+        return powers[n - 1 :: -1].copy() if n else powers[:0].copy()
 
     def _judge(self) -> GuardVerdict:
         s = self.settings

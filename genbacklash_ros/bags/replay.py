@@ -46,6 +46,7 @@ from genbacklash_ros.bags.bagio import (
     check_selection,
 )
 from genbacklash_ros.bags.raw_values import RawValueReader, UndecodableMessage
+from genbacklash_ros.blas_threads import one_blas_thread
 from genbacklash_ros.node.compensate import CompensationStatus
 from genbacklash_ros.node.messages import DiagnosticArray, Float64MultiArray, MessageError
 from genbacklash_ros.node.parameters import NodeParameters
@@ -523,7 +524,7 @@ def replay(
     if command_topic == encoder_topic:
         raise BagError(f"the command and encoder topics must differ, both are {command_topic!r}")
     started = time.perf_counter()
-    with _few_collections(), BagReader(bag) as reader:
+    with _few_collections(), one_blas_thread(), BagReader(bag) as reader:
         cmd_info = reader.topic(command_topic, COMMAND_MSGTYPES)
         enc_info = reader.topic(encoder_topic, ENCODER_MSGTYPES)
         custom_data = reader.custom_data

@@ -19,9 +19,9 @@ from collections.abc import Sequence
 from typing import Any
 
 from genbacklash_core import GenBacklashError
+from genbacklash_ros.blas_threads import one_blas_thread
 from genbacklash_ros.node.joints import JointSet, load_joint_set
 from genbacklash_ros.node.parameters import NODE_NAME
-from genbacklash_ros.transports.blas_threads import one_blas_thread
 from genbacklash_ros.transports.stop_signals import StopSignals
 
 __all__ = ["add_parser", "choose_transport", "main", "ros2_main", "run_node"]

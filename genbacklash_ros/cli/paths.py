@@ -246,8 +246,11 @@ def check_paths(args: argparse.Namespace) -> None:
                 "every input (nothing was written)"
             )
     overwrite = bool(getattr(args, "overwrite", False))
+    joints = _several_joints(args)
     for option, value, real in outputs:
-        if option.kind == "bag":
+        if option.kind == "bag" and joints:
+            _check_joint_bags(option.label, value, real, joints, overwrite)
+        elif option.kind == "bag":
             _check_bag(option.label, value, real, overwrite)
         elif option.kind == "dir":
             _creatable_directory(option.label, value, real)
@@ -258,8 +261,38 @@ def check_paths(args: argparse.Namespace) -> None:
         else:
             _creatable_directory(option.label, value, real.parent)
     for option, _value, real in outputs:
-        if option.kind == "bag" and overwrite and (real.exists() or real.is_symlink()):
-            remove_own_output(real)
+        if option.kind != "bag" or not overwrite:
+            continue
+        for bag in [real / joint for joint in joints] if joints else [real]:
+            if bag.exists() or bag.is_symlink():
+                remove_own_output(bag)
+
+
+def _several_joints(args: argparse.Namespace) -> list[str]:
+    """The joints of a command run once per joint (several ``--joint``:
+    :func:`genbacklash_ros.cli.joints.per_joint`), whose output bag ``OUT`` is then a
+    directory holding one bag per joint, ``OUT/<joint>``; [] for one joint."""
+    if not hasattr(args, "joint"):
+        return []
+    from genbacklash_ros.cli.joints import selection
+
+    joints, _ = selection(args)
+    return joints if len(joints) > 1 else []
+
+
+def _check_joint_bags(
+    label: str, given: str, path: Path, joints: list[str], overwrite: bool
+) -> None:
+    """``path`` holds one bag per joint: each ``path/<joint>`` is checked as an output bag
+    (replaced with ``--overwrite`` only when genbacklash wrote it); ``path`` itself is a
+    directory that is kept, with whatever else it holds."""
+    if path.is_symlink() or (path.exists() and not path.is_dir()):
+        raise OutputPathError(
+            f"{label} {given} is not a directory; with several --joint, {label} is a "
+            "directory that gets a bag per joint"
+        )
+    for joint in joints:
+        _check_bag(label, f"{given}/{joint}", path / joint, overwrite)
 
 
 def remove_own_output(path: str | Path) -> None:

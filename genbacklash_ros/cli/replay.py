@@ -833,7 +833,8 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
         "--overwrite",
         action="store_true",
         help="replace OUT if it is a bag an earlier genbacklash run wrote (it holds "
-        "genbacklash-output.json and nothing but the bag); anything else is never removed",
+        "genbacklash-output.json and nothing but the bag); with several --joint, each "
+        "OUT/<joint> that is; anything else is never removed",
     )
     parser.add_argument("--report", metavar="DIR", help="write PNG plots and index.html into DIR")
     add_checkpoint_option(parser)

@@ -100,6 +100,7 @@ from std_msgs.msg import Float64MultiArray as RosFloat64MultiArray
 from std_msgs.msg import MultiArrayDimension as RosMultiArrayDimension
 
 from genbacklash_core import GenBacklashError
+from genbacklash_ros.blas_threads import one_blas_thread
 from genbacklash_ros.node.checkpoint_writer import BackgroundCheckpointWriter
 from genbacklash_ros.node.identify import live_worker
 from genbacklash_ros.node.joints import JointSet, is_joint_parameter, load_joint_set
@@ -131,7 +132,6 @@ from genbacklash_ros.node.wiring import (
     selected_type,
     type_mismatches,
 )
-from genbacklash_ros.transports.blas_threads import one_blas_thread
 from genbacklash_ros.transports.stop_signals import StopSignals
 
 __all__ = ["BacklashIdentifierNode", "WaitLoop", "descriptor", "from_ros", "main", "to_ros"]
@@ -798,7 +798,7 @@ def main(
     released when it returns: ignored from then on when ``exiting``, else restored) only
     sets a flag, which the wait loop (:class:`WaitLoop`) reads at its next wake-up (a
     message, or at most :data:`WAKE_S`). The node runs with one BLAS thread
-    (:func:`~genbacklash_ros.transports.blas_threads.one_blas_thread`). Then, in order: the
+    (:func:`~genbacklash_ros.blas_threads.one_blas_thread`). Then, in order: the
     node finishes (pending samples, final refit and estimate, checkpoint), the executor and
     the node are destroyed, rclpy shuts down.
     """

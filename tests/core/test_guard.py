@@ -239,3 +239,33 @@ def test_free_run_refuses_branches_that_are_not_finite() -> None:
     u = np.array([0.0, 1e200])
     with pytest.raises(GenBacklashError, match="not finite"):
         free_run(model, u, np.zeros(2), np.zeros(2, dtype=bool))
+
+
+def test_the_window_weights_are_the_powers_computed_per_batch() -> None:
+    """The cached powers (CompensationGuard._weights) give, bit for bit, the weights
+    ``decay**(n-1-k)`` computed afresh for each batch, as the cache grows and when the
+    window (so the decay) changes; and a guard's verdicts are those of the fresh ones."""
+    guard = CompensationGuard(GuardSettings(window=500))
+    for window in (500, 2000, 500):
+        decay = math.exp(-1.0 / window)
+        for n in (1, 2, 7, 16, 17, 1000, 333, 6001, 5, 12_345):
+            fresh = decay ** np.arange(n - 1, -1, -1, dtype=np.float64)
+            cached = guard._weights(decay, n)
+            assert cached.flags.c_contiguous
+            np.testing.assert_array_equal(cached, fresh)
+            assert float(cached.sum()) == float(fresh.sum())
+
+    class Fresh(CompensationGuard):
+        def _weights(self, decay: float, n: int) -> np.ndarray:
+            return decay ** np.arange(n - 1, -1, -1, dtype=np.float64)
+
+    rng = np.random.default_rng(24)
+    u = np.cumsum(rng.normal(0.0, 0.01, 9000))
+    y = simulate_backlash(OPERATION_BACKLASH, u) + rng.normal(0.0, 1e-4, u.size)
+    breaks = rng.random(u.size) < 0.01
+    guards = [CompensationGuard(GuardSettings(window=700)), Fresh(GuardSettings(window=700))]
+    for start in range(0, u.size, 1500):
+        part = slice(start, start + 1500)
+        model = _scaled(OPERATION_BACKLASH, 1.0 + start / 9000)  # a new model: judged anew
+        verdicts = [g.update(u[part], y[part], breaks[part], model) for g in guards]
+        assert verdicts[0] == verdicts[1]

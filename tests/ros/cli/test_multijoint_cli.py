@@ -192,3 +192,61 @@ def test_a_node_params_file_with_joints_serves_the_commands_too(
     params.write_text("/**/backlash_identifier:\n  ros__parameters:\n" + body.format(j="elbw"))
     assert main([*args, "--params-file", str(params), "--json"]) == 2
     assert "'elbw' is not in 'joints' (close matches: elbow)" in capsys.readouterr().err
+
+
+def _tree(path: Path) -> dict[str, bytes]:
+    return {
+        str(p.relative_to(path)): p.read_bytes() for p in sorted(path.rglob("*")) if p.is_file()
+    }
+
+
+def test_overwrite_of_several_joints_replaces_only_their_bags(
+    arm_bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``-o OUT`` with several joints is a directory of one bag per joint: ``--overwrite``
+    replaces those bags (genbacklash wrote them) and nothing else in OUT; without it an
+    existing joint's bag stops the run; a joint's bag genbacklash did not write, or an OUT
+    that is a file, is never removed; an OUT holding the input is refused."""
+    out = tmp_path / "out"
+    args = ["replay", str(arm_bag), *TOPICS, "--joint", "shoulder,elbow"]
+    args += ["--command-index", "0,2", "-o", str(out), "--no-progress", "--json"]
+    assert main(args) == 0
+    first = _tree(out)
+    (out / "notes.txt").write_text("mine")  # the user's, beside the joints' bags
+    other = out / "wrist"  # another run's joint, not selected now
+    other.mkdir()
+    (other / "keep.txt").write_text("keep")
+    capsys.readouterr()
+
+    assert main(args) == 2  # exists already
+    assert "exists already" in capsys.readouterr().err
+    assert main([*args, "--overwrite"]) == 0
+    capsys.readouterr()
+    again = _tree(out)
+    assert again.pop("notes.txt") == b"mine" and again.pop("wrist/keep.txt") == b"keep"
+    assert again.keys() == first.keys()  # the same bags, written anew
+    assert (out / "shoulder" / "genbacklash-output.json").is_file()
+
+    # a joint's directory genbacklash did not write: refused, nothing removed
+    (out / "elbow" / "genbacklash-output.json").unlink()
+    before = _tree(out)
+    assert main([*args, "--overwrite"]) == 2
+    err = capsys.readouterr().err
+    assert "not removing it" in err and f"{out}/elbow" in err, err
+    assert _tree(out) == before
+
+    # OUT a file: refused, kept
+    plain = tmp_path / "plain.txt"
+    plain.write_text("keep")
+    plain_args = [*args[: args.index("-o")], "-o", str(plain), "--no-progress", "--overwrite"]
+    assert main(plain_args) == 2
+    assert "is not a directory" in capsys.readouterr().err
+    assert plain.read_text() == "keep"
+
+    # OUT holding the input bag: refused before anything is touched
+    holder = arm_bag.parent
+    before = _tree(holder)
+    holder_args = [*args[: args.index("-o")], "-o", str(holder), "--overwrite", "--no-progress"]
+    assert main(holder_args) == 2
+    assert "contains the input" in capsys.readouterr().err
+    assert _tree(holder) == before

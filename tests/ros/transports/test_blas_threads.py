@@ -1,4 +1,4 @@
-"""One BLAS thread while the node runs (:mod:`genbacklash_ros.transports.blas_threads`): the
+"""One BLAS thread while the node runs (:mod:`genbacklash_ros.blas_threads`): the
 limit holds inside the block and the previous one comes back after it, and both transports
 run their node inside it (``rclpy_node.main``; ``run_node`` with ``--transport dds``)."""
 
@@ -12,8 +12,8 @@ import numpy  # noqa: F401  (loads numpy's BLAS, which threadpoolctl then sees)
 import pytest
 from threadpoolctl import threadpool_info, threadpool_limits
 
+from genbacklash_ros.blas_threads import one_blas_thread
 from genbacklash_ros.cli import node as cli_node
-from genbacklash_ros.transports.blas_threads import one_blas_thread
 
 from ._ros2 import rclpy_missing
 
