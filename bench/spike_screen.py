@@ -112,7 +112,7 @@ def _spike(src: Path, dst: Path, seed: int) -> set[int]:
 
 def run_one(kind: str, seed: int, spiked: bool, duration: float) -> Outcome:
     """Write, maybe spike and replay one bag; count the drops."""
-    with tempfile.TemporaryDirectory(dir="/tmp") as tmp:
+    with tempfile.TemporaryDirectory(prefix="gb-spike-") as tmp:  # honours TMPDIR
         clean = Path(tmp) / "clean"
         _write_clean(kind, seed, clean, duration)
         bag, injected = clean, set[int]()
