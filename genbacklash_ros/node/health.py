@@ -332,6 +332,18 @@ def _isolated(
     return from_y > limit and from_predicted < from_y
 
 
+def _travelling_in_play(readings: tuple[float, float, float], bands: tuple[float, ...]) -> bool:
+    """Whether three readings in a row (``readings``, each inside its band ``bands[2k] ..
+    bands[2k+1]``) travel one way inside the play: the model holds a load there (eq. 20,
+    ``x(t) = x(t-1)`` between the branches), so a load that moves there (falling across
+    the gap under gravity, coasting after the gear left it, springing back) moves where the
+    model says nothing, at a speed it does not predict. Its readings are no evidence against
+    one another: a change of pace between them is the load's, not a spike's."""
+    a, b, c = readings
+    inside = all(bands[2 * k] < v < bands[2 * k + 1] for k, v in enumerate(readings))
+    return inside and (a < b < c or a > b > c)
+
+
 class StreamHealth:
     """The faults of a pipeline's command and encoder streams and what detects them.
 
@@ -921,13 +933,22 @@ class StreamHealth:
                     # a reading just before it judged by the band alone (the commands
                     # before it unknown) that neither follows, nor their motion leads back
                     # to, is the isolated one
+                    # (unless the three travel one way inside the play, where the model
+                    # does not predict the load's pace: physics drivetrains under gravity)
                     if (
                         neighbour is not None
                         and neighbour[3]
                         and by_band == i - 1
                         and abs(x - (2.0 * y - neighbour[0])) > limit
+                        and not _travelling_in_play(
+                            (x, y, neighbour[0]),
+                            (x_low, x_high, lo, hi, neighbour[1], neighbour[2]),
+                        )
                     ):
                         bad.append(by_band)
+                        back = 2.0 * y - neighbour[0]  # where the readings after it lead
+                        if abs(x - back) > abs(worst[1]):
+                            worst = (x, x - back, back)
             else:
                 errors.append(abs(error))
             by_band = i if res and abs(error) <= limit else None

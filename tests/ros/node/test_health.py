@@ -301,3 +301,23 @@ def test_a_spike_judged_by_the_band_alone_does_not_take_the_readings_after_it() 
     spike = 64 * 8 + 40  # resting inside the play, the first sample after a jog
     y[spike] += 12 * COUNT
     assert _screen_steps(StreamHealth(), times, u, y, resumed) == [spike]
+
+
+def test_a_load_travelling_inside_the_play_after_a_settling_gap_is_no_spike() -> None:
+    """A physics drivetrain under gravity (issue 22, the physics gravity record, seed 2): after
+    samples taken out while the servo settled, the load falls across the play, slowing: 6,
+    then 3, then 1 count a reading. The model holds a load inside the play (eq. 20), so it
+    predicts none of it; the reading judged by the band alone, the first of the fall, was
+    taken out as the isolated one (the readings after it lead back to 3 counts beside it).
+    Readings that travel one way inside the play are the load's: nothing is taken out, and
+    the resting spike of the band-alone test above is still caught beside them."""
+    times, u, y, resumed = _jogs(12, 0.0)
+    start = 64 * 8 + 40  # resting inside the play, the first sample after a jog
+    assert resumed[start]
+    fall = np.array([0, -6, -9, -10]) * COUNT
+    y[start : start + 4] = y[start] + fall
+    y[start + 4 : 64 * 9] = y[start + 3]
+    assert _screen_steps(StreamHealth(), times, u, y, resumed) == []
+    spike = 64 * 5 + 40
+    y[spike] += 12 * COUNT
+    assert _screen_steps(StreamHealth(), times, u, y, resumed) == [spike]
