@@ -24,15 +24,21 @@ so the estimate of eq. (29), fitted on rows that move, sits beside the quasi-sta
 and no covariance computed from their spread alone (eq. 23's, or a sandwich of it) grows with
 the number of rows the way a bias does not shrink with it. So the rows are fitted once more
 with a *lag* column per dead zone, ``|u(t) - u(t-1)| J_c``: its coefficient is the apparent
-widening per unit of command step (a servo delay in ticks), and the fit's value at zero speed
-is where the quasi-static dead zones sit. When a lag stands out of its noise
-(:attr:`DeadZoneDrift.lagging`), that zero-speed point is the ``b`` of the term above: the
-band is widened by the distance the data themselves say the estimate lies from the drivetrain
-at rest. Only the band: the estimate (what the compensator uses) is not moved.
+widening per unit of command step (a servo delay in ticks), and the fit's value at zero speed,
+:attr:`DeadZoneDrift.rest`, is where the quasi-static dead zones sit, with its covariance
+``C_rest``. The bands then add ``b b^T + C_rest`` with ``b`` the distance from the estimate to
+that point: the estimate's mean squared error about the drivetrain at rest, ``E[(p - p_rest)
+(p - p_rest)^T]``, with ``p_rest`` itself estimated. This term is not gated on a test: a
+pre-test (add the bias only once the lag is significant) under-covers exactly where the lag is
+real but not yet certain (tried: the first seconds after convergence on the physics records
+missed). Where the model holds, ``b`` is noise of covariance ``C_rest`` and the term is about
+``2 C_rest``: the price of not knowing that there is no lag, small when the rows move at many
+speeds (the operation records: the median band of the 10-minute record 1.52 -> 1.55 mrad) and
+nothing when they all move at one speed (the lag cannot be told from the dead zones there and
+the term is the drift's alone). Only the band: the estimate (what the compensator uses) is not
+moved.
 
-Both tests are gated at ``DRIFT_Z`` standard deviations, so on a drivetrain the play operator
-describes (no drift, no lag) the bands are the statistical ones, and the cost is two more
-solves of a ``(P + 4)``-column Gram matrix per fit of the bands.
+The cost is one more solve of a ``(P + 2..4)``-column Gram matrix per fit of the bands.
 
 A backlash alone only: the cascade's bands are the statistical ones.
 
@@ -80,10 +86,9 @@ class DeadZoneDrift:
         The estimate ``p`` the rows were fitted around.
     correction : ndarray, shape (P,)
         ``p_now - p``: how far the drivetrain has moved past the estimate ``p`` (natural
-        parameters); the estimate trails by ``-correction``. When :attr:`lagging`, the
-        drivetrain now *and at rest*: the fit's value at zero command speed.
+        parameters); the estimate trails by ``-correction``.
     covariance : ndarray, shape (P, P)
-        Covariance of ``correction`` (the joint fit's, drift rates and lags included).
+        Covariance of ``correction`` (the joint fit's, drift rates included).
     rate : ndarray, shape (2,)
         Growth of ``c_left`` and ``c_right`` per clock tick.
     rate_std : ndarray, shape (2,)
@@ -98,6 +103,11 @@ class DeadZoneDrift:
         row moving at one speed).
     lag_std : ndarray, shape (2,)
         Standard deviations of ``lag`` (zeros when the rows cannot tell).
+    rest : ndarray, shape (P,), or None
+        ``p_rest - p``: where the fit with the lag puts the drivetrain (now, when drifting)
+        at zero command speed, from the estimate ``p``; None when the rows cannot tell a lag.
+    rest_covariance : ndarray, shape (P, P), or None
+        Covariance of ``rest``.
     """
 
     estimate: FloatArray
@@ -109,14 +119,16 @@ class DeadZoneDrift:
     dead: tuple[int, int] = (0, 0)
     lag: FloatArray = field(default_factory=lambda: np.zeros(2))
     lag_std: FloatArray = field(default_factory=lambda: np.zeros(2))
+    rest: FloatArray | None = None
+    rest_covariance: FloatArray | None = None
 
     @property
     def lagging(self) -> bool:
         """Whether the rows show a lag beyond doubt: either dead zone's apparent widening
         with the command speed more than ``DRIFT_Z`` standard deviations from zero. The
         play operator (eqs. 20-21) is rate independent; a lag is the model's error (a servo
-        between the command and the gear), and :attr:`correction` is then the zero-speed
-        point."""
+        between the command and the gear). Informative: the bands add the distance to the
+        zero-speed point whether or not the lag is certain (see the module notes)."""
         return bool(np.any(np.abs(self.lag) > DRIFT_Z * self.lag_std))
 
     @property
@@ -130,25 +142,34 @@ class DeadZoneDrift:
     def tracking_covariance(
         self, current: FloatArray | None = None, ticks: float = 0.0
     ) -> FloatArray:
-        """``b b^T`` when :attr:`drifting` or :attr:`lagging`, else zeros: the term the bands
-        add to the covariance of the estimate ``current`` (default :attr:`estimate`)
-        ``ticks`` after the rows were fitted, where ``b`` is how far the drivetrain (at rest,
-        when lagging) lies from it: ``estimate + correction - current``, the dead zones
-        ``rate * ticks`` further when drifting.
+        """The term the bands add to the covariance of the estimate ``current`` (default
+        :attr:`estimate`) ``ticks`` after the rows were fitted.
 
-        ``cov + b b^T`` is the estimate's mean squared error about the drivetrain when
-        ``b`` is its bias; ``b`` is itself estimated, and the 2-sigma band then reaches at
-        least ``2 |b|`` from the estimate, which leaves room for an error in ``b`` as large
-        as ``b`` itself."""
+        With a lag fit (:attr:`rest` not None): ``b b^T + C_rest``, ``b`` the distance from
+        ``current`` to the drivetrain at rest, ``estimate + rest - current`` (the dead zones
+        ``rate * ticks`` further when :attr:`drifting`): the mean squared error about a
+        point that is itself estimated. Without one (the rows all move at one speed):
+        ``b b^T`` with ``b = estimate + correction - current`` (likewise moved on) when
+        :attr:`drifting`, else zeros: on a drivetrain that does not change, ``correction``
+        is noise and a band that added it would be wider where it was right already.
+
+        ``cov + b b^T`` is the estimate's mean squared error when ``b`` is its bias; the
+        2-sigma band then reaches at least ``2 |b|`` from the estimate, room for an error in
+        ``b`` as large as ``b`` itself."""
         size = self.correction.size
         drifting = self.drifting
-        if not (drifting or self.lagging):
-            return np.zeros((size, size))
-        b = self.correction if current is None else self.estimate + self.correction - current
+        extra = np.zeros((size, size))
+        if self.rest is not None and self.rest_covariance is not None:
+            offset, extra = self.rest, self.rest_covariance
+        elif drifting:
+            offset = self.correction
+        else:
+            return extra
+        b = offset if current is None else self.estimate + offset - current
         if ticks and drifting:
             b = b.copy()
             b[list(self.dead)] += self.rate * ticks
-        return np.asarray(np.outer(b, b), dtype=np.float64)
+        return np.asarray(np.outer(b, b) + extra, dtype=np.float64)
 
 
 def one_step_sensitivity(
@@ -242,10 +263,10 @@ def dead_zone_drift(
 
     Then the lag (see the module notes): the same rows with the columns
     ``|u(t) - u(t-1)| J_c`` added (the age columns only when the first fit found a drift, so
-    that a drift that is not there adds no noise). When their coefficients stand out of
-    their noise, :attr:`DeadZoneDrift.correction` is this fit's: the drivetrain at zero
-    command speed. Rows that all move at one speed cannot tell a lag from the dead zones
-    (the lag columns are then multiples of ``J_c``); the lag is then reported as zero.
+    that a drift that is not there adds no noise); its parameters' part at zero speed is
+    :attr:`DeadZoneDrift.rest`. Rows that all move at one speed cannot tell a lag from the
+    dead zones (the lag columns are then multiples of ``J_c``): the lag is then reported as
+    zero and ``rest`` as None.
     """
     if structure.cascade:
         return None
@@ -271,6 +292,7 @@ def dead_zone_drift(
     drifting = bool(np.any(np.abs(rate) > DRIFT_Z * rate_std))
     correction, correction_cov = coef[:size], cov[:size, :size]
     lag, lag_std = np.zeros(2), np.zeros(2)
+    rest, rest_cov = None, None
     speed = np.abs(u1 - u0)[engaged][:, None]
     columns = [sens[engaged], *([ageing] if drifting else []), speed * dead_columns]
     lagged = _solve(np.hstack(columns), target)
@@ -278,8 +300,7 @@ def dead_zone_drift(
         lag_coef, lag_cov = lagged
         lag = lag_coef[-2:]
         lag_std = np.sqrt(np.maximum(np.diag(lag_cov)[-2:], 0.0))
-        if np.any(np.abs(lag) > DRIFT_Z * lag_std):  # the model misfits: bias to rest
-            correction, correction_cov = lag_coef[:size], lag_cov[:size, :size]
+        rest, rest_cov = lag_coef[:size], lag_cov[:size, :size]
     return DeadZoneDrift(
         np.array(p, dtype=np.float64),
         np.asarray(correction, dtype=np.float64),
@@ -290,6 +311,8 @@ def dead_zone_drift(
         (dead[0], dead[1]),
         np.asarray(lag, dtype=np.float64),
         np.asarray(lag_std, dtype=np.float64),
+        None if rest is None else np.asarray(rest, dtype=np.float64),
+        None if rest_cov is None else np.asarray(rest_cov, dtype=np.float64),
     )
 
 

@@ -157,33 +157,41 @@ def test_a_servo_lag_is_found_and_the_band_reaches_the_drivetrain_at_rest(seed: 
     assert fit is not None
     assert fit.lagging and not fit.drifting
     np.testing.assert_allclose(fit.lag, [0.7, 0.7], atol=6 * float(np.max(fit.lag_std)))
-    # the correction points from the estimate to the drivetrain at rest
-    np.testing.assert_allclose(fit.correction[[1, 3]], -mean_widening, atol=5e-4)
-    b = fit.tracking_covariance()
-    play_bias = float(np.sqrt(b[1, 1] + b[3, 3] + 2 * b[1, 3]))
+    # the zero-speed point: from the estimate to the drivetrain at rest
+    assert fit.rest is not None and fit.rest_covariance is not None
+    np.testing.assert_allclose(fit.rest[[1, 3]], -mean_widening, atol=5e-4)
+    term = fit.tracking_covariance()
+    play_term = float(np.sqrt(term[1, 1] + term[3, 3] + 2 * term[1, 3]))
     true_error = 2 * mean_widening
-    assert abs(play_bias - true_error) < 0.1 * true_error  # ~ the estimate's play error
+    assert abs(play_term - true_error) < 0.1 * true_error  # ~ the estimate's play error
 
 
-def test_rows_without_a_lag_show_none_and_add_nothing() -> None:
+def test_rows_without_a_lag_show_none_and_add_only_noise() -> None:
     """The same rows at many speeds without a lag, noise only: no lag stands out (5 seeds),
-    so a drivetrain the play operator describes keeps its statistical bands."""
+    and the term the bands add is of the size of the zero-speed point's own noise (the
+    price of not knowing there is no lag; the test above: a lag adds its bias)."""
     for seed in range(5):
         rows, age = _lagged_rows(np.random.default_rng([seed, 46]), 1200, 0.0, 1e-3)
         fit = dead_zone_drift(Structure(1), STRAIGHT.parameters(), rows, age)
-        assert fit is not None
+        assert fit is not None and fit.rest_covariance is not None
         assert np.all(fit.lag_std > 0.0)  # the speeds vary: the rows can tell
         assert not fit.lagging and not fit.drifting
-        assert not np.any(fit.tracking_covariance())
+        term, noise = fit.tracking_covariance(), fit.rest_covariance
+        play_term = float(np.sqrt(term[1, 1] + term[3, 3] + 2 * term[1, 3]))
+        play_noise = float(np.sqrt(noise[1, 1] + noise[3, 3] + 2 * noise[1, 3]))
+        assert play_noise <= play_term <= 4.0 * play_noise
 
 
 def test_rows_at_one_speed_cannot_tell_a_lag() -> None:
     """Every row moving by the same step: a lag is indistinguishable from wider dead zones,
-    so none is reported (zeros) and the drift fit stands as it was."""
+    so none is reported (zeros, no zero-speed point) and the drift's term stands alone
+    (here none: the dead zones do not drift)."""
     rows, age = _rows(np.random.default_rng(47), 600, 0.0, 0.0)
     fit = dead_zone_drift(Structure(3), CURVED.parameters(), rows, age)
     assert fit is not None
     assert not np.any(fit.lag) and not np.any(fit.lag_std) and not fit.lagging
+    assert fit.rest is None and fit.rest_covariance is None
+    assert not np.any(fit.tracking_covariance())
 
 
 @pytest.mark.parametrize("make", [WindowedIdentifier, RecursiveIdentifier])
