@@ -191,8 +191,11 @@ def _tables(args: argparse.Namespace) -> None:
     modes = [False] if args.clean_only else [False, True]
     jobs = [(k, s, m, args.duration) for k in kinds for m in modes for s in range(args.seeds)]
     started = time.perf_counter()
+    outcomes: list[Outcome] = []
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
-        outcomes = list(pool.map(_task, jobs))
+        for outcome in pool.map(_task, jobs):  # in order; each record logged as it is done
+            outcomes.append(outcome)
+            print(f"<!-- {outcome} -->", file=sys.stderr, flush=True)
     print(
         "| scenario | seeds | clean: false spike drops (bags with any) | spiked: injected "
         "| judged | caught | caught / judged | caught / injected | false drops |"
