@@ -28,15 +28,14 @@ widening per unit of command step (a servo delay in ticks), and the fit's value 
 :attr:`DeadZoneDrift.rest`, is where the quasi-static dead zones sit, with its covariance
 ``C_rest``. The bands then add ``b b^T + C_rest`` with ``b`` the distance from the estimate to
 that point: the estimate's mean squared error about the drivetrain at rest, ``E[(p - p_rest)
-(p - p_rest)^T]``, with ``p_rest`` itself estimated. This term is not gated on a test: a
-pre-test (add the bias only once the lag is significant) under-covers exactly where the lag is
-real but not yet certain (tried: the first seconds after convergence on the physics records
-missed). Where the model holds, ``b`` is noise of covariance ``C_rest`` and the term is about
-``2 C_rest``: the price of not knowing that there is no lag, small when the rows move at many
-speeds (the operation records: the median band of the 10-minute record 1.52 -> 1.55 mrad) and
-nothing when they all move at one speed (the lag cannot be told from the dead zones there and
-the term is the drift's alone). Only the band: the estimate (what the compensator uses) is not
-moved.
+(p - p_rest)^T]``, with ``p_rest`` itself estimated -- when a lag stands out of its noise
+(:attr:`DeadZoneDrift.lagging`, ``DRIFT_Z`` standard deviations), like the drift. Gated, so a
+drivetrain the play operator describes keeps its statistical bands (where the model holds,
+``b`` is noise and the term would be ``~2 C_rest``: wider where the band was right already,
+and the seeded start of a checkpoint, whose prior is the saved covariance, would be weaker).
+The price of the gate is a pre-test's: while a real lag is not yet certain (the first seconds
+after convergence) the band lacks it. Only the band: the estimate (what the compensator uses)
+is not moved.
 
 The cost is one more solve of a ``(P + 2..4)``-column Gram matrix per fit of the bands.
 
@@ -127,8 +126,8 @@ class DeadZoneDrift:
         """Whether the rows show a lag beyond doubt: either dead zone's apparent widening
         with the command speed more than ``DRIFT_Z`` standard deviations from zero. The
         play operator (eqs. 20-21) is rate independent; a lag is the model's error (a servo
-        between the command and the gear). Informative: the bands add the distance to the
-        zero-speed point whether or not the lag is certain (see the module notes)."""
+        between the command and the gear); the bands then add the distance to the zero-speed
+        point :attr:`rest` (see the module notes)."""
         return bool(np.any(np.abs(self.lag) > DRIFT_Z * self.lag_std))
 
     @property
@@ -145,13 +144,13 @@ class DeadZoneDrift:
         """The term the bands add to the covariance of the estimate ``current`` (default
         :attr:`estimate`) ``ticks`` after the rows were fitted.
 
-        With a lag fit (:attr:`rest` not None): ``b b^T + C_rest``, ``b`` the distance from
-        ``current`` to the drivetrain at rest, ``estimate + rest - current`` (the dead zones
-        ``rate * ticks`` further when :attr:`drifting`): the mean squared error about a
-        point that is itself estimated. Without one (the rows all move at one speed):
-        ``b b^T`` with ``b = estimate + correction - current`` (likewise moved on) when
-        :attr:`drifting`, else zeros: on a drivetrain that does not change, ``correction``
-        is noise and a band that added it would be wider where it was right already.
+        When :attr:`lagging`: ``b b^T + C_rest``, ``b`` the distance from ``current`` to the
+        drivetrain at rest, ``estimate + rest - current`` (the dead zones ``rate * ticks``
+        further when :attr:`drifting`): the mean squared error about a point that is itself
+        estimated. Else, when :attr:`drifting`: ``b b^T`` with ``b = estimate + correction -
+        current`` (likewise moved on). Else zeros: on a drivetrain the model describes
+        ``correction`` and ``rest`` are noise, and a band that added them would be wider
+        where it was right already.
 
         ``cov + b b^T`` is the estimate's mean squared error when ``b`` is its bias; the
         2-sigma band then reaches at least ``2 |b|`` from the estimate, room for an error in
@@ -159,7 +158,7 @@ class DeadZoneDrift:
         size = self.correction.size
         drifting = self.drifting
         extra = np.zeros((size, size))
-        if self.rest is not None and self.rest_covariance is not None:
+        if self.lagging and self.rest is not None and self.rest_covariance is not None:
             offset, extra = self.rest, self.rest_covariance
         elif drifting:
             offset = self.correction
