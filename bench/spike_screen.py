@@ -166,6 +166,7 @@ def _arguments(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--physics", nargs="*", default=None, help="physics variants too")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--clean-only", action="store_true")
+    parser.add_argument("--spiked-only", action="store_true", help="the spiked records alone")
     parser.add_argument("--quick", action="store_true", help="smaller settings (smoke test)")
     args = parser.parse_args(argv)
     if args.quick:
@@ -188,7 +189,7 @@ def _tables(args: argparse.Namespace) -> None:
         from genbacklash_ros.physics.variants import VARIANTS
 
         kinds += [f"physics:{v}" for v in (args.physics or VARIANTS)]
-    modes = [False] if args.clean_only else [False, True]
+    modes = [False] if args.clean_only else [True] if args.spiked_only else [False, True]
     jobs = [(k, s, m, args.duration) for k in kinds for m in modes for s in range(args.seeds)]
     started = time.perf_counter()
     outcomes: list[Outcome] = []
