@@ -332,16 +332,21 @@ def _isolated(
     return from_y > limit and from_predicted < from_y
 
 
-def _travelling_in_play(readings: tuple[float, float, float], bands: tuple[float, ...]) -> bool:
-    """Whether three readings in a row (``readings``, each inside its band ``bands[2k] ..
-    bands[2k+1]``) travel one way inside the play: the model holds a load there (eq. 20,
-    ``x(t) = x(t-1)`` between the branches), so a load that moves there (falling across
-    the gap under gravity, coasting after the gear left it, springing back) moves where the
-    model says nothing, at a speed it does not predict. Its readings are no evidence against
-    one another: a change of pace between them is the load's, not a spike's."""
+def _travelling(readings: tuple[float, float, float]) -> bool:
+    """Whether three readings in a row travel one way (strictly): a load that moves, at a
+    pace of its own. After samples taken out while the servo settled, the first reading
+    (judged by the band alone) is where the load was when the readings resumed: inside the
+    play, where the model holds a load (eq. 20, ``x(t) = x(t-1)`` between the branches), one
+    falls across the gap under gravity or coasts; on a flank, a load behind a servo that lags
+    the command catches up with the band (the physics drivetrains: +9, +3, +1.5 mrad a
+    reading). Either way the pace changes between the readings, and the readings after the
+    first do not lead back to it on a straight line: that is the load's, not a spike's.
+
+    The price: a spike displaced against the motion at such a reading also travels one way
+    with the readings after it, and is fed; one displaced along the motion by more than a
+    reading's step turns back, and is still caught (as is any spike on a resting load)."""
     a, b, c = readings
-    inside = all(bands[2 * k] < v < bands[2 * k + 1] for k, v in enumerate(readings))
-    return inside and (a < b < c or a > b > c)
+    return a < b < c or a > b > c
 
 
 class StreamHealth:
@@ -933,17 +938,14 @@ class StreamHealth:
                     # a reading just before it judged by the band alone (the commands
                     # before it unknown) that neither follows, nor their motion leads back
                     # to, is the isolated one
-                    # (unless the three travel one way inside the play, where the model
-                    # does not predict the load's pace: physics drivetrains under gravity)
+                    # (unless the three travel one way, at a pace the model does not
+                    # predict: the physics drivetrains, see _travelling)
                     if (
                         neighbour is not None
                         and neighbour[3]
                         and by_band == i - 1
                         and abs(x - (2.0 * y - neighbour[0])) > limit
-                        and not _travelling_in_play(
-                            (x, y, neighbour[0]),
-                            (x_low, x_high, lo, hi, neighbour[1], neighbour[2]),
-                        )
+                        and not _travelling((x, y, neighbour[0]))
                     ):
                         bad.append(by_band)
                         back = 2.0 * y - neighbour[0]  # where the readings after it lead
