@@ -349,6 +349,19 @@ def _travelling(readings: tuple[float, float, float]) -> bool:
     return a < b < c or a > b > c
 
 
+def _trailing(y: float, predicted: float, y_next: float, y_after: float) -> bool:
+    """Whether a reading judged by the band alone (the first after samples taken out while
+    the servo settled), off its band by ``y - predicted``, is a load trailing the band: it
+    and the two readings after it travel one way (:func:`_travelling`), towards the side the
+    band is on. A servo that lags the command leaves the load behind a moving flank when the
+    readings resume and it closes on it reading by reading (the physics gravity records:
+    3.8 mrad behind, then 0.7, then on it). A spike returns at once instead, and a spike
+    ahead of the flank turns back: both are still caught. The price: a spike behind a
+    moving flank at such a reading is fed."""
+    travelling = _travelling((y, y_next, y_after))
+    return travelling and (y - predicted) * (y_next - y) < 0.0
+
+
 class StreamHealth:
     """The faults of a pipeline's command and encoder streams and what detects them.
 
@@ -917,7 +930,12 @@ class StreamHealth:
                 else:
                     held.append(i)
                 continue
-            if abs(error) > limit:
+            # a reading judged by the band alone (no reading before it) gets one count more:
+            # where the load rests against a flank when the readings resume depends on how
+            # far the servo trails the command then, which the learned shift only averages
+            # (the physics gravity record, seed 6: 2 counts behind, on the flank at the next)
+            far = limit + self._quantum if res else limit
+            if abs(error) > far:
                 # a load still moving as it moved one reading before (coasting, ringing)
                 # is no spike; nor is a reading the one after it sides with
                 if move is None or res or abs(y - x - move) > limit:
@@ -928,6 +946,9 @@ class StreamHealth:
                         isolated = not min(x, neighbour[0]) <= y <= max(x, neighbour[0])
                     else:
                         isolated = _isolated(y, predicted, lo, hi, *neighbour[:3], limit)
+                        beyond = later[i + 1] if i + 1 < len(later) else None
+                        if isolated and res and beyond is not None and beyond[3]:
+                            isolated = not _trailing(y, predicted, neighbour[0], beyond[0])
                     if isolated:
                         bad.append(i)
                         x, x_low, x_high, x_at = predicted, lo, hi, i  # stands in for it
@@ -938,13 +959,14 @@ class StreamHealth:
                     # a reading just before it judged by the band alone (the commands
                     # before it unknown) that neither follows, nor their motion leads back
                     # to, is the isolated one
-                    # (unless the three travel one way, at a pace the model does not
-                    # predict: the physics drivetrains, see _travelling)
+                    # (judged by the band alone: one count more, as above; and not when
+                    # the three travel one way, at a pace the model does not predict: the
+                    # physics drivetrains, see _travelling)
                     if (
                         neighbour is not None
                         and neighbour[3]
                         and by_band == i - 1
-                        and abs(x - (2.0 * y - neighbour[0])) > limit
+                        and abs(x - (2.0 * y - neighbour[0])) > limit + self._quantum
                         and not _travelling((x, y, neighbour[0]))
                     ):
                         bad.append(by_band)
@@ -953,7 +975,7 @@ class StreamHealth:
                             worst = (x, x - back, back)
             else:
                 errors.append(abs(error))
-            by_band = i if res and abs(error) <= limit else None
+            by_band = i if res and abs(error) <= far else None
             if inside <= lo:
                 pushed[0].append(y - float(edges[0][i]))
             elif inside >= hi:

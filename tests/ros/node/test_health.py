@@ -325,21 +325,27 @@ def test_a_load_travelling_at_its_own_pace_after_a_settling_gap_is_no_spike() ->
     * gravity, seed 2: inside the play the load falls across the gap, slowing (6, 3, 1
       counts a reading); the model holds a load there (eq. 20);
     * near_ideal, seed 11: the load pushed up a flank by a jog carries on past it into the
-      play, slowing (6, 3, 1 counts).
+      play, slowing (6, 3, 1 counts);
+    * gravity, seeds 6 and 7: a load behind the flank a jog moved (the servo trails the
+      command) closes on it reading by reading (6, 2, 1 counts behind, then on it).
 
     Readings that travel one way are the load's: nothing is taken out, and the resting spike
     of the band-alone test above is still caught beside them."""
-    for case in ("fall", "carry on"):
+    for case in ("fall", "carry on", "trail"):
         times, u, y, resumed = _jogs(12, 0.0)
         if case == "fall":
             at = 64 * 8 + 40  # resting inside the play, the first sample after a jog
             assert resumed[at]
             y[at : at + 4] = y[at] + np.array([0, -6, -9, -10]) * COUNT
             y[at + 4 : 64 * 9] = y[at + 3]
-        else:
+        elif case == "carry on":
             at = 64 * 6 + 30  # the first sample of a jog: the load pushed up the flank
             assert resumed[at]
             _overshoot(u, y, at, [6, 9, 10])
+        else:
+            at = 64 * 7 + 30  # the first sample of a jog, the load still behind the flank
+            assert resumed[at]
+            y[at : at + 3] -= np.array([6, 2, 1]) * COUNT
         assert _screen_steps(StreamHealth(), times, u, y, resumed) == [], case
         spike = 64 * 5 + 40
         y[spike] += 12 * COUNT
