@@ -291,8 +291,11 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=5, help="seeds of the wear scenarios")
     parser.add_argument("--physics-seeds", type=int, default=3, help="seeds of each physics set")
     parser.add_argument("--jobs", type=int, default=1, help="records replayed at once")
+    parser.add_argument(
+        "--scenarios", nargs="*", choices=list(SCENARIOS), help="a subset of the wear scenarios"
+    )
     args = parser.parse_args()
-    scenarios = list(SCENARIOS)
+    scenarios = list(SCENARIOS) if args.scenarios is None else args.scenarios
     physics = [physics_label(n, b) for n, b in PHYSICS]
     if args.quick:
         args.seeds, args.physics_seeds = 2, 1
@@ -305,13 +308,14 @@ def main() -> None:
     jobs += [(p, seed, True) for p in physics for seed in range(args.physics_seeds)]
     started = time.perf_counter()
     machine = machine_description()
-    with ProcessPoolExecutor(max_workers=args.jobs) as pool:
-        results = list(
-            tqdm(pool.map(run_record, jobs), total=len(jobs), desc="coverage", file=sys.stderr)
-        )
-    raw = Path(__file__).resolve().parent / "output" / "coverage.json"
+    raw = Path(__file__).resolve().parent / "output" / "coverage.jsonl"
     raw.parent.mkdir(parents=True, exist_ok=True)
-    raw.write_text(json.dumps(results, indent=1), encoding="utf-8")  # the tables' numbers
+    results: list[dict[str, Any]] = []
+    with ProcessPoolExecutor(max_workers=args.jobs) as pool, raw.open("w") as log:
+        for result in tqdm(pool.map(run_record, jobs), total=len(jobs), file=sys.stderr):
+            results.append(result)
+            log.write(json.dumps(result) + "\n")  # each record as it is done
+            log.flush()
     operation_results = [r for r in results if not r["physics"]]
     physics_results = [r for r in results if r["physics"]]
     rows = [
