@@ -350,3 +350,16 @@ def test_a_load_travelling_at_its_own_pace_after_a_settling_gap_is_no_spike() ->
         spike = 64 * 5 + 40
         y[spike] += 12 * COUNT
         assert _screen_steps(StreamHealth(), times, u, y, resumed) == [spike], case
+
+
+def test_a_reading_exactly_the_counts_floor_away_is_within_the_limit() -> None:
+    """The limit's floor is ``SPIKE_COUNTS`` counts: a reading that far from a prediction
+    that is itself a reading is within it, whatever the rounding of their difference (the
+    physics gravity record, seed 15, lost a reading 2 counts on from the one before it, at
+    the end of a feed where no reading after it could vouch for it). Here the last reading
+    of each step, resting inside the play, moves by 2 counts, up or down."""
+    times, u, y, resumed = _jogs(12, 0.0)
+    for k in range(2, 12):
+        end = 64 * k + 63
+        y[end] = y[end - 1] + (2 if k % 2 else -2) * COUNT
+    assert _screen_steps(StreamHealth(), times, u, y, resumed) == []
