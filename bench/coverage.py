@@ -1,6 +1,6 @@
-"""Do the 2-sigma bands hold the truth while the gap wears? (issue 22, "Nothing overstated")
+"""Do the 2-sigma bands hold the truth while the gap wears, and on physics data? (issue 22)
 
-    python bench/coverage.py [--quick]
+    python bench/coverage.py [--quick] [--seeds 5] [--physics-seeds 3] [--jobs 1]
 
 Each record is written as a bag and replayed with ``genbacklash_ros.bags.replay.replay``
 (what ``genbacklash replay`` runs: the node's pipeline, default parameters), once per
@@ -8,9 +8,12 @@ identifier. Every estimate the replay published after the first ``converged`` on
 against the true dead zones at its data time (the bag's truth, ``c_left``, ``c_right`` every
 0.25 s, interpolated): is ``|estimate - truth| <= 2 sigma``, with sigma the standard
 deviation the replay's report draws (the published covariance)? Coverage is the share of
-those estimates; the target is >= 90 %.
+those estimates; the target is >= 90 %. Each replay runs twice: with the bands as published
+(*after*) and without their lag term (*before*: the tracking fit's zero-speed point
+dropped, which is the band of the commit before the lag term, bit for bit); the same run,
+the same records.
 
-Inputs (the wear scenarios, 5 seeds each):
+Inputs (the wear scenarios, ``--seeds`` seeds each):
 
 * ``operation 30 s, +20 %``: the bundled operation bag's settings (``genbacklash simulate
   --scenario operation``): 100 Hz held commands, trapezoidal moves, dwells and jogs, a 1 kHz
@@ -20,24 +23,43 @@ Inputs (the wear scenarios, 5 seeds each):
 * ``drivetrain 12 s, +20 %``: the paper-style random input (``--scenario drivetrain``:
   commands at 100-1000 Hz, SNR 25).
 
-Physics data (no wear: the play is fixed by the geometry; 3 seeds): the MuJoCo near-ideal
-drivetrain (``simulate --physics near_ideal``, 60 Hz servo, 40 s), the band checked against
-the bag's truth (the quasi-static characteristic a slow sweep measures). The servo between
-the command and the gear biases the estimate there (issue 23), which the band does not model.
+Physics data (no wear: the play is fixed by the geometry; ``--physics-seeds`` seeds): the
+MuJoCo drivetrains (``simulate --physics VARIANT``, 40 s of operation) near_ideal, coasting,
+compliant and gravity with a 60 Hz servo, and near_ideal with a 20 and a 100 Hz servo, the
+band checked against the bag's truth (the quasi-static characteristic a slow sweep
+measures). On each physics bag ``genbacklash identify --json`` runs too: is its play within
+2 of its standard deviations (``play_std``) of the quasi-static play?
 """
 
 from __future__ import annotations
 
+import argparse
+import contextlib
+import dataclasses
+import json
 import sys
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
+from typing import Any
 
 import numpy as np
-from _common import command_line, machine_description, md_table, parse_args, write_section
+from _common import (
+    PHYSICS_TOPICS,
+    cli_json,
+    command_line,
+    json_play,
+    machine_description,
+    md_table,
+    write_section,
+)
 from tqdm import tqdm
 
+from genbacklash_core.online import recursive as recursive_module
+from genbacklash_core.online import windowed as windowed_module
+from genbacklash_core.online.tracking import DeadZoneDrift, dead_zone_drift
 from genbacklash_core.scenarios import OperationSettings
 from genbacklash_ros.bags.replay import replay
 from genbacklash_ros.bags.simbags import (
@@ -49,6 +71,14 @@ from genbacklash_ros.bags.simbags import (
 
 METHODS = ("windowed", "recursive")
 TARGET = 0.90
+PHYSICS = (
+    ("near_ideal", 60.0),
+    ("coasting", 60.0),
+    ("compliant", 60.0),
+    ("gravity", 60.0),
+    ("near_ideal", 20.0),
+    ("near_ideal", 100.0),
+)
 
 
 def operation(seconds: float, wear: float) -> Callable[[Path, int], SimulatedBag]:
@@ -60,9 +90,39 @@ def drivetrain(path: Path, seed: int) -> SimulatedBag:
     return write_drivetrain_bag(path, seed=seed, duration=12.0, wear=0.2)
 
 
-def coverage(bag: Path, method: str, joint: str | None) -> dict[str, float]:
+SCENARIOS: dict[str, Callable[[Path, int], SimulatedBag]] = {
+    "operation 30 s, +20 %": operation(30.0, 0.2),
+    "drivetrain 12 s, +20 %": drivetrain,
+    "operation 10 min, +50 %": operation(600.0, 0.5),
+}
+
+
+@contextlib.contextmanager
+def lag_term(on: bool) -> Iterator[None]:
+    """The bands as published (``on``), or without their lag term (the bands before it: the
+    fits' zero-speed point dropped, so :meth:`DeadZoneDrift.tracking_covariance` adds the
+    drift's term alone, as the commit before the lag term did)."""
+    if on:
+        yield
+        return
+
+    def without_rest(*args: Any) -> DeadZoneDrift | None:
+        fit = dead_zone_drift(*args)
+        return None if fit is None else dataclasses.replace(fit, rest=None, rest_covariance=None)
+
+    modules = (windowed_module, recursive_module)
+    for module in modules:
+        module.dead_zone_drift = without_rest  # type: ignore[attr-defined]
+    try:
+        yield
+    finally:
+        for module in modules:
+            module.dead_zone_drift = dead_zone_drift  # type: ignore[attr-defined]
+
+
+def coverage(bag: Path, method: str, joint: str | None, lag: bool = True) -> dict[str, float]:
     """Replay ``bag`` with ``method``; the bands' coverage of the truth after convergence."""
-    with tempfile.TemporaryDirectory(prefix="gb-coverage-") as tmp:
+    with tempfile.TemporaryDirectory(prefix="gb-coverage-") as tmp, lag_term(lag):
         result = replay(
             bag,
             Path(tmp) / "out",
@@ -102,106 +162,206 @@ def coverage(bag: Path, method: str, joint: str | None) -> dict[str, float]:
     return out
 
 
-def table_row(label: str, method: str, seed: int, c: dict[str, float]) -> tuple[object, ...]:
-    """One record's row of the per-record tables."""
+def physics_label(name: str, bandwidth: float) -> str:
+    return f"{name} 40 s, {bandwidth:g} Hz servo"
+
+
+def identify_check(bag: Path) -> dict[str, float]:
+    """``genbacklash identify --json`` on ``bag``: its play and ``play_std`` against the
+    quasi-static play of the bag's truth."""
+    from genbacklash_ros.bags.bagio import BagReader
+
+    out = cli_json(["identify", str(bag), *PHYSICS_TOPICS, "--json"])
+    with BagReader(bag) as reader:
+        truth = read_truth(reader.custom_data)
+    assert truth is not None
+    true_play = float(truth.c_left[0] + truth.c_right[0])
+    std = out.get("play_std")
+    return {
+        "error": json_play(out) - true_play,
+        "std": float(std) if isinstance(std, (int, float)) else float("nan"),
+    }
+
+
+def run_record(job: tuple[str, int, bool]) -> dict[str, Any]:
+    """Write one record's bag and replay it with both identifiers, bands with and without
+    the lag term; for a physics record, ``identify`` too."""
+    label, seed, physics = job
+    with tempfile.TemporaryDirectory(prefix="gb-coverage-bags-") as tmp:
+        bag = Path(tmp) / "bag"
+        if physics:
+            from genbacklash_ros.physics.bag import write_physics_bag  # needs mujoco
+            from genbacklash_ros.physics.variants import variant
+
+            name, bandwidth = next((n, b) for n, b in PHYSICS if physics_label(n, b) == label)
+            write_physics_bag(bag, variant(name, bandwidth=bandwidth), seed=seed)
+        else:
+            SCENARIOS[label](bag, seed)
+        out: dict[str, Any] = {"label": label, "seed": seed, "physics": physics}
+        for method in METHODS:
+            out[method] = coverage(bag, method, "drive_joint", lag=True)
+            out[method + " before"] = coverage(bag, method, "drive_joint", lag=False)
+        if physics:
+            out["identify"] = identify_check(bag)
+    return out
+
+
+def table_row(
+    label: str, method: str, seed: int, c: dict[str, float], b: dict[str, float]
+) -> tuple[object, ...]:
+    """One record's row of the per-record tables (``c`` after, ``b`` before)."""
     return (
         label,
         method,
         seed,
         f"{c['c_left']:.0%}",
         f"{c['c_right']:.0%}",
-        f"{c['play']:.0%}",
+        f"{b['play']:.0%} → {c['play']:.0%}",
         int(c["count"]),
         f"{1e3 * c['error']:.2f}",
-        f"{1e3 * c['band']:.2f}",
+        f"{1e3 * b['band']:.2f} → {1e3 * c['band']:.2f}",
     )
 
 
-def physics_coverage(path: Path, seed: int, method: str) -> dict[str, float]:
-    """The near-ideal physics drivetrain: the band against the geometric play."""
-    from genbacklash_ros.physics.bag import write_physics_bag  # needs mujoco ([physics])
-    from genbacklash_ros.physics.variants import variant
+HEADER = (
+    "input",
+    "identifier",
+    "seed",
+    "c_left covered",
+    "c_right covered",
+    "play covered, before → after",
+    "estimates",
+    "median abs. play error (mrad)",
+    "median 2-sigma half-width, before → after (mrad)",
+)
 
-    bag = path / f"physics-{seed}"
-    if not bag.exists():
-        write_physics_bag(bag, variant("near_ideal", bandwidth=60.0), seed=seed)
-    return coverage(bag, method, "drive_joint")
+
+IDENTIFY_HEADER = (
+    "input",
+    "seed",
+    "play error (mrad)",
+    "play_std (mrad)",
+    "abs. error / std",
+    "within 2 std",
+)
+
+
+def summary_table(results: list[dict[str, Any]]) -> str:
+    pooled: dict[tuple[str, str], list[dict[str, float]]] = {}
+    before: dict[tuple[str, str], list[dict[str, float]]] = {}
+    for r in results:
+        for method in METHODS:
+            pooled.setdefault((r["label"], method), []).append(r[method])
+            before.setdefault((r["label"], method), []).append(r[method + " before"])
+    rows = []
+    for key, after in pooled.items():
+        prior = before[key]
+        share = float(np.mean([a["play"] for a in after]))
+        rows.append(
+            (
+                key[0],
+                key[1],
+                len(after),
+                f"{np.mean([p['play'] for p in prior]):.0%} → {share:.0%}",
+                f"{np.min([a['play'] for a in after]):.0%}",
+                f"{1e3 * np.median([p['band'] for p in prior]):.2f} → "
+                f"{1e3 * np.median([a['band'] for a in after]):.2f}",
+                f"{1e3 * np.median([a['error'] for a in after]):.2f}",
+                "met" if share >= TARGET else "NOT met",
+            )
+        )
+    return md_table(
+        (
+            "input",
+            "identifier",
+            "seeds",
+            "play covered, pooled, before → after",
+            "worst seed (after)",
+            "median 2-sigma half-width, before → after (mrad)",
+            "median abs. play error (mrad)",
+            ">= 90 %",
+        ),
+        rows,
+    )
 
 
 def main() -> None:
-    args = parse_args(__doc__.splitlines()[0])
-    seeds = range(2) if args.quick else range(5)
-    scenarios: list[tuple[str, Callable[[Path, int], SimulatedBag], str | None]] = [
-        ("operation 30 s, +20 %", operation(30.0, 0.2), "drive_joint"),
-        ("drivetrain 12 s, +20 %", drivetrain, "drive_joint"),
-    ]
-    if not args.quick:
-        scenarios.append(("operation 10 min, +50 %", operation(600.0, 0.5), "drive_joint"))
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="smaller settings (smoke test)")
+    parser.add_argument("--seeds", type=int, default=5, help="seeds of the wear scenarios")
+    parser.add_argument("--physics-seeds", type=int, default=3, help="seeds of each physics set")
+    parser.add_argument("--jobs", type=int, default=1, help="records replayed at once")
+    parser.add_argument(
+        "--scenarios", nargs="*", choices=list(SCENARIOS), help="a subset of the wear scenarios"
+    )
+    args = parser.parse_args()
+    scenarios = list(SCENARIOS) if args.scenarios is None else args.scenarios
+    physics = [physics_label(n, b) for n, b in PHYSICS]
+    if args.quick:
+        args.seeds, args.physics_seeds = 2, 1
+        scenarios, physics = scenarios[:2], physics[:1]
+    try:
+        import mujoco  # noqa: F401
+    except ImportError:
+        physics = []
+    jobs = [(s, seed, False) for s in scenarios for seed in range(args.seeds)]
+    jobs += [(p, seed, True) for p in physics for seed in range(args.physics_seeds)]
     started = time.perf_counter()
-    rows: list[tuple[object, ...]] = []
-    pooled: dict[tuple[str, str], list[float]] = {}
-    with tempfile.TemporaryDirectory(prefix="gb-coverage-bags-") as tmp:
-        jobs = [(s, seed) for s in scenarios for seed in seeds]
-        for (label, write, joint), seed in tqdm(jobs, desc="coverage", file=sys.stderr):
-            bag = Path(tmp) / f"{label.split()[0]}-{len(rows)}"
-            write(bag, seed)
-            for method in METHODS:
-                c = coverage(bag, method, joint)
-                pooled.setdefault((label, method), []).append(c["play"])
-                rows.append(table_row(label, method, seed, c))
-        physics_rows: list[tuple[object, ...]] = []
-        if not args.quick:
-            try:
-                import mujoco  # noqa: F401
-            except ImportError:
-                physics_rows = [("(mujoco not installed)", "", "", "", "", "", "", "", "")]
-            else:
-                for seed in tqdm(range(3), desc="physics", file=sys.stderr):
-                    for method in METHODS:
-                        c = physics_coverage(Path(tmp), seed, method)
-                        label = "near_ideal 40 s, 60 Hz servo"
-                        physics_rows.append(table_row(label, method, seed, c))
-    header = (
-        "input",
-        "identifier",
-        "seed",
-        "c_left covered",
-        "c_right covered",
-        "play covered",
-        "estimates",
-        "median |play error| (mrad)",
-        "median 2-sigma half-width (mrad)",
-    )
-    summary = md_table(
-        ("input", "identifier", "play covered, pooled over seeds", "worst seed", "target"),
-        [
-            (
-                label,
-                method,
-                f"{np.mean(v):.0%}",
-                f"{np.min(v):.0%}",
-                "met" if np.mean(v) >= TARGET else "NOT met",
-            )
-            for (label, method), v in pooled.items()
-        ],
-    )
-    body = f"""{__doc__.split("Inputs", 1)[0].split(chr(10), 3)[3].strip()}
+    machine = machine_description()
+    raw = Path(__file__).resolve().parent / "output" / "coverage.jsonl"
+    raw.parent.mkdir(parents=True, exist_ok=True)
+    results: list[dict[str, Any]] = []
+    with ProcessPoolExecutor(max_workers=args.jobs) as pool, raw.open("w") as log:
+        for result in tqdm(pool.map(run_record, jobs), total=len(jobs), file=sys.stderr):
+            results.append(result)
+            log.write(json.dumps(result) + "\n")  # each record as it is done
+            log.flush()
+    operation_results = [r for r in results if not r["physics"]]
+    physics_results = [r for r in results if r["physics"]]
+    rows = [
+        table_row(r["label"], m, r["seed"], r[m], r[m + " before"])
+        for r in operation_results
+        for m in METHODS
+    ]
+    physics_rows = [
+        table_row(r["label"], m, r["seed"], r[m], r[m + " before"])
+        for r in physics_results
+        for m in METHODS
+    ]
+    identify_rows = [
+        (
+            r["label"],
+            r["seed"],
+            f"{1e3 * r['identify']['error']:+.2f}",
+            f"{1e3 * r['identify']['std']:.3f}",
+            f"{abs(r['identify']['error']) / r['identify']['std']:.1f}",
+            "yes" if abs(r["identify"]["error"]) <= 2 * r["identify"]["std"] else "no",
+        )
+        for r in physics_results
+    ]
+    intro = __doc__.split("Inputs", 1)[0].split(chr(10), 3)[3].strip()
+    body = f"""{intro}
 
-Command: `{command_line()}`. {machine_description()} Total {time.perf_counter() - started:.0f} s.
+Command: `{command_line()}`. {machine} Total {time.perf_counter() - started:.0f} s.
 
 Target: the 2-sigma bands hold the truth >= 90 % of the time after convergence, on the wear
-scenarios, 5 seeds, both identifiers.
+scenarios (operation-shaped data) and on the physics drivetrains, both identifiers.
 
-{summary}
+{summary_table(results)}
 
-Per record (inputs: operation-shaped and random-input wear scenarios):
+Per record, operation-shaped and random-input wear scenarios:
 
-{md_table(header, rows)}
+{md_table(HEADER, rows) if rows else "(none)"}
 
-Physics data (MuJoCo near-ideal drivetrain, 60 Hz servo, 40 s, no wear; the band against
-the quasi-static truth):
+Per record, physics data (MuJoCo, 40 s of operation, no wear; the band against the
+quasi-static truth):
 
-{md_table(header, physics_rows) if physics_rows else "(not run with --quick)"}
+{md_table(HEADER, physics_rows) if physics_rows else "(mujoco not installed)"}
+
+Batch: ``genbacklash identify`` on the same physics bags, its play against the quasi-static
+play (``play_std`` is its reported standard deviation):
+
+{md_table(IDENTIFY_HEADER, identify_rows) if identify_rows else "(none)"}
 """
     write_section("coverage", body)
     print(body)

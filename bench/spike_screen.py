@@ -112,7 +112,7 @@ def _spike(src: Path, dst: Path, seed: int) -> set[int]:
 
 def run_one(kind: str, seed: int, spiked: bool, duration: float) -> Outcome:
     """Write, maybe spike and replay one bag; count the drops."""
-    with tempfile.TemporaryDirectory(dir="/tmp") as tmp:
+    with tempfile.TemporaryDirectory(prefix="gb-spike-") as tmp:  # honours TMPDIR
         clean = Path(tmp) / "clean"
         _write_clean(kind, seed, clean, duration)
         bag, injected = clean, set[int]()
@@ -166,6 +166,7 @@ def _arguments(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--physics", nargs="*", default=None, help="physics variants too")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--clean-only", action="store_true")
+    parser.add_argument("--spiked-only", action="store_true", help="the spiked records alone")
     parser.add_argument("--quick", action="store_true", help="smaller settings (smoke test)")
     args = parser.parse_args(argv)
     if args.quick:
@@ -188,11 +189,14 @@ def _tables(args: argparse.Namespace) -> None:
         from genbacklash_ros.physics.variants import VARIANTS
 
         kinds += [f"physics:{v}" for v in (args.physics or VARIANTS)]
-    modes = [False] if args.clean_only else [False, True]
+    modes = [False] if args.clean_only else [True] if args.spiked_only else [False, True]
     jobs = [(k, s, m, args.duration) for k in kinds for m in modes for s in range(args.seeds)]
     started = time.perf_counter()
+    outcomes: list[Outcome] = []
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
-        outcomes = list(pool.map(_task, jobs))
+        for outcome in pool.map(_task, jobs):  # in order; each record logged as it is done
+            outcomes.append(outcome)
+            print(f"<!-- {outcome} -->", file=sys.stderr, flush=True)
     print(
         "| scenario | seeds | clean: false spike drops (bags with any) | spiked: injected "
         "| judged | caught | caught / judged | caught / injected | false drops |"

@@ -14,6 +14,31 @@ estimate (``p_now - p``) and the drift rates. When a rate stands out of its nois
 covariance they publish: the estimate's mean squared error is ``cov + b b^T``. The estimate
 itself is left as it was (what the compensator and the state use).
 
+The same fit asks a second question: does the model misfit the data the way a servo between
+the command and the gear makes it misfit? A drive that trails the command by ``tau`` ticks
+reads, while moving, the branch at ``u(t) - tau (u(t) - u(t-1))``: to first order each dead
+zone looks wider by ``tau |u(t) - u(t-1)|`` (eqs. 11-12: ``dR/dc_R = -R'``, ``dL/dc_L = L'``),
+so the estimate of eq. (29), fitted on rows that move, sits beside the quasi-static dead zones
+(the truth a slow sweep measures; on the MuJoCo drivetrains 2.6-3.7 mrad of play, ~5 %, at a
+60 Hz servo). That is model error, not noise: the residuals are correlated with the speed,
+and no covariance computed from their spread alone (eq. 23's, or a sandwich of it) grows with
+the number of rows the way a bias does not shrink with it. So the rows are fitted once more
+with a *lag* column per dead zone, ``|u(t) - u(t-1)| J_c``: its coefficient is the apparent
+widening per unit of command step (a servo delay in ticks), and the fit's value at zero speed,
+:attr:`DeadZoneDrift.rest`, is where the quasi-static dead zones sit, with its covariance
+``C_rest``. The bands then add ``b b^T + C_rest`` with ``b`` the distance from the estimate to
+that point: the estimate's mean squared error about the drivetrain at rest, ``E[(p - p_rest)
+(p - p_rest)^T]``, with ``p_rest`` itself estimated -- when a lag stands out of its noise
+(:attr:`DeadZoneDrift.lagging`, ``DRIFT_Z`` standard deviations), like the drift. Gated, so a
+drivetrain the play operator describes keeps its statistical bands (where the model holds,
+``b`` is noise and the term would be ``~2 C_rest``: wider where the band was right already,
+and the seeded start of a checkpoint, whose prior is the saved covariance, would be weaker).
+The price of the gate is a pre-test's: while a real lag is not yet certain (the first seconds
+after convergence) the band lacks it. Only the band: the estimate (what the compensator uses)
+is not moved.
+
+The cost is one more solve of a ``(P + 2..4)``-column Gram matrix per fit of the bands.
+
 A backlash alone only: the cascade's bands are the statistical ones.
 
 Examples
@@ -32,7 +57,7 @@ Examples
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -69,6 +94,19 @@ class DeadZoneDrift:
         Standard deviations of ``rate``.
     rows : int
         Rows that engaged a branch (those the fit used).
+    dead : tuple of int
+        Where ``c_left`` and ``c_right`` sit in the parameters.
+    lag : ndarray, shape (2,)
+        Apparent widening of ``c_left`` and ``c_right`` per unit of command step
+        ``|u(t) - u(t-1)|`` (a servo delay in ticks); zeros when the rows cannot tell (every
+        row moving at one speed).
+    lag_std : ndarray, shape (2,)
+        Standard deviations of ``lag`` (zeros when the rows cannot tell).
+    rest : ndarray, shape (P,), or None
+        ``p_rest - p``: where the fit with the lag puts the drivetrain (now, when drifting)
+        at zero command speed, from the estimate ``p``; None when the rows cannot tell a lag.
+    rest_covariance : ndarray, shape (P, P), or None
+        Covariance of ``rest``.
     """
 
     estimate: FloatArray
@@ -77,7 +115,20 @@ class DeadZoneDrift:
     rate: FloatArray
     rate_std: FloatArray
     rows: int
-    dead: tuple[int, int] = (0, 0)  # where c_left and c_right sit in the parameters
+    dead: tuple[int, int] = (0, 0)
+    lag: FloatArray = field(default_factory=lambda: np.zeros(2))
+    lag_std: FloatArray = field(default_factory=lambda: np.zeros(2))
+    rest: FloatArray | None = None
+    rest_covariance: FloatArray | None = None
+
+    @property
+    def lagging(self) -> bool:
+        """Whether the rows show a lag beyond doubt: either dead zone's apparent widening
+        with the command speed more than ``DRIFT_Z`` standard deviations from zero. The
+        play operator (eqs. 20-21) is rate independent; a lag is the model's error (a servo
+        between the command and the gear); the bands then add the distance to the zero-speed
+        point :attr:`rest` (see the module notes)."""
+        return bool(np.any(np.abs(self.lag) > DRIFT_Z * self.lag_std))
 
     @property
     def drifting(self) -> bool:
@@ -90,18 +141,34 @@ class DeadZoneDrift:
     def tracking_covariance(
         self, current: FloatArray | None = None, ticks: float = 0.0
     ) -> FloatArray:
-        """``b b^T`` when :attr:`drifting`, else zeros: the term the bands add to the
-        covariance of the estimate ``current`` (default :attr:`estimate`) ``ticks`` after
-        the rows were fitted, where ``b`` is how far the drivetrain has moved past it:
-        ``estimate + correction - current``, the dead zones ``rate * ticks`` further."""
+        """The term the bands add to the covariance of the estimate ``current`` (default
+        :attr:`estimate`) ``ticks`` after the rows were fitted.
+
+        When :attr:`lagging`: ``b b^T + C_rest``, ``b`` the distance from ``current`` to the
+        drivetrain at rest, ``estimate + rest - current`` (the dead zones ``rate * ticks``
+        further when :attr:`drifting`): the mean squared error about a point that is itself
+        estimated. Else, when :attr:`drifting`: ``b b^T`` with ``b = estimate + correction -
+        current`` (likewise moved on). Else zeros: on a drivetrain the model describes
+        ``correction`` and ``rest`` are noise, and a band that added them would be wider
+        where it was right already.
+
+        ``cov + b b^T`` is the estimate's mean squared error when ``b`` is its bias; the
+        2-sigma band then reaches at least ``2 |b|`` from the estimate, room for an error in
+        ``b`` as large as ``b`` itself."""
         size = self.correction.size
-        if not self.drifting:
-            return np.zeros((size, size))
-        b = self.correction if current is None else self.estimate + self.correction - current
-        if ticks:
+        drifting = self.drifting
+        extra = np.zeros((size, size))
+        if self.lagging and self.rest is not None and self.rest_covariance is not None:
+            offset, extra = self.rest, self.rest_covariance
+        elif drifting:
+            offset = self.correction
+        else:
+            return extra
+        b = offset if current is None else self.estimate + offset - current
+        if ticks and drifting:
             b = b.copy()
             b[list(self.dead)] += self.rate * ticks
-        return np.asarray(np.outer(b, b), dtype=np.float64)
+        return np.asarray(np.outer(b, b) + extra, dtype=np.float64)
 
 
 def one_step_sensitivity(
@@ -149,44 +216,17 @@ def one_step_sensitivity(
     return np.asarray(x, dtype=np.float64), jac
 
 
-def dead_zone_drift(
-    structure: Structure,
-    p: FloatArray,
-    rows: tuple[FloatArray, FloatArray, FloatArray, FloatArray],
-    age: ArrayLike,
-) -> DeadZoneDrift | None:
-    """Fit the remembered rows with the dead zones drifting linearly in time.
+def _solve(design: FloatArray, target: FloatArray) -> tuple[FloatArray, FloatArray] | None:
+    """Least squares ``design @ coef ~ target``: ``coef`` and its covariance
+    ``s^2 (D^T D)^-1`` (eq. 23's form), or None when the rows cannot tell (fewer rows than
+    columns, an empty column, or a direction the Gram matrix cannot resolve).
 
-    A row ``(u(t-1), u(t), x(t-1), x(t))`` of age ``a`` read the drivetrain as it was then.
-    With ``c_L``, ``c_R`` growing at ``rho`` per tick, its one-step prediction error at the
-    estimate ``p`` (the play operator of eqs. 20-21 from the measured ``x(t-1)``) is, to first
-    order, ``J (p_now - p) - a J_c rho``, where ``J`` is the prediction's sensitivity to the
-    parameters (:func:`~genbacklash_core.refine.simulation_jacobian`) and ``J_c`` its columns
-    of the dead zones. Least squares over the rows that engage a branch give
-    ``p_now - p`` and ``rho`` together, with their covariance. None when the rows cannot
-    tell (a branch without rows, fewer rows than unknowns) or for a cascade.
-
+    By the normal equations of the column-scaled design: a handful of columns, so the Gram
+    matrix is tiny; LAPACK's lstsq on the ~1000 x 10 design cost ~10 ms on a busy machine,
+    this ~0.1 ms.
     """
-    if structure.cascade:
+    if target.size <= design.shape[1]:
         return None
-    _, u1, y0, y1 = (np.asarray(r, dtype=np.float64) for r in rows)  # the clamp tells the branch
-    if u1.size == 0:
-        return None
-    prediction, sens = one_step_sensitivity(structure, p, u1, y0)
-    residual = y1 - prediction
-    names = structure.names()
-    dead = [names.index("c_left"), names.index("c_right")]
-    engaged = np.any(sens != 0.0, axis=1) & np.isfinite(residual)
-    size = p.size + 2
-    if np.count_nonzero(engaged) <= size or not np.all(np.any(sens[engaged][:, dead], axis=0)):
-        return None
-    a = np.asarray(age, dtype=np.float64)[engaged]
-    design = np.hstack([sens[engaged], -a[:, None] * sens[engaged][:, dead]])
-    target = residual[engaged]
-    # least squares by the normal equations of the column-scaled design: (P + 2) columns,
-    # so the Gram matrix is tiny; LAPACK's lstsq on the ~1000 x 10 design cost ~10 ms on a
-    # busy machine, this ~0.1 ms. Rank-deficient designs (a direction the rows cannot tell)
-    # give None.
     scale = np.sqrt(np.einsum("ij,ij->j", design, design))
     if not np.all(scale > 0.0):
         return None
@@ -198,18 +238,80 @@ def dead_zone_drift(
     inverse = np.linalg.inv(gram)
     coef = (inverse @ (unit.T @ target)) / scale
     left = target - design @ coef
-    dof = max(target.size - size, 1)
+    dof = max(target.size - design.shape[1], 1)
     s2 = float(left @ left) / dof
-    cov = s2 * inverse / np.outer(scale, scale)
-    rate_std = np.sqrt(np.maximum(np.diag(cov)[p.size :], 0.0))
+    return coef, s2 * inverse / np.outer(scale, scale)
+
+
+def dead_zone_drift(
+    structure: Structure,
+    p: FloatArray,
+    rows: tuple[FloatArray, FloatArray, FloatArray, FloatArray],
+    age: ArrayLike,
+) -> DeadZoneDrift | None:
+    """Fit the remembered rows with the dead zones drifting linearly in time, then with a lag.
+
+    A row ``(u(t-1), u(t), x(t-1), x(t))`` of age ``a`` read the drivetrain as it was then.
+    With ``c_L``, ``c_R`` growing at ``rho`` per tick, its one-step prediction error at the
+    estimate ``p`` (the play operator of eqs. 20-21 from the measured ``x(t-1)``) is, to first
+    order, ``J (p_now - p) - a J_c rho``, where ``J`` is the prediction's sensitivity to the
+    parameters (:func:`~genbacklash_core.refine.simulation_jacobian`) and ``J_c`` its columns
+    of the dead zones. Least squares over the rows that engage a branch give
+    ``p_now - p`` and ``rho`` together, with their covariance. None when the rows cannot
+    tell (a branch without rows, fewer rows than unknowns) or for a cascade.
+
+    Then the lag (see the module notes): the same rows with the columns
+    ``|u(t) - u(t-1)| J_c`` added (the age columns only when the first fit found a drift, so
+    that a drift that is not there adds no noise); its parameters' part at zero speed is
+    :attr:`DeadZoneDrift.rest`. Rows that all move at one speed cannot tell a lag from the
+    dead zones (the lag columns are then multiples of ``J_c``): the lag is then reported as
+    zero and ``rest`` as None.
+    """
+    if structure.cascade:
+        return None
+    u0, u1, y0, y1 = (np.asarray(r, dtype=np.float64) for r in rows)  # the clamp tells the branch
+    if u1.size == 0:
+        return None
+    prediction, sens = one_step_sensitivity(structure, p, u1, y0)
+    residual = y1 - prediction
+    names = structure.names()
+    dead = [names.index("c_left"), names.index("c_right")]
+    engaged = np.any(sens != 0.0, axis=1) & np.isfinite(residual)
+    if not np.all(np.any(sens[engaged][:, dead], axis=0)):
+        return None
+    dead_columns = sens[engaged][:, dead]
+    ageing = -np.asarray(age, dtype=np.float64)[engaged][:, None] * dead_columns
+    target = residual[engaged]
+    drift = _solve(np.hstack([sens[engaged], ageing]), target)
+    if drift is None:
+        return None
+    coef, cov = drift
+    size = p.size
+    rate, rate_std = coef[size:], np.sqrt(np.maximum(np.diag(cov)[size:], 0.0))
+    drifting = bool(np.any(np.abs(rate) > DRIFT_Z * rate_std))
+    correction, correction_cov = coef[:size], cov[:size, :size]
+    lag, lag_std = np.zeros(2), np.zeros(2)
+    rest, rest_cov = None, None
+    speed = np.abs(u1 - u0)[engaged][:, None]
+    columns = [sens[engaged], *([ageing] if drifting else []), speed * dead_columns]
+    lagged = _solve(np.hstack(columns), target)
+    if lagged is not None:
+        lag_coef, lag_cov = lagged
+        lag = lag_coef[-2:]
+        lag_std = np.sqrt(np.maximum(np.diag(lag_cov)[-2:], 0.0))
+        rest, rest_cov = lag_coef[:size], lag_cov[:size, :size]
     return DeadZoneDrift(
         np.array(p, dtype=np.float64),
-        np.asarray(coef[: p.size], dtype=np.float64),
-        np.asarray(cov[: p.size, : p.size], dtype=np.float64),
-        np.asarray(coef[p.size :], dtype=np.float64),
+        np.asarray(correction, dtype=np.float64),
+        np.asarray(correction_cov, dtype=np.float64),
+        np.asarray(rate, dtype=np.float64),
         np.asarray(rate_std, dtype=np.float64),
         int(target.size),
         (dead[0], dead[1]),
+        np.asarray(lag, dtype=np.float64),
+        np.asarray(lag_std, dtype=np.float64),
+        None if rest is None else np.asarray(rest, dtype=np.float64),
+        None if rest_cov is None else np.asarray(rest_cov, dtype=np.float64),
     )
 
 

@@ -11,7 +11,7 @@ from genbacklash_core import RecursiveIdentifier, WindowedIdentifier
 from genbacklash_core.backlash import GeneralBacklash
 from genbacklash_core.online.memory import RowMemory
 from genbacklash_core.online.tracking import dead_zone_drift
-from genbacklash_core.scenarios import OperationSettings, operation_record
+from genbacklash_core.scenarios import HiddenEffects, OperationSettings, operation_record
 from genbacklash_core.structure import Structure
 
 CURVED = GeneralBacklash([1.0, 0.03, -0.015], 0.045, [1.0, 0.025, -0.012], 0.05)
@@ -116,3 +116,105 @@ def test_a_wearing_gap_stays_inside_the_band(make: type) -> None:
         assert true_play - play > 0.003  # it trails the wear
         assert abs(play - true_play) <= 2.0 * play_std, (seed, play, play_std, true_play)
         assert play_std < 0.02  # and the band still says something (play ~0.11 rad)
+
+
+def _lagged_rows(
+    rng: np.random.Generator, n: int, lag: float, noise: float
+) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
+    """``n`` rows of moves at speeds from 0.01 to 0.08 per row, read through a drive that
+    trails the command by ``lag`` ticks: each dead zone looks ``lag * |u(t) - u(t-1)|``
+    wider (first order; exact for the straight branches of ``STRAIGHT``). Noise of standard
+    deviation ``noise`` on the readings; every row engages the branch of its move."""
+    u0 = rng.uniform(-1.0, 1.0, n)
+    step = rng.uniform(0.01, 0.08, n) * rng.choice([-1.0, 1.0], n)
+    u1 = u0 + step
+    widened = lag * np.abs(step)
+    right = STRAIGHT.m_right[0] * (u1 - STRAIGHT.c_right - widened)  # eq. (12)
+    left = STRAIGHT.m_left[0] * (u1 + STRAIGHT.c_left + widened)  # eq. (11)
+    y1 = np.where(step > 0, right, left) + rng.normal(0.0, noise, n)
+    y0 = np.where(step > 0, y1 - 0.2, y1 + 0.2)
+    return (u0, u1, y0, y1), np.arange(n, dtype=np.float64)[::-1]
+
+
+STRAIGHT = GeneralBacklash([1.0], 0.045, [1.0], 0.05)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_a_servo_lag_is_found_and_the_band_reaches_the_drivetrain_at_rest(seed: int) -> None:
+    """A drive 0.7 ticks behind the command (a 60 Hz servo at 100 Hz commands is ~0.3-1):
+    the dead zones the moving rows show are wider than at rest, and an estimate fitted on
+    them sits beside the quasi-static truth. The lag is found, and the band's bias term is
+    the distance to the drivetrain at rest (the zero-speed point), not to the rows."""
+    rng = np.random.default_rng([seed, 45])
+    rows, age = _lagged_rows(rng, 1200, 0.7, 2e-4)
+    u0, u1, _, _ = rows
+    mean_widening = 0.7 * float(np.mean(np.abs(u1 - u0)))  # what a fit of the rows shows
+    truth = STRAIGHT.parameters()
+    biased = truth.copy()
+    biased[1] += mean_widening  # c_left
+    biased[3] += mean_widening  # c_right
+    fit = dead_zone_drift(Structure(1), biased, rows, age)
+    assert fit is not None
+    assert fit.lagging and not fit.drifting
+    np.testing.assert_allclose(fit.lag, [0.7, 0.7], atol=6 * float(np.max(fit.lag_std)))
+    # the zero-speed point: from the estimate to the drivetrain at rest
+    assert fit.rest is not None and fit.rest_covariance is not None
+    np.testing.assert_allclose(fit.rest[[1, 3]], -mean_widening, atol=5e-4)
+    term = fit.tracking_covariance()
+    play_term = float(np.sqrt(term[1, 1] + term[3, 3] + 2 * term[1, 3]))
+    true_error = 2 * mean_widening
+    assert abs(play_term - true_error) < 0.1 * true_error  # ~ the estimate's play error
+
+
+def test_rows_without_a_lag_show_none_and_add_nothing() -> None:
+    """The same rows at many speeds without a lag, noise only: no lag stands out (5 seeds),
+    and the bands stay the statistical ones although the rows could tell a lag (the
+    zero-speed point is there, noise of the size of its own standard deviation)."""
+    for seed in range(5):
+        rows, age = _lagged_rows(np.random.default_rng([seed, 46]), 1200, 0.0, 1e-3)
+        fit = dead_zone_drift(Structure(1), STRAIGHT.parameters(), rows, age)
+        assert fit is not None and fit.rest_covariance is not None
+        assert np.all(fit.lag_std > 0.0)  # the speeds vary: the rows can tell
+        assert not fit.lagging and not fit.drifting
+        assert fit.rest is not None
+        noise = fit.rest_covariance
+        play_noise = float(np.sqrt(noise[1, 1] + noise[3, 3] + 2 * noise[1, 3]))
+        assert abs(fit.rest[1] + fit.rest[3]) < 4.0 * play_noise
+        assert not np.any(fit.tracking_covariance())
+
+
+def test_rows_at_one_speed_cannot_tell_a_lag() -> None:
+    """Every row moving by the same step: a lag is indistinguishable from wider dead zones,
+    so none is reported (zeros, no zero-speed point) and the drift's term stands alone
+    (here none: the dead zones do not drift)."""
+    rows, age = _rows(np.random.default_rng(47), 600, 0.0, 0.0)
+    fit = dead_zone_drift(Structure(3), CURVED.parameters(), rows, age)
+    assert fit is not None
+    assert not np.any(fit.lag) and not np.any(fit.lag_std) and not fit.lagging
+    assert fit.rest is None and fit.rest_covariance is None
+    assert not np.any(fit.tracking_covariance())
+
+
+@pytest.mark.parametrize("make", [WindowedIdentifier, RecursiveIdentifier])
+def test_a_servo_lag_stays_inside_the_band(make: type) -> None:
+    """The operation scenario read through a 60 Hz first-order servo (no wear): the estimate
+    sits tens of mrad beside the quasi-static play (every 1 kHz reading is fed, moving),
+    which the statistical band (~0.1 mrad, the run without the servo below) does not
+    describe. With the lag's bias term the band holds the play at rest, on 3 seeds, and
+    is not wider than a few times the error."""
+    for seed in range(3):
+        cfg = OperationSettings(duration=30.0, phases=(("operation", 30.0),), wear=0.0)
+        for servo in (0.0, 1.0 / (2.0 * np.pi * 60.0)):
+            rec = operation_record(cfg, seed, hidden=HiddenEffects(input_lag=servo))
+            u, y, b = rec.series(bridge=True)
+            ident = make(3)
+            for s in range(0, u.size, 64):
+                est = ident.update_many(u[s : s + 64], y[s : s + 64], b[s : s + 64])
+            assert est.available
+            play, play_std = est.play()
+            error = abs(play - float(rec.c_left[-1] + rec.c_right[-1]))
+            if servo == 0.0:  # the model holds: the statistical band, narrow
+                assert error <= 2.0 * play_std < 5e-4, (seed, error, play_std)
+            else:
+                assert error > 0.01, (seed, error)  # the servo biases the estimate
+                assert error <= 2.0 * play_std <= 4.0 * error, (seed, error, play_std)
