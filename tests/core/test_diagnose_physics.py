@@ -224,3 +224,21 @@ def test_a_slow_servo_alone_gets_no_physical_name() -> None:
     result = diagnose(u, y, catalog=RIVALS)
     assert result.effects and result.effects[0] in ("input_lag", "time_delay"), result.reason
     assert not set(result.effects) & set(PHYSICS_NAMES), [s.evidence for s in result.steps]
+
+
+def test_the_servo_lag_finds_a_fraction_of_a_sample_of_dead_time() -> None:
+    # a servo whose dead time is 1.5 samples (a held command sampled between two readings):
+    # whole samples fit it worse than the fraction does, and the BIC keeps the fraction
+    u = moves(7)
+    truth = AugmentedModel(
+        BACKLASH, delay=1, input_lag=0.7, input_lag_order=2, input_lag_fraction=0.5
+    )
+    rng = np.random.default_rng([7, 3])
+    y = np.round((truth.simulate(u, y_start=0.0) + rng.normal(0.0, 2e-4, u.size)) / STEP) * STEP
+    lag = tuple(effect for effect in CATALOG if effect.name == "input_lag")
+    result = diagnose(u, y, catalog=lag)
+    assert result.effects == ("input_lag",), result.reason
+    model = result.model
+    assert model.input_lag_fraction > 0.0
+    assert model.delay + model.input_lag_fraction == pytest.approx(1.5, abs=0.3)
+    assert model.input_lag_order == 2
