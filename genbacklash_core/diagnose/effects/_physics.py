@@ -8,7 +8,7 @@ trial's F-test, Bonferroni-corrected over the trials, must pass the screening th
 
 Behind the servo (:func:`servo_base`): a slow servo moves the load more than the load's own
 physics do, so the trials and the fit are also made on the current model with a servo's lag
-in front of the play (two equal stages, a sample late, fitted first by a few Gauss-Newton
+in front of the play (two equal stages, a sample late, fitted first by a few Levenberg-Marquardt
 steps; its pole is then fitted with the physics). The fitted model then carries that lag
 (``input_lag``) under the physical effect's name; the loop names it only when it passes the
 acceptance test against the servo's lag alone (:mod:`genbacklash_core.diagnose.loop`).
@@ -62,7 +62,7 @@ _FINALISTS = 2  # starts refined by least squares
 _MAX_EVALUATIONS = 15  # least-squares iterations per start (each costs 1 + k + 2 runs)
 _SERVO_DELAY = 1  # samples of dead time the servo's lag starts behind the model's
 _SERVO_POLE = 0.8  # each stage's pole the servo's fit starts from (4.5 samples)
-_SERVO_STEPS = 20  # Gauss-Newton steps of the servo's lag before the physics is added
+_SERVO_STEPS = 20  # Levenberg-Marquardt steps of the servo's lag before the physics is added
 _SERVO_FINALISTS = 1  # starts refined by least squares behind the servo
 
 
@@ -171,7 +171,7 @@ _SERVO_CACHE: WeakKeyDictionary[Context, _Base | None] = WeakKeyDictionary()
 def servo_base(context: Context) -> _Base | None:
     """The current model with the servo's lag in front of the play (two equal stages one
     sample late: a critically damped position loop, as :mod:`.input_lag` models it), its
-    pole and the branches fitted by a few Gauss-Newton steps; None when the model has a lag
+    pole and the branches fitted by a few Levenberg-Marquardt steps; None when the model has a lag
     or a linear block already, or no valid fit exists. Fitted once per context.
 
     A slow servo moves the load more than the load's own physics do: a physical effect
