@@ -4,11 +4,12 @@ The model output is
 
     y(t) = sat( z(t) + o + E(z(t)) ),    z = G(q) x,
     x = general backlash of v with gaps c(t) = c + k s(t),
-    v(t) = a v(t-1) + (1 - a) u(t - d)
+    v(t) = a v(t-1) + (1 - a) ((1 - f) u(t - d) + f u(t - d - 1))
 
 where the backlash is eqs. (11)-(13)/(20), ``G(q)`` the linear block of eq. (30) (absent for a
 backlash alone, where ``z = x``), ``d`` a dead time in samples, ``a`` the pole of the servo's
-first-order lag before the backlash (``input_lag``; 0: none), ``o`` an output offset, ``k`` a
+first-order lag before the backlash (``input_lag``; 0: none), ``f`` a fraction of a sample of
+dead time before that lag (linear interpolation between samples), ``o`` an output offset, ``k`` a
 gap drift (wear) along ``s(t)`` = the sample index or the input travel so far, ``E`` an error
 periodic in the load position ``z`` (``periodic_error``: harmonics of a period ``P``) and
 ``sat`` an output limit. The base model classes stay untouched; this wrapper composes them.
@@ -238,6 +239,13 @@ class AugmentedModel:
     input_lag_order : {1, 2}
         Stages of the input lag, each with the pole ``input_lag``: 2 is a critically damped
         servo (a position loop's two equal poles), the lag applied twice.
+    input_lag_fraction : float
+        ``f`` in ``[0, 1)``: a fraction of a sample of dead time before the input lag, its
+        input ``(1 - f) u(t - d) + f u(t - d - 1)`` (linear interpolation between samples;
+        0: none). A held command sampled by the servo between the encoder's readings lands a
+        fraction of a sample late, and the zero-order-hold discretisation of a lag has this
+        form (a numerator ``b_1 + b_2 q^-1``, ``f = b_2 / (b_1 + b_2)``). Only with an input
+        lag: it belongs to the servo's model.
 
     Examples
     --------
@@ -258,6 +266,7 @@ class AugmentedModel:
     periodic: PeriodicError | None = None
     physics: LoadPhysics | None = None
     input_lag_order: int = 1
+    input_lag_fraction: float = 0.0
 
     def __post_init__(self) -> None:
         if not isinstance(self.base, (GeneralBacklash, Cascade)):
@@ -289,6 +298,14 @@ class AugmentedModel:
         if isinstance(order, bool) or order not in (1, 2):
             raise GenBacklashError(f"input_lag_order must be 1 or 2, got {order!r}")
         object.__setattr__(self, "input_lag_order", int(order))
+        fraction = self.input_lag_fraction
+        if isinstance(fraction, bool) or not isinstance(fraction, (int, float, np.floating)):
+            raise GenBacklashError(f"input_lag_fraction must be a number, got {fraction!r}")
+        if not 0.0 <= fraction < 1.0:
+            raise GenBacklashError(f"input_lag_fraction must be in [0, 1), got {fraction}")
+        if fraction != 0.0 and self.input_lag == 0.0:
+            raise GenBacklashError("input_lag_fraction needs an input lag (it is the servo's)")
+        object.__setattr__(self, "input_lag_fraction", float(fraction))
         if self.periodic is not None and not isinstance(self.periodic, PeriodicError):
             raise GenBacklashError(
                 f"periodic must be a PeriodicError or None, got {self.periodic!r}"
@@ -393,6 +410,7 @@ class AugmentedModel:
                 ),
                 input_lag=0.0 if lag is None else lag["pole"],
                 input_lag_order=1 if lag is None else lag.get("order", 1),
+                input_lag_fraction=0.0 if lag is None else lag.get("fraction", 0.0),
                 periodic=(
                     None
                     if periodic is None
@@ -438,6 +456,7 @@ class AugmentedModel:
                 "pole": self.input_lag,
                 "time_constant": -1.0 / math.log(self.input_lag),
                 "order": self.input_lag_order,
+                "fraction": self.input_lag_fraction,
             }
         )
         periodic = self.periodic
@@ -493,7 +512,7 @@ def without_effect(model: AugmentedModel, effect: str) -> AugmentedModel | None:
         "output_offset": {"offset": 0.0},
         "gap_drift": {"drift": None},
         "saturation": {"saturation": None},
-        "input_lag": {"input_lag": 0.0, "input_lag_order": 1},
+        "input_lag": {"input_lag": 0.0, "input_lag_order": 1, "input_lag_fraction": 0.0},
         "periodic_error": {"periodic": None},
         "coasting_load": {"physics": None},
         "compliant_coupling": {"physics": None},

@@ -41,7 +41,8 @@ class DiagnoseSettings:
     floor_margin : float
         Stop when the validation gap is within this factor of what quantisation and noise
         allow (:mod:`~genbacklash_core.diagnose.floor`; only when the record's dwells measured
-        the noise).
+        the noise). An effect must also lower the gap by at least ``floor_margin - 1`` times
+        that floor: a smaller drop is within what the floor allows.
 
     Examples
     --------

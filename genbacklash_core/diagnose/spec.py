@@ -107,6 +107,7 @@ class ModelSpec:
     harmonics: int = 0
     physics: LoadPhysics | None = None
     input_lag_order: int = 1
+    input_lag_fraction: float = 0.0
 
     @classmethod
     def of(cls, model: AugmentedModel) -> ModelSpec:
@@ -121,6 +122,7 @@ class ModelSpec:
             0 if model.periodic is None else model.periodic.harmonics,
             model.physics,
             model.input_lag_order,
+            model.input_lag_fraction,
         )
 
     @property
@@ -137,10 +139,11 @@ class ModelSpec:
 
     @property
     def n_free(self) -> int:
-        """Free parameters for information criteria: the vector plus a dead time and the load
-        physics' parameters when present."""
+        """Free parameters for information criteria: the vector plus a dead time, its
+        fraction of a sample and the load physics' parameters when present."""
         physics = 0 if self.physics is None else self.physics.n_free
-        return self.n_parameters + int(self.delay > 0) + physics
+        fraction = int(self.input_lag and self.input_lag_fraction > 0.0)
+        return self.n_parameters + int(self.delay > 0) + fraction + physics
 
     def names(self) -> tuple[str, ...]:
         """Parameter names in vector order."""
@@ -223,16 +226,18 @@ class ModelSpec:
         if i_drift is not None and self.drift is not None:
             drift = Drift(float(theta[i_drift]), self.drift)
         i_lag, _ = self._extra_index()
+        lag = 0.0 if i_lag is None else float(theta[i_lag])
         return AugmentedModel(
             base,
             self.delay,
             0.0 if i_off is None else float(theta[i_off]),
             drift,
             saturation,
-            0.0 if i_lag is None else float(theta[i_lag]),
+            lag,
             self.periodic_error(theta),
             self.physics,
             self.input_lag_order,
+            self.input_lag_fraction if lag != 0.0 else 0.0,  # no lag: no servo to carry it
         )
 
     # ------------------------------------------------------------------ pieces
@@ -288,10 +293,19 @@ class ModelSpec:
             return f"the period of the periodic error is not positive ({theta[i_period]:.3g})"
         return None
 
+    def delayed_input(self, u: FloatArray) -> FloatArray:
+        """The input delayed by the dead time and, with an input lag, by its fraction of a
+        sample: ``(1 - f) u(t - d) + f u(t - d - 1)``."""
+        ud = shift_input(u, self.delay)
+        f = self.input_lag_fraction if self.input_lag else 0.0
+        if f == 0.0:
+            return ud
+        return (1.0 - f) * ud + f * shift_input(u, self.delay + 1)
+
     def backlash_input(self, theta: FloatArray, u: FloatArray) -> FloatArray:
         """``v``: the input delayed by the dead time and lagged by the input lag (if any;
-        ``input_lag_order`` equal first-order stages)."""
-        ud = shift_input(u, self.delay)
+        ``input_lag_order`` equal first-order stages, after its fraction of a sample)."""
+        ud = self.delayed_input(u)
         i_lag, _ = self._extra_index()
         if i_lag is None:
             return ud
@@ -318,7 +332,7 @@ class ModelSpec:
 
         i_lag, _ = self._extra_index()
         a = 0.0 if i_lag is None else float(theta[i_lag])
-        ud = shift_input(u, self.delay)
+        ud = self.delayed_input(u)
         stages = self._stages(a, ud) if self.input_lag_order > 1 else [ud, v]
         dv = np.zeros(ud.size)
         for before, after in itertools.pairwise(stages):
@@ -603,6 +617,7 @@ class ModelSpec:
         harmonics: int | None = None,
         physics: LoadPhysics | None = None,
         input_lag_order: int | None = None,
+        input_lag_fraction: float | None = None,
     ) -> ModelSpec:
         """A spec with some parts replaced (``orders`` is ``(na, nb)``)."""
         s = self.structure
@@ -617,6 +632,7 @@ class ModelSpec:
             self.harmonics if harmonics is None else harmonics,
             self.physics if physics is None else physics,
             self.input_lag_order if input_lag_order is None else input_lag_order,
+            self.input_lag_fraction if input_lag_fraction is None else input_lag_fraction,
         )
 
     def embed(self, model: AugmentedModel) -> FloatArray:

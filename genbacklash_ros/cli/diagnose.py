@@ -185,7 +185,12 @@ def _model_lines(result: Diagnosis, period: float | None = None) -> list[str]:
                 lines.append(f"  {'limit ' + side:<14}{value:>12.5f}")
     if model.input_lag:
         tau = -1.0 / math.log(model.input_lag)
-        lines.append(f"  {'input lag':<14}{model.input_lag:>12.5f}  pole ({tau:.1f} samples)")
+        stages = f", {model.input_lag_order} equal stages" if model.input_lag_order > 1 else ""
+        fraction = model.input_lag_fraction
+        late = f", dead time {fraction:g} of a sample longer" if fraction else ""
+        lines.append(
+            f"  {'input lag':<14}{model.input_lag:>12.5f}  pole ({tau:.1f} samples{stages}{late})"
+        )
     if model.periodic is not None:
         periodic = model.periodic
         lines.append(f"  {'period':<14}{periodic.period:>12.5f}")

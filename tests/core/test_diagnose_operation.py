@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -13,7 +14,7 @@ import pytest
 from genbacklash_core import GeneralBacklash
 from genbacklash_core.diagnose import AugmentedModel, diagnose, split_record
 from genbacklash_core.diagnose.floor import encoder_step, noise_floor
-from genbacklash_core.diagnose.model import PeriodicError
+from genbacklash_core.diagnose.model import PeriodicError, without_effect
 from genbacklash_core.diagnose.spec import ModelSpec
 from genbacklash_core.diagnose.synthetic import operation_case, random_walk_input
 from genbacklash_core.errors import GenBacklashError
@@ -33,9 +34,10 @@ def _finite_difference_jacobian(spec: ModelSpec, theta: np.ndarray, u: np.ndarra
     return out
 
 
-@pytest.mark.parametrize("order", [1, 2])
-def test_input_lag_and_periodic_error_have_exact_sensitivities(order: int) -> None:
-    # order 2: the lag applied twice with one pole (a critically damped servo)
+@pytest.mark.parametrize(("order", "fraction"), [(1, 0.0), (2, 0.0), (1, 0.4), (2, 0.75)])
+def test_input_lag_and_periodic_error_have_exact_sensitivities(order: int, fraction: float) -> None:
+    # order 2: the lag applied twice with one pole (a critically damped servo); a fraction:
+    # part of a sample of dead time before the lag
     u = random_walk_input(600, np.random.default_rng(3))
     model = AugmentedModel(
         GeneralBacklash((1.0, 0.05), 0.3, (1.1, 0.04), 0.2),
@@ -44,6 +46,7 @@ def test_input_lag_and_periodic_error_have_exact_sensitivities(order: int) -> No
         input_lag=0.7,
         periodic=PeriodicError(0.9, (0.02, 0.01), (0.01, -0.005)),
         input_lag_order=order,
+        input_lag_fraction=fraction,
     )
     spec = ModelSpec.of(model)
     theta = spec.vector(model)
@@ -80,6 +83,29 @@ def test_the_new_effects_round_trip_through_the_json_model() -> None:
         AugmentedModel(GeneralBacklash.ideal(1.0, 0.05, 0.06), input_lag=1.0)
     with pytest.raises(GenBacklashError, match="one cos and one sin"):
         PeriodicError(0.5, (0.001, 0.0), (0.002,))
+
+
+def test_a_fraction_of_a_sample_of_dead_time_interpolates_the_servo_input() -> None:
+    backlash = GeneralBacklash.ideal(1.0, 0.05, 0.06)
+    model = AugmentedModel(backlash, delay=1, input_lag=0.6, input_lag_fraction=0.25)
+    data = json.loads(json.dumps(model.to_dict()))
+    assert data["input_lag"]["fraction"] == 0.25
+    assert AugmentedModel.from_dict(data) == model
+    assert model.effects == ("time_delay", "input_lag")  # the fraction is the servo's part
+    u = random_walk_input(300, np.random.default_rng(11))
+    # the same model with whole samples, fed the input interpolated by hand: 3/4 of u(t - 1)
+    # and 1/4 of u(t - 2)
+    held = np.concatenate([[u[0]], u[:-1]])
+    by_hand = AugmentedModel(backlash, delay=1, input_lag=0.6).simulate(0.75 * u + 0.25 * held)
+    np.testing.assert_allclose(model.simulate(u), by_hand, atol=1e-12)
+    spec = ModelSpec.of(model)
+    assert spec.n_free == ModelSpec.of(replace(model, input_lag_fraction=0.0)).n_free + 1
+    assert without_effect(model, "input_lag") == AugmentedModel(backlash, delay=1)
+    for bad in (1.0, -0.1):
+        with pytest.raises(GenBacklashError, match="input_lag_fraction"):
+            AugmentedModel(backlash, input_lag=0.6, input_lag_fraction=bad)
+    with pytest.raises(GenBacklashError, match="needs an input lag"):
+        AugmentedModel(backlash, input_lag_fraction=0.5)
 
 
 def test_hidden_effects_leave_the_random_stream_alone() -> None:

@@ -186,3 +186,59 @@ def test_a_misfit_no_effect_explains_is_said_with_its_number() -> None:
     text = result.unexplained_text()
     assert text.startswith("unexplained: the final misfit") and f"{times:.0f} times" in text
     assert result.to_dict()["unexplained"]["times_floor"] == pytest.approx(times)
+
+
+# --------------------------------------------------------------------------- behind a servo
+
+
+def servo_record(
+    physics: LoadPhysics | None, seed: int, pole: float = 0.88
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(u, y)`` as :func:`record`, the load behind a slow servo: two equal stages of pole
+    ``pole`` (8 samples each: a critically damped 20 Hz position loop at 1 kHz) one sample
+    late, then the play and ``physics``."""
+    u = moves(seed)
+    model = AugmentedModel(BACKLASH, delay=1, input_lag=pole, input_lag_order=2, physics=physics)
+    rng = np.random.default_rng([seed, 2])
+    y = model.simulate(u, y_start=0.0) + rng.normal(0.0, 2e-4, u.size)
+    return u, np.round(y / STEP) * STEP
+
+
+def test_a_physical_effect_behind_a_slow_servo_is_named_and_carries_the_servo() -> None:
+    # a slow servo moves the load more than its spring does: fitted on the command alone the
+    # spring explains less than the servo's lag, which was named in its place (issue 23,
+    # the compliant drivetrain at 20 Hz); fitted behind the servo's lag, it is named first
+    u, y = servo_record(COMPLIANT, 6)
+    result = diagnose(u, y, catalog=RIVALS)
+    assert result.steps, result.reason
+    first = result.steps[0]
+    assert first.effect == "compliant_coupling", [s.evidence for s in result.steps]
+    assert first.model.input_lag > 0.0 and first.model.input_lag_order == 2
+    assert first.gap_after < 0.5 * first.gap_before
+
+
+def test_a_slow_servo_alone_gets_no_physical_name() -> None:
+    # the physics fitted behind the servo's lag nests that lag: it must explain more than the
+    # lag alone to be named
+    u, y = servo_record(None, 4)
+    result = diagnose(u, y, catalog=RIVALS)
+    assert result.effects and result.effects[0] in ("input_lag", "time_delay"), result.reason
+    assert not set(result.effects) & set(PHYSICS_NAMES), [s.evidence for s in result.steps]
+
+
+def test_the_servo_lag_finds_a_fraction_of_a_sample_of_dead_time() -> None:
+    # a servo whose dead time is 1.5 samples (a held command sampled between two readings):
+    # whole samples fit it worse than the fraction does, and the BIC keeps the fraction
+    u = moves(7)
+    truth = AugmentedModel(
+        BACKLASH, delay=1, input_lag=0.7, input_lag_order=2, input_lag_fraction=0.5
+    )
+    rng = np.random.default_rng([7, 3])
+    y = np.round((truth.simulate(u, y_start=0.0) + rng.normal(0.0, 2e-4, u.size)) / STEP) * STEP
+    lag = tuple(effect for effect in CATALOG if effect.name == "input_lag")
+    result = diagnose(u, y, catalog=lag)
+    assert result.effects == ("input_lag",), result.reason
+    model = result.model
+    assert model.input_lag_fraction > 0.0
+    assert model.delay + model.input_lag_fraction == pytest.approx(1.5, abs=0.3)
+    assert model.input_lag_order == 2
