@@ -11,7 +11,12 @@ from genbacklash_core import RecursiveIdentifier, WindowedIdentifier
 from genbacklash_core.backlash import GeneralBacklash
 from genbacklash_core.online.memory import RowMemory
 from genbacklash_core.online.tracking import dead_zone_drift
-from genbacklash_core.scenarios import HiddenEffects, OperationSettings, operation_record
+from genbacklash_core.scenarios import (
+    HiddenEffects,
+    OperationRecord,
+    OperationSettings,
+    operation_record,
+)
 from genbacklash_core.structure import Structure
 
 CURVED = GeneralBacklash([1.0, 0.03, -0.015], 0.045, [1.0, 0.025, -0.012], 0.05)
@@ -98,6 +103,17 @@ def test_memory_stamps_count_the_rows_taken() -> None:
     assert order.tolist() == [2, 3, 4, 5] and up.tolist() == [True, True, True, False]
 
 
+def _final_play(make: type, rec: OperationRecord) -> tuple[float, float]:
+    """The play and its standard deviation of a ``make(3)`` identifier fed the record in
+    chunks of 64 samples, as the node's batch path feeds it."""
+    u, y, b = rec.series(bridge=True)
+    ident = make(3)
+    for s in range(0, u.size, 64):
+        est = ident.update_many(u[s : s + 64], y[s : s + 64], b[s : s + 64])
+    assert est.available
+    return est.play()
+
+
 @pytest.mark.parametrize("make", [WindowedIdentifier, RecursiveIdentifier])
 def test_a_wearing_gap_stays_inside_the_band(make: type) -> None:
     """The operation scenario, both dead zones 20 % wider after 30 s (the bundled bag): the
@@ -106,12 +122,7 @@ def test_a_wearing_gap_stays_inside_the_band(make: type) -> None:
     for seed in range(3):
         cfg = OperationSettings(duration=30.0, phases=(("operation", 30.0),), wear=0.2)
         rec = operation_record(cfg, seed)
-        u, y, b = rec.series(bridge=True)
-        ident = make(3)
-        for s in range(0, u.size, 64):
-            est = ident.update_many(u[s : s + 64], y[s : s + 64], b[s : s + 64])
-        assert est.available
-        play, play_std = est.play()
+        play, play_std = _final_play(make, rec)
         true_play = float(rec.c_left[-1] + rec.c_right[-1])
         assert true_play - play > 0.003  # it trails the wear
         assert abs(play - true_play) <= 2.0 * play_std, (seed, play, play_std, true_play)
@@ -206,12 +217,7 @@ def test_a_servo_lag_stays_inside_the_band(make: type) -> None:
         cfg = OperationSettings(duration=30.0, phases=(("operation", 30.0),), wear=0.0)
         for servo in (0.0, 1.0 / (2.0 * np.pi * 60.0)):
             rec = operation_record(cfg, seed, hidden=HiddenEffects(input_lag=servo))
-            u, y, b = rec.series(bridge=True)
-            ident = make(3)
-            for s in range(0, u.size, 64):
-                est = ident.update_many(u[s : s + 64], y[s : s + 64], b[s : s + 64])
-            assert est.available
-            play, play_std = est.play()
+            play, play_std = _final_play(make, rec)
             error = abs(play - float(rec.c_left[-1] + rec.c_right[-1]))
             if servo == 0.0:  # the model holds: the statistical band, narrow
                 assert error <= 2.0 * play_std < 5e-4, (seed, error, play_std)
