@@ -93,22 +93,6 @@ def played(
     yield Played(summary, returncode, log.read_text())
 
 
-@pytest.fixture
-def ros_init() -> Iterator[Callable[..., None]]:
-    """``ros_init(*ros_args)``: rclpy initialised with those ``--ros-args`` on a DDS domain
-    of its own (as in test_rclpy_node.py); shut down after the test."""
-    import rclpy
-
-    def init(*ros_args: str) -> None:
-        rclpy.try_shutdown()
-        rclpy.init(args=["backlash_identifier", "--ros-args", *ros_args], domain_id=domain_id())
-
-    try:
-        yield init
-    finally:
-        rclpy.try_shutdown()
-
-
 @needs_rclpy
 def test_the_motor_subscription_exists_only_with_a_motor_input(
     ros_init: Callable[..., None],

@@ -13,7 +13,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -42,21 +42,6 @@ def test_without_rclpy_the_cli_says_so(
     err = capsys.readouterr().err
     assert "pip install 'genbacklash[ros]'" in err
     assert "genbacklash node --transport dds" in err
-
-
-@pytest.fixture
-def ros_init() -> Iterator[Callable[..., None]]:
-    """``ros_init(*ros_args)``: rclpy initialised (the global context) with those
-    ``--ros-args`` on a DDS domain of its own; shut down after the test."""
-    import rclpy
-
-    def init(*ros_args: str) -> None:
-        rclpy.init(args=["backlash_identifier", "--ros-args", *ros_args], domain_id=domain_id())
-
-    try:
-        yield init
-    finally:
-        rclpy.try_shutdown()
 
 
 @pytest.fixture

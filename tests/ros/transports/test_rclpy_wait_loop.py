@@ -18,7 +18,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -30,20 +30,6 @@ from ._ros2 import domain_id, rclpy_missing
 HERE = Path(__file__).parent
 
 pytestmark = pytest.mark.skipif(bool(rclpy_missing()), reason=rclpy_missing() or "-")
-
-
-@pytest.fixture
-def ros_context() -> Iterator[Callable[..., Any]]:
-    """``init(*ros_args)``: rclpy initialised on a DDS domain of its own; shut down after."""
-    import rclpy
-
-    def init(*ros_args: str) -> None:
-        rclpy.init(args=["backlash_identifier", "--ros-args", *ros_args], domain_id=domain_id())
-
-    try:
-        yield init
-    finally:
-        rclpy.try_shutdown()
 
 
 def _until(condition: Callable[[], bool], step: Callable[[], object], seconds: float) -> None:
@@ -62,7 +48,7 @@ def _reading(value: float, stamp_ns: int) -> Any:
 
 
 def test_the_loop_takes_both_topics_in_source_order_and_executors_do_not(
-    ros_context: Callable[..., Any],
+    ros_init: Callable[..., Any],
 ) -> None:
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
@@ -72,7 +58,7 @@ def test_the_loop_takes_both_topics_in_source_order_and_executors_do_not(
 
     from genbacklash_ros.transports import rclpy_node
 
-    ros_context()
+    ros_init()
     node = rclpy_node.BacklashIdentifierNode()
     seen: list[tuple[str, float]] = []
     node._command_sub.callback = lambda msg, info: seen.append(("command", msg.data[0]))
@@ -117,7 +103,7 @@ def test_the_loop_takes_both_topics_in_source_order_and_executors_do_not(
 
 
 def test_a_reading_that_comes_while_a_command_is_handled_is_taken_in_the_same_wake_up(
-    ros_context: Callable[..., Any],
+    ros_init: Callable[..., Any],
 ) -> None:
     """The loop takes again before it waits (``WaitLoop._drain``): at 1 kHz the reading
     published right after a command is handed on in the wake-up that took the command."""
@@ -129,7 +115,7 @@ def test_a_reading_that_comes_while_a_command_is_handled_is_taken_in_the_same_wa
 
     from genbacklash_ros.transports import rclpy_node
 
-    ros_context()
+    ros_init()
     node = rclpy_node.BacklashIdentifierNode()
     peer = rclpy.create_node("wait_loop_drain_peer")
     command = peer.create_publisher(Float64MultiArray, "/command", 10)
@@ -167,7 +153,7 @@ def test_a_reading_that_comes_while_a_command_is_handled_is_taken_in_the_same_wa
 
 
 def test_services_timer_and_a_clock_made_at_run_time_are_served(
-    ros_context: Callable[..., Any],
+    ros_init: Callable[..., Any],
 ) -> None:
     """A parameter request from another node, the 1 Hz diagnostics (STALE: no data) and, after
     ``use_sim_time`` is set at run time, the ``/clock`` subscription rclpy then makes."""
@@ -180,7 +166,7 @@ def test_services_timer_and_a_clock_made_at_run_time_are_served(
 
     from genbacklash_ros.transports import rclpy_node
 
-    ros_context()
+    ros_init()
     node = rclpy_node.BacklashIdentifierNode()
     executor = SingleThreadedExecutor()
     executor.add_node(node)
@@ -230,13 +216,13 @@ def test_services_timer_and_a_clock_made_at_run_time_are_served(
         node.destroy_node()
 
 
-def test_an_external_shutdown_ends_the_loop(ros_context: Callable[..., Any]) -> None:
+def test_an_external_shutdown_ends_the_loop(ros_init: Callable[..., Any]) -> None:
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 
     from genbacklash_ros.transports import rclpy_node
 
-    ros_context()
+    ros_init()
     node = rclpy_node.BacklashIdentifierNode()
     executor = SingleThreadedExecutor()
     executor.add_node(node)
