@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import threading
 import time
 from typing import Any
 
@@ -40,6 +39,9 @@ def models() -> tuple[Any, ...]:
 
 
 def main() -> int:
+    # run as a script: this file's folder is on sys.path
+    from _player import await_answers, spinning, tick_in_real_time, wait_for
+
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--domain-id", type=int, required=True)
     parser.add_argument("--seconds", type=float, default=10.0)
@@ -49,7 +51,6 @@ def main() -> int:
     args = parser.parse_args()
 
     import rclpy
-    from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
@@ -99,34 +100,25 @@ def main() -> int:
             Float64MultiArray, f"/backlash_identifier/{name}/estimate", on_estimate(name), keep
         )
     node.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, keep)
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
-    spinner = threading.Thread(target=executor.spin, daemon=True)
-    spinner.start()
-    try:
-        deadline = time.monotonic() + args.match_timeout
-        while time.monotonic() < deadline:
-            if (
+    with spinning(node):
+        if not wait_for(
+            lambda: (
                 command.get_subscription_count() >= 1
                 and encoder.get_subscription_count() >= 1
                 and node.count_publishers("compensated_command") >= 1  # both ways matched
                 and all(
                     node.count_publishers(f"/backlash_identifier/{n}/estimate") >= 1 for n in NAMES
                 )
-            ):
-                break
-            time.sleep(0.05)
-        else:
+            ),
+            args.match_timeout,
+        ):
             print(json.dumps({"error": "the node's subscriptions did not match"}))
             return 1
         time.sleep(args.settle)
         layout = MultiArrayLayout(dim=[MultiArrayDimension(label="arm", size=SIZE, stride=SIZE)])
         sent: list[list[float]] = []
-        start = time.monotonic()
-        for k in range(n_enc):
-            delay = start + k * 1e-3 - time.monotonic()
-            if delay > 0:
-                time.sleep(delay)
+
+        def tick(k: int) -> None:
             if k % per_command == 0 and k // per_command < n_cmd:
                 i = k // per_command
                 data = [0.0] * SIZE
@@ -138,10 +130,9 @@ def main() -> int:
             reading = JointState(name=list(NAMES), position=[readings[j][k] for j in range(3)])
             reading.header.stamp = node.get_clock().now().to_msg()
             encoder.publish(reading)
-        elapsed = time.monotonic() - start
-        wait_until = time.monotonic() + 30.0  # a loaded machine: the node may be behind
-        while len(answered) < len(sent) and time.monotonic() < wait_until:
-            time.sleep(0.05)
+
+        elapsed, _ = tick_in_real_time(n_enc, 1e-3, tick)
+        await_answers(answered, len(sent))
         time.sleep(1.5)  # an estimate and a diagnostics report more
         summary = {
             "sent": sent,
@@ -155,11 +146,6 @@ def main() -> int:
         }
         print(json.dumps(summary))
         return 0
-    finally:
-        executor.shutdown()
-        spinner.join(5)
-        node.destroy_node()
-        rclpy.try_shutdown()
 
 
 if __name__ == "__main__":

@@ -31,6 +31,9 @@ from typing import Any
 
 
 def main() -> int:
+    # run as a script: this file's folder is on sys.path
+    from _player import tick_in_real_time, wait_for
+
     # imported here: pytest's doctest collection imports this file where cyclonedds may be missing
     from cyclonedds.domain import DomainParticipant
     from cyclonedds.pub import DataWriter
@@ -70,35 +73,26 @@ def main() -> int:
     encoder_qos = endpoint_qos(SENSOR_QOS, "sensor_msgs/msg/JointState")
     command = DataWriter(dp, Topic(dp, "rt/command", Float64MultiArray_), qos=command_qos)
     encoder = DataWriter(dp, Topic(dp, "rt/encoder", JointState_), qos=encoder_qos)
-    deadline = time.monotonic() + args.match_timeout
-    while time.monotonic() < deadline:
-        if (
+    if not wait_for(
+        lambda: (
             command.get_publication_matched_status().current_count >= 1
             and encoder.get_publication_matched_status().current_count >= 1
-        ):
-            break
-        time.sleep(0.05)
-    else:
+        ),
+        args.match_timeout,
+    ):
         print(json.dumps({"error": "the node's readers did not match"}))
         return 1
     time.sleep(0.3)  # let the remote readers finish matching both ways
     label = "u,seq,t_mono_ns" if args.clock == "monotonic" else "u,seq,t_ns"
     layout = MultiArrayLayout_([MultiArrayDimension_(label, 3, 3)], 0)
-    period = 1.0 / args.rate
-    start = time.monotonic()
-    late = 0
-    for k in range(n):
-        target = start + k * period
-        delay = target - time.monotonic()
-        if delay > 0:
-            time.sleep(delay)
-        elif delay < -period:
-            late += 1
+
+    def tick(k: int) -> None:
         u, y = float(data.u[k]), float(data.y[k])
         command.write(Float64MultiArray_(layout, [u, float(k), float(clock_ns())]))
         sec, nanosec = divmod(time.time_ns(), 1_000_000_000)
         encoder.write(JointState_(Header_(Time_(sec, nanosec), ""), ["j"], [y], [], []))
-    elapsed = time.monotonic() - start
+
+    elapsed, late = tick_in_real_time(n, 1.0 / args.rate, tick)
     time.sleep(0.5)  # let reliable samples be acknowledged before the participant goes
     summary = {"sent": n, "seconds": elapsed, "rate": n / elapsed, "late": late}
     summary["u"] = data.u.tolist()
@@ -110,10 +104,9 @@ def _play_rclpy(
     args: argparse.Namespace, u: list[float], y: list[float], clock_ns: Callable[[], int]
 ) -> dict[str, Any]:
     """The same stream from an rclpy node; what came back and what the ROS graph shows."""
-    import threading
-
+    # run as a script: this file's folder is on sys.path
     import rclpy
-    from rclpy.executors import SingleThreadedExecutor
+    from _player import await_answers, spinning, tick_in_real_time, wait_for
     from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
@@ -136,36 +129,24 @@ def _play_rclpy(
 
     node.create_subscription(Float64MultiArray, "compensated_command", on_compensated, keep)
     node.create_subscription(Float64MultiArray, "/backlash_identifier/estimate", on_estimate, keep)
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
-    spinner = threading.Thread(target=executor.spin, daemon=True)
-    spinner.start()
-    summary: dict[str, Any] = {"sent": 0}
-    try:
-        deadline = time.monotonic() + args.match_timeout
-        while time.monotonic() < deadline:
-            if command.get_subscription_count() >= 1 and encoder.get_subscription_count() >= 1:
-                break
-            time.sleep(0.05)
-        else:
+    with spinning(node):
+        if not wait_for(
+            lambda: command.get_subscription_count() >= 1 and encoder.get_subscription_count() >= 1,
+            args.match_timeout,
+        ):
             return {"error": "the node's subscriptions did not match"}
         time.sleep(0.3)
         label = "u,seq,t_mono_ns" if args.clock == "monotonic" else "u,seq,t_ns"
         layout = MultiArrayLayout(dim=[MultiArrayDimension(label=label, size=3, stride=3)])
-        period = 1.0 / args.rate
-        start = time.monotonic()
-        for k in range(n):
-            delay = start + k * period - time.monotonic()
-            if delay > 0:
-                time.sleep(delay)
+
+        def tick(k: int) -> None:
             command.publish(Float64MultiArray(layout=layout, data=[u[k], float(k), clock_ns()]))
             reading = JointState(name=["j"], position=[y[k]])
             reading.header.stamp = node.get_clock().now().to_msg()
             encoder.publish(reading)
-        elapsed = time.monotonic() - start
-        wait_until = time.monotonic() + 10.0
-        while len(answered) < n and time.monotonic() < wait_until:
-            time.sleep(0.05)
+
+        elapsed, _ = tick_in_real_time(n, 1.0 / args.rate, tick)
+        await_answers(answered, n, timeout=10.0)
         time.sleep(0.3)
         graph = {
             "nodes": sorted(
@@ -198,11 +179,6 @@ def _play_rclpy(
             "graph": graph,
         }
         return summary
-    finally:
-        executor.shutdown()
-        spinner.join(5)
-        node.destroy_node()
-        rclpy.try_shutdown()
 
 
 if __name__ == "__main__":

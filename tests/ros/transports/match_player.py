@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import threading
 import time
 from typing import Any
 
@@ -28,6 +27,9 @@ from genbacklash_core import paper_example
 
 
 def main(argv: list[str] | None = None) -> int:
+    # run as a script: this file's folder is on sys.path
+    from _player import spinning, wait_for
+
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rate", type=float, default=500.0)
     parser.add_argument("--seconds", type=float, default=3.0)
@@ -37,7 +39,6 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     import rclpy
-    from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import qos_profile_sensor_data
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
@@ -60,17 +61,13 @@ def main(argv: list[str] | None = None) -> int:
     )
     command = node.create_publisher(Float64MultiArray, "/command", 10)
     encoder = node.create_publisher(JointState, "/encoder", qos_profile_sensor_data)
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
-    spinner = threading.Thread(target=executor.spin, daemon=True)
-    spinner.start()
-    print("publishing", flush=True)
-    period = 1.0 / args.rate
-    k_match = -1
-    end = time.monotonic() + args.match_timeout
-    next_write = time.monotonic()
-    k = 0
-    try:
+    with spinning(node):
+        print("publishing", flush=True)
+        period = 1.0 / args.rate
+        k_match = -1
+        end = time.monotonic() + args.match_timeout
+        next_write = time.monotonic()
+        k = 0
         while time.monotonic() < end:
             if k_match < 0 and command.get_subscription_count() >= 1:
                 k_match = k
@@ -95,9 +92,7 @@ def main(argv: list[str] | None = None) -> int:
             print(json.dumps({"error": f"no subscription matched in {args.match_timeout} s"}))
             return 1
         wanted = range(k_match, k)
-        deadline = time.monotonic() + args.reply_timeout
-        while time.monotonic() < deadline and any(j not in replies for j in wanted):
-            time.sleep(0.05)
+        wait_for(lambda: all(j in replies for j in wanted), args.reply_timeout)
         lost = [j for j in wanted if j not in replies]
         latency = sorted((replies[j] - sent[j]) / 1e6 for j in wanted if j in replies)
         summary = {
@@ -108,11 +103,6 @@ def main(argv: list[str] | None = None) -> int:
         }
         print(json.dumps(summary), flush=True)
         return 0
-    finally:
-        executor.shutdown()
-        spinner.join(5)
-        node.destroy_node()
-        rclpy.try_shutdown()
 
 
 if __name__ == "__main__":
