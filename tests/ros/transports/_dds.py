@@ -112,14 +112,49 @@ def stop_node(node: subprocess.Popen[bytes], log: Path) -> int:
         pytest.fail(f"the node did not exit within 30 s of SIGINT:\n{log.read_text()}")
 
 
-def wait_for(predicate: Any, timeout: float) -> bool:
-    """Poll ``predicate`` until it is true or ``timeout`` seconds passed; its last value."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.02)
-    return bool(predicate())
+@dataclass
+class Played:
+    """What a player process reported (its last JSON line), and the node's exit and log."""
+
+    summary: dict[str, Any]
+    returncode: int
+    log: str
+
+
+def play_against_node(
+    tmp: Path,
+    transport: str,
+    params_yaml: str,
+    player: str,
+    player_args: list[str],
+    timeout: float,
+) -> Played:
+    """Start the node (``transport``, the params file ``params_yaml``), run ``player`` (a
+    script beside this module) on a domain of their own, then stop the node with SIGINT."""
+    from ._ros2 import domain_id
+
+    domain = domain_id()
+    log = tmp / "node.log"
+    params = tmp / "params.yaml"
+    params.write_text(params_yaml)
+    node = start_node(params, log, domain, transport)
+    here = Path(__file__).parent
+    try:
+        ran = subprocess.run(
+            [sys.executable, str(here / player), "--domain-id", str(domain), *player_args],
+            capture_output=True,
+            text=True,
+            timeout=timeout,
+            check=False,
+        )
+        assert ran.returncode == 0, ran.stdout + ran.stderr + log.read_text()
+        summary = json.loads(ran.stdout.strip().splitlines()[-1])
+        returncode = stop_node(node, log)
+    finally:
+        if node.poll() is None:
+            node.kill()
+            node.wait(10)
+    return Played(summary, returncode, log.read_text())
 
 
 def diagnostic_values(diag: Any) -> dict[str, str]:

@@ -37,7 +37,7 @@ def spinning(node: Any) -> Iterator[None]:
         rclpy.try_shutdown()
 
 
-def wait_for(ready: Callable[[], bool], timeout: float, poll: float = 0.05) -> bool:
+def wait_for(ready: Callable[[], bool], timeout: float, poll: float = 0.02) -> bool:
     """Poll ``ready`` until it holds (True) or ``timeout`` seconds pass (False).
 
     >>> wait_for(lambda: True, 1.0)

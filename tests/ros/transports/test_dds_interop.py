@@ -35,7 +35,8 @@ import pytest
 
 from genbacklash_core import paper_example
 
-from ._dds import Subscriber, diagnostic_values, match_trial, start_node, stop_node, wait_for
+from ._dds import Subscriber, diagnostic_values, match_trial, start_node, stop_node
+from ._player import wait_for
 from ._ros2 import ros2_command_missing
 
 pytest.importorskip("cyclonedds", reason="cyclonedds is not installed (pip install .[dds])")

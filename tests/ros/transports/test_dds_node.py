@@ -37,7 +37,8 @@ from genbacklash_ros.transports.dds_types import (
     MultiArrayLayout_,
 )
 
-from ._dds import Received, Subscriber, diagnostic_values, start_node, stop_node, wait_for
+from ._dds import Received, Subscriber, diagnostic_values, start_node, stop_node
+from ._player import wait_for
 
 HERE = Path(__file__).parent
 TRUTH = paper_example(1).model

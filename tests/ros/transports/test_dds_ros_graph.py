@@ -53,7 +53,8 @@ from genbacklash_ros.transports.ros_graph import (
 )
 from genbacklash_ros.transports.type_hash import typehash_user_data
 
-from ._dds import Subscriber, diagnostic_values, wait_for
+from ._dds import Subscriber, diagnostic_values
+from ._player import wait_for
 
 DOMAIN = 1 + (os.getpid() * 7919 + random.randrange(1000)) % 200
 MISMATCH = WiringMismatch(

@@ -12,20 +12,15 @@ the player's Fast DDS writers as the rclpy node does.
 
 from __future__ import annotations
 
-import json
-import subprocess
-import sys
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pytest
 
 from genbacklash_ros.node.parameters import NodeParameters
 
-from ._dds import stop_node
+from ._dds import Played, play_against_node
 from ._ros2 import domain_id, rclpy_missing
 
 HERE = Path(__file__).parent
@@ -34,22 +29,13 @@ SECONDS = 12.0
 needs_rclpy = pytest.mark.skipif(bool(rclpy_missing()), reason=rclpy_missing() or "-")
 
 
-@dataclass
-class Played:
-    summary: dict[str, Any]
-    returncode: int
-    log: str
-
-
-def _params(path: Path) -> Path:
-    path.write_text(
-        "/**/backlash_identifier:\n"
-        "  ros__parameters:\n"
-        "    command_type: float64\n"
-        "    gear_input: motor_encoder\n"
-        "    publish_rate: 5.0\n"
-    )
-    return path
+PARAMS = (
+    "/**/backlash_identifier:\n"
+    "  ros__parameters:\n"
+    "    command_type: float64\n"
+    "    gear_input: motor_encoder\n"
+    "    publish_rate: 5.0\n"
+)
 
 
 @pytest.fixture(scope="module", params=["rclpy", "dds"])
@@ -63,34 +49,9 @@ def played(
     if transport == "dds":
         pytest.importorskip("cyclonedds", reason="cyclonedds is not installed (pip install .[dds])")
     tmp = tmp_path_factory.mktemp(f"motor_{transport}")
-    domain = domain_id()
-    log = tmp / "node.log"
-    cmd = [sys.executable, "-m", "genbacklash_ros.cli.node", "--transport", transport]
-    cmd += ["--params-file", str(_params(tmp / "motor.yaml")), "--domain-id", str(domain)]
-    node = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=log.open("wb"))
-    try:
-        player = subprocess.run(
-            [
-                sys.executable,
-                str(HERE / "motor_player.py"),
-                "--domain-id",
-                str(domain),
-                "--seconds",
-                str(SECONDS),
-            ],
-            capture_output=True,
-            text=True,
-            timeout=180,
-            check=False,
-        )
-        assert player.returncode == 0, player.stdout + player.stderr + log.read_text()
-        summary = json.loads(player.stdout.strip().splitlines()[-1])
-        returncode = stop_node(node, log)
-    finally:
-        if node.poll() is None:
-            node.kill()
-            node.wait(10)
-    yield Played(summary, returncode, log.read_text())
+    yield play_against_node(
+        tmp, transport, PARAMS, "motor_player.py", ["--seconds", str(SECONDS)], timeout=180
+    )
 
 
 @needs_rclpy

@@ -10,19 +10,14 @@ unchanged, every joint's element compensated), each joint's estimate on
 
 from __future__ import annotations
 
-import json
-import subprocess
-import sys
 from collections.abc import Iterator
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pytest
 
-from ._dds import stop_node
-from ._ros2 import domain_id, rclpy_missing
+from ._dds import Played, play_against_node
+from ._ros2 import rclpy_missing
 
 HERE = Path(__file__).parent
 NAMES = ("shoulder", "elbow", "wrist")
@@ -31,25 +26,16 @@ SECONDS = 10.0
 pytestmark = pytest.mark.skipif(bool(rclpy_missing()), reason=rclpy_missing() or "-")
 
 
-@dataclass
-class Played:
-    summary: dict[str, Any]
-    returncode: int
-    log: str
-
-
-def _params(path: Path) -> Path:
-    path.write_text(
-        "/**/backlash_identifier:\n"
-        "  ros__parameters:\n"
-        "    command_type: float64_multi_array\n"
-        "    joints: [shoulder, elbow, wrist]\n"
-        "    command_indices: [0, 2, 3]\n"
-        "    publish_rate: 5.0\n"
-        "    wrist:\n"
-        "      publish_rate: 10.0\n"
-    )
-    return path
+PARAMS = (
+    "/**/backlash_identifier:\n"
+    "  ros__parameters:\n"
+    "    command_type: float64_multi_array\n"
+    "    joints: [shoulder, elbow, wrist]\n"
+    "    command_indices: [0, 2, 3]\n"
+    "    publish_rate: 5.0\n"
+    "    wrist:\n"
+    "      publish_rate: 10.0\n"
+)
 
 
 @pytest.fixture(scope="module", params=["rclpy", "dds"])
@@ -60,39 +46,14 @@ def played(
     if transport == "dds":
         pytest.importorskip("cyclonedds", reason="cyclonedds is not installed (pip install .[dds])")
     tmp = tmp_path_factory.mktemp(f"arm_{transport}")
-    domain = domain_id()
-    log = tmp / "node.log"
-    cmd = [sys.executable, "-m", "genbacklash_ros.cli.node", "--transport", transport]
-    cmd += ["--params-file", str(_params(tmp / "arm.yaml")), "--domain-id", str(domain)]
-    node = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=log.open("wb"))
-    try:
-        # the DDS transport may lose what a Fast DDS peer sends in its first second after
-        # matching (issue 24's deliverable 3, not this test's subject): the player waits
-        settle = "2.0" if transport == "dds" else "0.5"
-        player = subprocess.run(
-            [
-                sys.executable,
-                str(HERE / "arm_player.py"),
-                "--domain-id",
-                str(domain),
-                "--seconds",
-                str(SECONDS),
-                "--settle",
-                settle,
-            ],
-            capture_output=True,
-            text=True,
-            timeout=120,
-            check=False,
-        )
-        assert player.returncode == 0, player.stdout + player.stderr + log.read_text()
-        summary = json.loads(player.stdout.strip().splitlines()[-1])
-        returncode = stop_node(node, log)
-    finally:
-        if node.poll() is None:
-            node.kill()
-            node.wait(10)
-    yield Played(summary, returncode, log.read_text())
+    yield play_against_node(
+        tmp,
+        transport,
+        PARAMS,
+        "arm_player.py",
+        ["--seconds", str(SECONDS), "--settle", "0.5"],
+        timeout=120,
+    )
 
 
 def test_every_command_is_answered_with_one_compensated_array(played: Played) -> None:

@@ -51,7 +51,8 @@ from genbacklash_ros.node.messages import (
 from genbacklash_ros.node.parameters import NodeParameters
 from genbacklash_ros.node.pipeline import BacklashPipeline, Output
 
-from ._dds import Received, Subscriber, diagnostic_values, start_node, wait_for
+from ._dds import Received, Subscriber, diagnostic_values, start_node
+from ._player import wait_for
 
 HERE = Path(__file__).parent
 TRUTH = paper_example(1).model
