@@ -343,28 +343,24 @@ class DdsNode:
                 self.discovered.participants,
                 self.discovered.waited_s,
             )
-        self._command_reader: DataReader[Any] = DataReader(
-            dp,
-            Topic(dp, dds_topic(t["command"]), command_type),
-            qos=endpoint_qos(_deep(DEFAULT_QOS), command_ros),
-        )
-        self._encoder_reader: DataReader[Any] = DataReader(
-            dp,
-            Topic(dp, dds_topic(t["encoder"]), encoder_type),
-            qos=endpoint_qos(_deep(SENSOR_QOS), encoder_ros),
-        )
-        # a motor encoder (gear_input motor_encoder, dual encoders): the gear's input
-        self._readers: dict[_Kind, DataReader[Any]] = {
-            "command": self._command_reader,
-            "encoder": self._encoder_reader,
-        }
+        # one reader per input; a motor encoder (gear_input motor_encoder, dual encoders) is
+        # the gear's input
+        inputs: list[tuple[_Kind, str, Any]] = [
+            ("command", command_ros, DEFAULT_QOS),
+            ("encoder", encoder_ros, SENSOR_QOS),
+        ]
         if params.motor_input:
-            motor_ros = _ENCODER_ROS_TYPES[params.motor_encoder_type]
-            self._readers["motor_encoder"] = DataReader(
-                dp,
-                Topic(dp, dds_topic(t["motor_encoder"]), DDS_TYPES[motor_ros]),
-                qos=endpoint_qos(_deep(SENSOR_QOS), motor_ros),
+            inputs.append(
+                ("motor_encoder", _ENCODER_ROS_TYPES[params.motor_encoder_type], SENSOR_QOS)
             )
+        self._readers: dict[_Kind, DataReader[Any]] = {
+            kind: DataReader(
+                dp,
+                Topic(dp, dds_topic(t[kind]), DDS_TYPES[ros_type]),
+                qos=endpoint_qos(_deep(qos), ros_type),
+            )
+            for kind, ros_type, qos in inputs
+        }
         self._writers: dict[str, DataWriter[Any]] = {
             "compensated_command": DataWriter(
                 dp,
