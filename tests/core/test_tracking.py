@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -224,3 +226,25 @@ def test_a_servo_lag_stays_inside_the_band(make: type) -> None:
             else:
                 assert error > 0.01, (seed, error)  # the servo biases the estimate
                 assert error <= 2.0 * play_std <= 4.0 * error, (seed, error, play_std)
+
+
+def test_a_misfit_that_follows_the_motion_adds_a_model_term_that_grows() -> None:
+    """Rows read through a drivetrain that the play operator misfits smoothly in time (a
+    disturbance ``A sin(t / 40)`` on the readings: a ringing coupling, a load torque) and
+    white noise. ``A = 0``: the misfit is white, no model term. Else it stands out and the
+    play's model-error term grows with ``A``; neither a drift nor a lag explains it."""
+    terms = []
+    for amplitude in (0.0, 1e-3, 3e-3, 1e-2):
+        rows, age = _lagged_rows(np.random.default_rng(48), 1200, 0.0, 5e-4)
+        u0, u1, y0, y1 = rows
+        disturbed = (u0, u1, y0, y1 + amplitude * np.sin(age / 40.0))
+        fit = dead_zone_drift(Structure(1), STRAIGHT.parameters(), disturbed, age)
+        assert fit is not None and fit.misfit is not None and fit.model_covariance is not None
+        assert fit.misfit.significant == (amplitude > 0.0)
+        model = fit.model_covariance
+        terms.append(float(np.sqrt(model[1, 1] + model[3, 3] + 2 * model[1, 3])))
+        band = fit.tracking_covariance()
+        np.testing.assert_array_less(-1e-18, np.linalg.eigvalsh(band))
+        assert np.all(np.diag(band) >= np.diag(model))  # the band holds the model term
+    assert terms[0] == 0.0
+    assert all(a < b for a, b in itertools.pairwise(terms)), terms
