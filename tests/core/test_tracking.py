@@ -248,3 +248,48 @@ def test_a_misfit_that_follows_the_motion_adds_a_model_term_that_grows() -> None
         assert np.all(np.diag(band) >= np.diag(model))  # the band holds the model term
     assert terms[0] == 0.0
     assert all(a < b for a, b in itertools.pairwise(terms)), terms
+
+
+@pytest.mark.parametrize("make", [WindowedIdentifier, RecursiveIdentifier])
+def test_the_model_term_moves_the_band_and_nothing_the_compensation_reads(
+    make: type, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The operation scenario with a periodic error on the load (a misfit that follows the
+    motion): with and without the model-error term, every estimate's parameters, state and
+    confidence are the same bits (what the compensator and the guard read); only the
+    published covariance differs, and it is never the smaller."""
+    import dataclasses
+
+    from genbacklash_core.online import recursive, windowed
+
+    cfg = OperationSettings(duration=20.0, phases=(("operation", 20.0),), wear=0.0)
+    hidden = HiddenEffects(period=0.5, harmonics=((0.004, 0.0),))
+    u, y, b = operation_record(cfg, 1, hidden=hidden).series(bridge=True)
+
+    def run() -> list[tuple[np.ndarray, str, float, np.ndarray]]:
+        ident = make(3)
+        out = []
+        for s in range(0, u.size, 64):
+            est = ident.update_many(u[s : s + 64], y[s : s + 64], b[s : s + 64])
+            out.append((est.parameters, est.state.value, est.confidence, est.covariance))
+        return out
+
+    with_term = run()
+
+    def without(*args: object) -> object:
+        fit = dead_zone_drift(*args)  # type: ignore[arg-type]
+        return None if fit is None else dataclasses.replace(fit, model_covariance=None)
+
+    for module in (windowed, recursive):
+        monkeypatch.setattr(module, "dead_zone_drift", without)
+    without_term = run()
+    wider = 0
+    for (p, state, conf, cov), (p0, state0, conf0, cov0) in zip(
+        with_term, without_term, strict=True
+    ):
+        np.testing.assert_array_equal(p, p0)
+        assert (state, conf) == (state0, conf0)
+        if np.all(np.isfinite(cov0)):
+            assert np.all(np.diag(cov) >= np.diag(cov0))
+            wider += bool(np.any(np.diag(cov) > np.diag(cov0)))
+    assert wider > 0  # the misfit was seen: the band did change
