@@ -19,14 +19,7 @@ from genbacklash_ros.bags.bagio import BagReader
 from genbacklash_ros.bags.simbags import read_truth
 from genbacklash_ros.cli.main import main
 
-try:
-    import mujoco  # noqa: F401
-
-    HAVE_MUJOCO = True
-except ImportError:
-    HAVE_MUJOCO = False
-
-pytestmark = pytest.mark.skipif(not HAVE_MUJOCO, reason="needs mujoco (genbacklash[physics])")
+pytest.importorskip("mujoco", reason="needs mujoco (genbacklash[physics])")
 
 TOPICS = ["--command", "/command", "--encoder", "/encoder", "--joint", "drive_joint"]
 
