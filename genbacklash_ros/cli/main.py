@@ -173,9 +173,10 @@ class _Uncertainty:
         if self.model_dominates:
             out.append(
                 f"  the model error dominates: {self.misfit:.3g} RMS of the misfit follows "
-                "the motion (not white noise),\n  so the play operator does not describe "
-                "this drivetrain fully (a servo's lag, a coasting load, a spring,\n  gravity); "
-                "the band is the bias a misfit that size can cause"
+                "the motion (not white noise):\n  the play operator does not describe this "
+                "record fully (a servo's lag, a coasting load, a spring,\n  gravity, a play "
+                "that wears during the record, the encoder's rounding while the load rests);"
+                "\n  the band is the bias a misfit that size can cause"
             )
         if math.isfinite(self.play_std) and 2 * self.play_std > abs(self.play):
             out.append("  the band is wider than the play itself: the play is not determined")
