@@ -12,10 +12,13 @@ the refinement's own analytic Jacobian of the same simulation
 (:func:`genbacklash_core.refine.simulation_jacobian`, restarted at the sample rule's breaks):
 one simulation, where central differences took ``2P + 1`` (they agree to ~1e-9 relative).
 
-It assumes white residuals. Encoder quantisation is not white on a slowly moving load, so
-these standard deviations are a lower bound; the fleet's wear trend
-(``genbacklash_ros.fleet.trends``) scales them up by the scatter the bags show when that is
-larger.
+It assumes white residuals. Encoder quantisation is not white on a slowly moving load, and
+a model the drivetrain does not follow (a servo's lag, a coasting load, a spring, gravity)
+leaves a residual that does not average out, so these standard deviations are a lower bound;
+the fleet's wear trend (``genbacklash_ros.fleet.trends``) scales them up by the scatter the
+bags show when that is larger. :func:`batch_uncertainty` adds the model-error part
+(:mod:`genbacklash_core.model_error`: the correlated misfit's worst bias) beside the
+statistical one; ``genbacklash identify`` reports both and their sum.
 
 Examples
 --------
@@ -30,14 +33,79 @@ Examples
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from .backlash import GeneralBacklash
 from .cascade import Cascade
+from .model_error import Misfit, correlated_misfit, model_error_covariance
 from .refine import simulation_jacobian
 from .structure import Structure
 
-__all__ = ["gap_std", "parameter_covariance", "parameter_std", "play_std"]
+__all__ = [
+    "BatchUncertainty",
+    "batch_uncertainty",
+    "gap_std",
+    "parameter_covariance",
+    "parameter_std",
+    "play_std",
+]
+
+
+@dataclass(frozen=True)
+class BatchUncertainty:
+    """A batch estimate's covariance in two parts (see the module notes).
+
+    Attributes
+    ----------
+    statistical : ndarray, shape (P, P)
+        ``s^2 (J^T J)^+``: the noise's (:func:`parameter_covariance`).
+    model : ndarray, shape (P, P)
+        The model error's (:func:`~genbacklash_core.model_error.model_error_covariance`);
+        zeros when the residual is white.
+    misfit : Misfit
+        The residual's correlated part the model term comes from.
+    """
+
+    statistical: np.ndarray
+    model: np.ndarray
+    misfit: Misfit
+
+    @property
+    def total(self) -> np.ndarray:
+        """``statistical + model``: the estimate's mean squared error."""
+        return np.asarray(self.statistical + self.model, dtype=np.float64)
+
+
+def _fit(
+    model: GeneralBacklash | Cascade,
+    u: np.ndarray,
+    y: np.ndarray,
+    breaks: np.ndarray | None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The free-run residual ``y - y_sim`` of ``model`` on ``(u, y)`` and its Jacobian."""
+    structure = Structure.of(model)
+    yy = np.asarray(y, dtype=np.float64)
+    x0 = 0.0 if structure.cascade else float(yy[0])
+    y_sim, jac = simulation_jacobian(
+        structure, model.parameters(), np.asarray(u, dtype=np.float64), yy, x0, breaks
+    )
+    return yy - y_sim, jac
+
+
+def _statistical(residual: np.ndarray, jac: np.ndarray) -> np.ndarray:
+    """``s^2 (J^T J)^+`` with an infinite variance where ``J`` has a zero column."""
+    size = jac.shape[1]
+    dof = max(residual.size - size, 1)
+    s2 = float(residual @ residual) / dof
+    informed = np.any(jac != 0.0, axis=0)
+    cov = np.full((size, size), np.nan)
+    sub = jac[:, informed]
+    cov[np.ix_(informed, informed)] = s2 * np.linalg.pinv(sub.T @ sub)
+    cov[~informed, :] = cov[:, ~informed] = 0.0
+    cov[~informed, ~informed] = np.inf
+    return cov
 
 
 def parameter_covariance(
@@ -51,22 +119,30 @@ def parameter_covariance(
     A parameter the data do not inform (a zero column of ``J``) gets an infinite variance
     rather than a misleading zero.
     """
-    structure = Structure.of(model)
-    p = model.parameters()
-    uu = np.asarray(u, dtype=np.float64)
-    yy = np.asarray(y, dtype=np.float64)
-    x0 = 0.0 if structure.cascade else float(yy[0])
-    y_sim, jac = simulation_jacobian(structure, p, uu, yy, x0, breaks)
-    residual = yy - y_sim
-    dof = max(uu.size - p.size, 1)
-    s2 = float(residual @ residual) / dof
-    informed = np.any(jac != 0.0, axis=0)
-    cov = np.full((p.size, p.size), np.nan)
-    sub = jac[:, informed]
-    cov[np.ix_(informed, informed)] = s2 * np.linalg.pinv(sub.T @ sub)
-    cov[~informed, :] = cov[:, ~informed] = 0.0
-    cov[~informed, ~informed] = np.inf
-    return cov
+    return _statistical(*_fit(model, u, y, breaks))
+
+
+def batch_uncertainty(
+    model: GeneralBacklash | Cascade,
+    u: np.ndarray,
+    y: np.ndarray,
+    breaks: np.ndarray | None = None,
+) -> BatchUncertainty:
+    """The statistical and the model-error covariance of ``model``'s parameters on
+    ``(u, y)``, from one simulation (see the module notes).
+
+    >>> from genbacklash_core import identify_backlash, paper_example
+    >>> data = paper_example(1).generate(seed=0)  # the model is exact, the noise white
+    >>> result = identify_backlash(data.u, data.y, 3)
+    >>> spread = batch_uncertainty(result.model, data.u, data.y)
+    >>> spread.misfit.significant, bool(np.all(spread.model == 0.0))
+    (False, True)
+    """
+    residual, jac = _fit(model, u, y, breaks)
+    misfit = correlated_misfit(residual, breaks)
+    return BatchUncertainty(
+        _statistical(residual, jac), model_error_covariance(jac, misfit), misfit
+    )
 
 
 def parameter_std(

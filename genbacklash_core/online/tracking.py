@@ -37,7 +37,20 @@ The price of the gate is a pre-test's: while a real lag is not yet certain (the 
 after convergence) the band lacks it. Only the band: the estimate (what the compensator uses)
 is not moved.
 
-The cost is one more solve of a ``(P + 2..4)``-column Gram matrix per fit of the bands.
+What neither a drift nor a lag explains -- a spring that rings, gravity holding the load on
+one flank, a servo whose error is not linear in the speed -- stays in the residual of the last
+of those fits as a misfit that follows the motion. Its power is the lag-1 autocovariance of
+the residuals of adjacent rows in time order (white noise has none), and the worst bias a
+misfit of that size can cause is a model-error covariance ``C_model = (N e^2 / 3) (J^T J)^-1``
+(:mod:`genbacklash_core.model_error`, the same term as the batch identify's, on the one-step
+sensitivities ``J`` of the ``N`` rows): :attr:`DeadZoneDrift.model_covariance`. The bands add
+it when that misfit stands out of its noise (:attr:`~genbacklash_core.model_error.Misfit.
+significant`), so the play operator with white noise keeps its statistical bands. Only the
+bands: the identifiers' state, confidence and drift detection read their own statistical
+covariance.
+
+The cost is one more solve of a ``(P + 2..4)``-column Gram matrix per fit of the bands, and
+the model-error term's pseudo-inverse of a ``P x P`` Gram matrix.
 
 A backlash alone only: the cascade's bands are the statistical ones.
 
@@ -62,6 +75,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from genbacklash_core._typing import ArrayLike, FloatArray
+from genbacklash_core.model_error import Misfit, correlated_misfit, model_error_covariance
 from genbacklash_core.structure import Structure
 
 __all__ = [
@@ -107,6 +121,11 @@ class DeadZoneDrift:
         at zero command speed, from the estimate ``p``; None when the rows cannot tell a lag.
     rest_covariance : ndarray, shape (P, P), or None
         Covariance of ``rest``.
+    misfit : Misfit or None
+        The correlated part of the last fit's residuals over consecutive rows (None: not
+        measured).
+    model_covariance : ndarray, shape (P, P), or None
+        The model error's covariance from ``misfit`` (zeros when it is not significant).
     """
 
     estimate: FloatArray
@@ -120,6 +139,8 @@ class DeadZoneDrift:
     lag_std: FloatArray = field(default_factory=lambda: np.zeros(2))
     rest: FloatArray | None = None
     rest_covariance: FloatArray | None = None
+    misfit: Misfit | None = None
+    model_covariance: FloatArray | None = None
 
     @property
     def lagging(self) -> bool:
@@ -154,21 +175,25 @@ class DeadZoneDrift:
 
         ``cov + b b^T`` is the estimate's mean squared error when ``b`` is its bias; the
         2-sigma band then reaches at least ``2 |b|`` from the estimate, room for an error in
-        ``b`` as large as ``b`` itself."""
+        ``b`` as large as ``b`` itself.
+
+        In every case plus :attr:`model_covariance`, the misfit neither explains (zeros when
+        it is white)."""
         size = self.correction.size
         drifting = self.drifting
+        model = np.zeros((size, size)) if self.model_covariance is None else self.model_covariance
         extra = np.zeros((size, size))
         if self.lagging and self.rest is not None and self.rest_covariance is not None:
             offset, extra = self.rest, self.rest_covariance
         elif drifting:
             offset = self.correction
         else:
-            return extra
+            return model.copy()
         b = offset if current is None else self.estimate + offset - current
         if ticks and drifting:
             b = b.copy()
             b[list(self.dead)] += self.rate * ticks
-        return np.asarray(np.outer(b, b) + extra, dtype=np.float64)
+        return np.asarray(np.outer(b, b) + extra + model, dtype=np.float64)
 
 
 def one_step_sensitivity(
@@ -214,6 +239,16 @@ def one_step_sensitivity(
     jac[by_right, n + 1 : 2 * n + 1] = pow_right[by_right]
     jac[by_right, 2 * n + 1] = d_right[by_right]
     return np.asarray(x, dtype=np.float64), jac
+
+
+def _adjacent_misfit(residual: FloatArray, age: FloatArray) -> Misfit:
+    """:func:`~genbacklash_core.model_error.correlated_misfit` of the rows in time order, each
+    paired with the row before it however far apart they are (the recursive identifier's
+    memory keeps 1,000 rows of a long span, few of them consecutive samples). White noise
+    leaves no lag-1 covariance at any spacing, so the gate holds; a misfit that follows the
+    motion decorrelates over a wide spacing, so the term can only be the smaller for it."""
+    order = np.argsort(-age, kind="stable")  # the oldest first
+    return correlated_misfit(residual[order])
 
 
 def _solve(design: FloatArray, target: FloatArray) -> tuple[FloatArray, FloatArray] | None:
@@ -266,6 +301,9 @@ def dead_zone_drift(
     :attr:`DeadZoneDrift.rest`. Rows that all move at one speed cannot tell a lag from the
     dead zones (the lag columns are then multiples of ``J_c``): the lag is then reported as
     zero and ``rest`` as None.
+
+    Last the misfit neither explains: the correlated part of the last fit's residuals
+    (:attr:`DeadZoneDrift.misfit`) and its model-error covariance on the rows' sensitivities.
     """
     if structure.cascade:
         return None
@@ -286,6 +324,7 @@ def dead_zone_drift(
     if drift is None:
         return None
     coef, cov = drift
+    left = target - np.hstack([sens[engaged], ageing]) @ coef
     size = p.size
     rate, rate_std = coef[size:], np.sqrt(np.maximum(np.diag(cov)[size:], 0.0))
     drifting = bool(np.any(np.abs(rate) > DRIFT_Z * rate_std))
@@ -297,9 +336,11 @@ def dead_zone_drift(
     lagged = _solve(np.hstack(columns), target)
     if lagged is not None:
         lag_coef, lag_cov = lagged
+        left = target - np.hstack(columns) @ lag_coef
         lag = lag_coef[-2:]
         lag_std = np.sqrt(np.maximum(np.diag(lag_cov)[-2:], 0.0))
         rest, rest_cov = lag_coef[:size], lag_cov[:size, :size]
+    misfit = _adjacent_misfit(left, np.asarray(age, dtype=np.float64)[engaged])
     return DeadZoneDrift(
         np.array(p, dtype=np.float64),
         np.asarray(correction, dtype=np.float64),
@@ -312,6 +353,8 @@ def dead_zone_drift(
         np.asarray(lag_std, dtype=np.float64),
         None if rest is None else np.asarray(rest, dtype=np.float64),
         None if rest_cov is None else np.asarray(rest_cov, dtype=np.float64),
+        misfit,
+        model_error_covariance(sens[engaged], misfit),
     )
 
 

@@ -28,7 +28,7 @@ from genbacklash_core import (
     paper_example,
 )
 from genbacklash_core.data import NonFinitePolicy
-from genbacklash_core.uncertainty import parameter_covariance, play_std
+from genbacklash_core.uncertainty import batch_uncertainty, play_std
 from genbacklash_ros.bags.csvio import Series, write_series_csv
 from genbacklash_ros.cli import replay as replay_cli
 from genbacklash_ros.cli.joints import per_joint
@@ -110,33 +110,77 @@ def _identify(
 
 
 class _Uncertainty:
-    """The batch estimate's standard deviations: the output-error fit's Gauss-Newton
-    covariance ``s^2 (J^T J)^-1`` (:mod:`genbacklash_core.uncertainty`), propagated to the
-    play ``c_L + c_R`` by its gradient. NaN where the data do not tell."""
+    """The batch estimate's standard deviations in two parts
+    (:func:`genbacklash_core.uncertainty.batch_uncertainty`): the statistical one, the
+    output-error fit's Gauss-Newton covariance ``s^2 (J^T J)^-1``, and the model error's, from
+    the misfit white noise does not explain (:mod:`genbacklash_core.model_error`); the total
+    is their root sum of squares. Each is propagated to the play ``c_L + c_R`` by its
+    gradient. NaN where the data do not tell."""
 
     def __init__(self, result: IdentificationResult, series: Series) -> None:
         model = result.model
         size = len(model.parameter_names)
+        self.misfit = math.nan
         try:
-            cov = parameter_covariance(model, series.u, series.y, series.breaks)
-            self.std = np.sqrt(np.maximum(np.diag(cov), 0.0))
-            self.play_std = play_std(model, cov)
+            spread = batch_uncertainty(model, series.u, series.y, series.breaks)
+            parts = {"": spread.total, "statistical": spread.statistical, "model": spread.model}
+            self.parts = {k: np.sqrt(np.maximum(np.diag(c), 0.0)) for k, c in parts.items()}
+            self.play_parts = {k: play_std(model, c) for k, c in parts.items()}
+            self.misfit = spread.misfit.rms_model
         except (GenBacklashError, ValueError, FloatingPointError, np.linalg.LinAlgError):
-            self.std = np.full(size, np.nan)
-            self.play_std = math.nan
+            self.parts = {k: np.full(size, np.nan) for k in ("", "statistical", "model")}
+            self.play_parts = {k: math.nan for k in ("", "statistical", "model")}
+        self.std = self.parts[""]
+        self.play_std = self.play_parts[""]
         backlash = model.backlash if isinstance(model, Cascade) else model
         self.play = float(backlash.c_left + backlash.c_right)
 
+    @property
+    def model_dominates(self) -> bool:
+        """Whether the play's model-error part is larger than its statistical part."""
+        return bool(self.play_parts["model"] > self.play_parts["statistical"])
+
     def to_dict(self, names: Sequence[str]) -> dict[str, object]:
-        """``play_std`` and ``parameter_std`` (name -> std) for the JSON; None where unknown."""
+        """``play_std`` and ``parameter_std`` (name -> std; the total) for the JSON, with
+        their ``_statistical`` and ``_model`` parts, ``model_error_dominates`` and
+        ``misfit_correlated`` (the RMS misfit the model term comes from, in the units of
+        ``y``); None where unknown."""
 
         def clean(value: float) -> float | None:
             return float(value) if math.isfinite(value) else None
 
-        return {
-            "play_std": clean(self.play_std),
-            "parameter_std": {n: clean(v) for n, v in zip(names, self.std.tolist(), strict=True)},
-        }
+        out: dict[str, object] = {}
+        for part, std in self.parts.items():
+            suffix = f"_{part}" if part else ""
+            out[f"play_std{suffix}"] = clean(self.play_parts[part])
+            out[f"parameter_std{suffix}"] = {
+                n: clean(v) for n, v in zip(names, std.tolist(), strict=True)
+            }
+        out["model_error_dominates"] = self.model_dominates
+        out["misfit_correlated"] = clean(self.misfit)
+        return out
+
+    def lines(self) -> list[str]:
+        """The play with its 2-sigma band, and how the band splits (text output)."""
+        out = [replay_cli.play_line(self.play, self.play_std)]
+        stat, model = self.play_parts["statistical"], self.play_parts["model"]
+        if not (math.isfinite(stat) and math.isfinite(model)):
+            return out
+        out.append(
+            f"  of which (2 sigma) statistical +/- {2 * stat:.5f} rad, model error +/- "
+            f"{2 * model:.5f} rad"
+        )
+        if self.model_dominates:
+            out.append(
+                f"  the model error dominates: {self.misfit:.3g} RMS of the misfit follows "
+                "the motion (not white noise):\n  the play operator does not describe this "
+                "record fully (a servo's lag, a coasting load, a spring,\n  gravity, a play "
+                "that wears during the record, the encoder's rounding while the load rests);"
+                "\n  the band is the bias a misfit that size can cause"
+            )
+        if math.isfinite(self.play_std) and 2 * self.play_std > abs(self.play):
+            out.append("  the band is wider than the play itself: the play is not determined")
+        return out
 
 
 _RAD = replay_cli.RAD_PARAMETERS
@@ -203,7 +247,7 @@ def _cmd_identify(args: argparse.Namespace) -> int:
         print(json.dumps(out))
     else:
         print(_parameter_table(result, std=spread.std))
-        print(replay_cli.play_line(spread.play, spread.play_std))
+        print("\n".join(spread.lines()))
         if series.servo is not None:
             print(replay_cli.servo_line(series))
         print(_summary(result))

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -224,3 +226,70 @@ def test_a_servo_lag_stays_inside_the_band(make: type) -> None:
             else:
                 assert error > 0.01, (seed, error)  # the servo biases the estimate
                 assert error <= 2.0 * play_std <= 4.0 * error, (seed, error, play_std)
+
+
+def test_a_misfit_that_follows_the_motion_adds_a_model_term_that_grows() -> None:
+    """Rows read through a drivetrain that the play operator misfits smoothly in time (a
+    disturbance ``A sin(t / 40)`` on the readings: a ringing coupling, a load torque) and
+    white noise. ``A = 0``: the misfit is white, no model term. Else it stands out and the
+    play's model-error term grows with ``A``; neither a drift nor a lag explains it."""
+    terms = []
+    for amplitude in (0.0, 1e-3, 3e-3, 1e-2):
+        rows, age = _lagged_rows(np.random.default_rng(48), 1200, 0.0, 5e-4)
+        u0, u1, y0, y1 = rows
+        disturbed = (u0, u1, y0, y1 + amplitude * np.sin(age / 40.0))
+        fit = dead_zone_drift(Structure(1), STRAIGHT.parameters(), disturbed, age)
+        assert fit is not None and fit.misfit is not None and fit.model_covariance is not None
+        assert fit.misfit.significant == (amplitude > 0.0)
+        model = fit.model_covariance
+        terms.append(float(np.sqrt(model[1, 1] + model[3, 3] + 2 * model[1, 3])))
+        band = fit.tracking_covariance()
+        np.testing.assert_array_less(-1e-18, np.linalg.eigvalsh(band))
+        assert np.all(np.diag(band) >= np.diag(model))  # the band holds the model term
+    assert terms[0] == 0.0
+    assert all(a < b for a, b in itertools.pairwise(terms)), terms
+
+
+@pytest.mark.parametrize("make", [WindowedIdentifier, RecursiveIdentifier])
+def test_the_model_term_moves_the_band_and_nothing_the_compensation_reads(
+    make: type, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The operation scenario with a periodic error on the load (a misfit that follows the
+    motion): with and without the model-error term, every estimate's parameters, state and
+    confidence are the same bits (what the compensator and the guard read); only the
+    published covariance differs, and it is never the smaller."""
+    import dataclasses
+
+    from genbacklash_core.online import recursive, windowed
+
+    cfg = OperationSettings(duration=20.0, phases=(("operation", 20.0),), wear=0.0)
+    hidden = HiddenEffects(period=0.5, harmonics=((0.004, 0.0),))
+    u, y, b = operation_record(cfg, 1, hidden=hidden).series(bridge=True)
+
+    def run() -> list[tuple[np.ndarray, str, float, np.ndarray]]:
+        ident = make(3)
+        out = []
+        for s in range(0, u.size, 64):
+            est = ident.update_many(u[s : s + 64], y[s : s + 64], b[s : s + 64])
+            out.append((est.parameters, est.state.value, est.confidence, est.covariance))
+        return out
+
+    with_term = run()
+
+    def without(*args: object) -> object:
+        fit = dead_zone_drift(*args)  # type: ignore[arg-type]
+        return None if fit is None else dataclasses.replace(fit, model_covariance=None)
+
+    for module in (windowed, recursive):
+        monkeypatch.setattr(module, "dead_zone_drift", without)
+    without_term = run()
+    wider = 0
+    for (p, state, conf, cov), (p0, state0, conf0, cov0) in zip(
+        with_term, without_term, strict=True
+    ):
+        np.testing.assert_array_equal(p, p0)
+        assert (state, conf) == (state0, conf0)
+        if np.all(np.isfinite(cov0)):
+            assert np.all(np.diag(cov) >= np.diag(cov0))
+            wider += bool(np.any(np.diag(cov) > np.diag(cov0)))
+    assert wider > 0  # the misfit was seen: the band did change

@@ -69,6 +69,13 @@ def test_identify_json_contract(
     expected_keys = {"model", "backlash", "iterations", "converged", "fit", "reason"}
     # issue 22: the play c_L + c_R with its standard deviation, the parameters' ones
     expected_keys |= {"play", "play_std", "parameter_std"}
+    # ... in two parts: the noise's and the model error's (issue 22, deliverable 3)
+    expected_keys |= {
+        f"{key}_{part}"
+        for key in ("play_std", "parameter_std")
+        for part in ("statistical", "model")
+    }
+    expected_keys |= {"model_error_dominates", "misfit_correlated"}
     if model == "cascade":
         expected_keys.add("linear")
         assert result["linear"]["a"][0] == 1.0
@@ -89,6 +96,10 @@ def test_identify_json_contract(
     assert abs(result["play"] - (truth.c_left + truth.c_right)) < 4 * result["play_std"]
     assert set(result["parameter_std"]) == set(_names(result))
     assert all(0.0 < s < 0.1 for s in result["parameter_std"].values())
+    # the paper's examples are the model itself with white noise: no model-error part
+    assert result["play_std_model"] == 0.0 and result["misfit_correlated"] == 0.0
+    assert result["play_std"] == result["play_std_statistical"]
+    assert result["model_error_dominates"] is False
 
 
 def test_identify_table_and_plots(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
