@@ -79,13 +79,12 @@ import math
 
 import numpy as np
 
-from genbacklash_core._typing import ArrayLike, BoolArray, FloatArray, IntArray
+from genbacklash_core._typing import BoolArray, FloatArray, IntArray
 from genbacklash_core.errors import GenBacklashError
 from genbacklash_core.estimate import (
     Estimate,
     EstimatorState,
     aged_confidence,
-    as_sample,
     confidence_of,
     relative_std_of,
 )
@@ -94,13 +93,11 @@ from genbacklash_core.samples import run_lengths
 from genbacklash_core.structure import Structure
 
 from .advice import AdviceCache, BranchCoverage, coverage_of, excitation_advice
+from .base import OnlineIdentifier
 from .covariance import natural_covariance, natural_from_theta, natural_variances, scaled_inverse
 from .divergence import ErrorScale
 from .fits import cold_fit
 from .inputs import (
-    InputLimits,
-    accept_sample,
-    checked_series,
     deadband,
     settings_or_default,
     template,
@@ -115,7 +112,7 @@ from .rows import (
     row_width,
     settling_samples,
 )
-from .seed import SeedPrior, prior_weights, seed_prior
+from .seed import SeedPrior, prior_weights
 from .settings import RecursiveSettings
 from .state import confidence_moved, held, settled_state
 from .tracking import DeadZoneDrift, dead_zone_drift, with_tracking
@@ -129,7 +126,7 @@ _DRIFT_EVERY = 250  # samples between two fits of the bands' tracking term (~0.3
 _WARMING, _RUNNING, _HELD, _STOPPED = "warming", "running", "held", "stopped"
 
 
-class RecursiveIdentifier:
+class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
     """Online identification over a binned memory of regression rows (see the module notes).
 
     Parameters
@@ -184,28 +181,12 @@ class RecursiveIdentifier:
         sign: float | None = None,
         settings: RecursiveSettings | None = None,
     ) -> None:
-        self._template, self._sign_known = template(degree, na, nb, sign)
-        self.settings = settings = settings_or_default(settings, RecursiveSettings)
-        both_branches = 2 * settings.branch_memory
-        # larger samples would overflow the regression: treated like NaN (``nonfinite``);
-        # the longest regression here is the cascade's buffer or both branches' memories
-        self._limits = InputLimits.of(self._template.degree, max(settings.buffer, both_branches))
-        self._estimate: Estimate | None = None
-        self.reset()
+        shape = template(degree, na, nb, sign)
+        settings = settings_or_default(settings, RecursiveSettings)
+        # the longest regression: the cascade's buffer or both branches' memories
+        super().__init__(shape, settings, max(settings.buffer, 2 * settings.branch_memory))
 
-    # ------------------------------------------------------------------ public interface
-
-    @property
-    def structure(self) -> Structure:
-        """The model structure (with the detected sense once known)."""
-        return self._structure
-
-    @property
-    def estimate(self) -> Estimate:
-        """The latest estimate."""
-        if self._estimate is None:
-            self._estimate = self._publish()
-        return self._estimate
+    _CHECK_FOLLOWS = True  # (it always did)
 
     @property
     def restarts(self) -> int:
@@ -356,15 +337,10 @@ class RecursiveIdentifier:
         >>> after.state.value, bool(np.max(np.abs(after.parameters - truth.parameters())) < 0.02)
         ('converged', True)
         """
-        prior = seed_prior(self._template, self._sign_known, estimate)
+        prior = self._restart_from(estimate)
         cov = scaled_inverse(prior.information)
-        if cov is None:  # seed_prior checked that it is positive definite
-            raise GenBacklashError("cannot seed: the estimate's information is singular")
-        self.reset()
+        assert cov is not None  # (_check_seed)
         s = self.settings
-        saved = estimate.structure
-        self._structure = Structure(saved.degree, saved.na, saved.nb, saved.sign)
-        self._sign_now = True
         self._theta = prior.theta.copy()
         self._last_valid = prior.theta.copy()
         self._unit_cov = cov
@@ -372,8 +348,6 @@ class RecursiveIdentifier:
         self._pull = prior.information / s.covariance_bound  # R_0: P <= bound * P_seed
         self._prior = prior
         self._errors.restart(prior.sigma2)
-        self._excitation = estimate.excitation
-        self._samples = estimate.samples
         self._last_row = [self._samples] * len(self._last_row)
         if self._structure.cascade:
             self._settling = settling_samples(self._structure, prior.p)
@@ -381,40 +355,13 @@ class RecursiveIdentifier:
         self._ever_started = True
         self._next_solve = self._samples + s.block
         self._reason = f"seeded from a saved estimate ({estimate.state.value})"
-        self._drift, self._next_drift = None, 0  # the saved covariance carries its bands
+        self._next_drift = 0
         self._version += 1
         return self.estimate
 
-    def update(self, u: float, y: float, *, follows: bool = True) -> Estimate:
-        """Take one sample. Returns the current estimate.
-
-        ``follows=False``: the sample does not follow the previous one on the encoder's
-        clock (a lost reading in between), so no row pairs the two.
-        """
-        uf, yf = as_sample(u, y)
-        if not isinstance(follows, (bool, np.bool_)):
-            raise GenBacklashError(f"follows must be True or False, got {follows!r}")
-        if not accept_sample(uf, yf, self._limits, self.settings.nonfinite, self._samples):
-            self._break_next = True  # dropped: the next sample does not follow the last
-            return self.estimate
-        self._take(np.array([uf]), np.array([yf]), np.array([not follows]))
-        return self.estimate
-
-    def update_many(self, u: ArrayLike, y: ArrayLike, breaks: ArrayLike | None = None) -> Estimate:
-        """Take a series of samples; the same as :meth:`update` on each, vectorised.
-
-        ``breaks[k]`` True: sample ``k`` does not follow sample ``k-1`` on the encoder's clock
-        (a lost reading, a gap; :func:`~genbacklash_core.samples.sample_breaks`), so no row
-        pairs them; ``breaks[0]`` refers to the previous call's last sample. Default: every
-        sample follows its predecessor.
-        """
-        uu, yy, bb, dropped_last = checked_series(
-            u, y, breaks, self._limits, self.settings.nonfinite
-        )
-        if dropped_last:
-            self._break_next = True
-        self._take(uu, yy, bb)
-        return self.estimate
+    def _check_seed(self, prior: SeedPrior) -> None:
+        if scaled_inverse(prior.information) is None:  # seed_prior checked that it is
+            raise GenBacklashError("cannot seed: the estimate's information is singular")
 
     def refit(self) -> Estimate:
         """Iterate over the memory now, with the rows since the last block boundary, instead
@@ -448,10 +395,6 @@ class RecursiveIdentifier:
         self._estimate = None
         if u.size == 0:
             return
-        if self._break_next:
-            b = b.copy()
-            b[0] = True
-            self._break_next = False
         if self._mode in (_RUNNING, _HELD):
             why = theta_problem(self._structure, self._theta)
             if why is not None:  # e.g. a corrupted state: never iterate from it

@@ -31,12 +31,11 @@ import math
 
 import numpy as np
 
-from genbacklash_core._typing import ArrayLike, BoolArray, FloatArray
+from genbacklash_core._typing import BoolArray, FloatArray
 from genbacklash_core.estimate import (
     Estimate,
     EstimatorState,
     aged_confidence,
-    as_sample,
     confidence_of,
     relative_std,
 )
@@ -44,6 +43,7 @@ from genbacklash_core.samples import run_lengths
 from genbacklash_core.structure import Structure
 
 from .advice import AdviceCache, BranchCoverage, excitation_advice
+from .base import OnlineIdentifier
 from .fits import (
     FitFailure,
     WindowFit,
@@ -57,9 +57,6 @@ from .fits import (
     refine_window,
 )
 from .inputs import (
-    InputLimits,
-    accept_sample,
-    checked_series,
     deadband,
     settings_or_default,
     template,
@@ -70,7 +67,7 @@ from .rows import (
     WindowRows,
     settling_samples,
 )
-from .seed import SeedPrior, seed_prior
+from .seed import SeedPrior
 from .settings import WindowedSettings
 from .state import FITTED_STATES, confidence_moved, held, settled_state
 from .tracking import DeadZoneDrift, dead_zone_drift, with_tracking
@@ -81,7 +78,7 @@ __all__ = ["WindowedIdentifier", "WindowedSettings"]
 # --------------------------------------------------------------------------- the identifier
 
 
-class WindowedIdentifier:
+class WindowedIdentifier(OnlineIdentifier[WindowedSettings]):
     """Online identification by warm-started batch iterations over a sliding window.
 
     Parameters
@@ -125,24 +122,9 @@ class WindowedIdentifier:
         sign: float | None = None,
         settings: WindowedSettings | None = None,
     ) -> None:
-        self._template, self._sign_known = template(degree, na, nb, sign)
-        self.settings = settings = settings_or_default(settings, WindowedSettings)
-        # larger samples would overflow the regression: treated like NaN (``nonfinite``);
-        # the longest regression here is the window's (the recursive memory's is longer)
-        self._limits = InputLimits.of(self._template.degree, settings.window)
-        self.reset()
-
-    # ---- public interface
-
-    @property
-    def structure(self) -> Structure:
-        """The model structure (with the detected sense once known)."""
-        return self._structure
-
-    @property
-    def estimate(self) -> Estimate:
-        """The latest estimate."""
-        return self._estimate
+        shape = template(degree, na, nb, sign)
+        settings = settings_or_default(settings, WindowedSettings)
+        super().__init__(shape, settings, settings.window)  # the longest regression: the window
 
     @property
     def min_samples(self) -> int:
@@ -163,7 +145,7 @@ class WindowedIdentifier:
         self._rows = 0  # rows taken (memory mode)
         self._idle = 0  # samples since the last informative row (cascade: stored sample)
         self._structure = self._template
-        self._sign_known_now = self._sign_known
+        self._sign_now = self._sign_known
         self._p: FloatArray | None = None  # equation-error estimate (warm start)
         self._reported: FloatArray | None = None  # published (refined when asked)
         self._covariance: FloatArray | None = None
@@ -275,20 +257,14 @@ class WindowedIdentifier:
         >>> after.state.value, bool(np.max(np.abs(after.parameters - truth.parameters())) < 0.02)
         ('converged', True)
         """
-        prior = seed_prior(self._template, self._sign_known, estimate)
-        self.reset()
+        prior = self._restart_from(estimate)
         s = self.settings
-        structure = estimate.structure
-        self._structure = Structure(structure.degree, structure.na, structure.nb, structure.sign)
-        self._sign_known_now = True
         self._seed = prior
         self._seed_samples = min(s.window, estimate.samples) if estimate.samples else s.window
         self._set_p(prior.p.copy())
         self._reported = prior.p.copy()
         self._covariance = np.array(estimate.covariance, dtype=np.float64)
-        self._drift = None  # the saved covariance carries the saved bands
         self._residual = estimate.residual
-        self._excitation = estimate.excitation
         rel = relative_std(prior.p, self._covariance)
         settled = estimate.state in (EstimatorState.CONVERGED, EstimatorState.NO_EXCITATION)
         self._state = settled_state(settled, rel, s.converged_std)
@@ -297,12 +273,11 @@ class WindowedIdentifier:
         )
         self._needs_cold = False
         self._restarted = False  # the next fit continues from the seed (steadiness test)
-        self._samples = estimate.samples
         self._last_fit_at = self._samples if self._memory is not None else self._kept
         self._last_fit_rows = self._seed_rows = self._rows
         self._next_fit = self._progress() + self.min_samples
         self._rebuild()
-        return self._estimate
+        return self.estimate
 
     @property
     def from_seed(self) -> bool:
@@ -320,56 +295,31 @@ class WindowedIdentifier:
             kept = min(self._seed_samples, self.settings.window - self._held())
         return max(kept, 0) / self._seed_samples
 
-    def update(self, u: float, y: float, *, follows: bool = True) -> Estimate:
-        """Take one sample; refit when due. Returns the current estimate.
-
-        ``follows=False``: the sample does not follow the previous one on the encoder's
-        clock (a lost reading in between): no regression row pairs the two.
-        """
-        uf, yf = as_sample(u, y)
-        if not accept_sample(uf, yf, self._limits, self.settings.nonfinite, self._samples):
-            self._break_next = True  # dropped: the next sample does not follow the last
-            return self._estimate
+    def _take_one(self, u: float, y: float, follows: bool) -> None:
         if self._memory is None:
-            return self._take(np.array([uf]), np.array([yf]), np.array([not follows]))
+            self._intake(np.array([u]), np.array([y]), np.array([not follows]))
+            return
         # one sample, without arrays (the per-sample path of a hand-written loop)
-        self._ring.push(uf, yf, not follows or self._break_next)
+        self._ring.push(u, y, not follows or self._break_next)
         last = self._last
-        if last is not None and follows and not self._break_next and uf != last[0]:
-            self._memory.add_one(last[0], uf, last[1], yf)  # a row of eq. (24)
+        if last is not None and follows and not self._break_next and u != last[0]:
+            self._memory.add_one(last[0], u, last[1], y)  # a row of eq. (24)
             self._rows += 1
             self._idle = 0
         else:
             self._idle += 1
         self._break_next = False
-        self._last = (uf, yf)
+        self._last = (u, y)
         self._samples += 1
         if self._rows >= self._next_fit:
             self._fit()
-        return self._publish()
+        self._publish()
 
-    def update_many(self, u: ArrayLike, y: ArrayLike, breaks: ArrayLike | None = None) -> Estimate:
-        """Take a series of samples; identical to :meth:`update` on each, vectorised.
-
-        ``breaks[k]`` True: sample ``k`` does not follow sample ``k-1`` (``breaks[0]``: the
-        previous call's last sample) on the encoder's clock; see
-        :mod:`genbacklash_core.samples`. Default: every sample follows its predecessor.
-        """
-        uu, yy, bb, dropped_last = checked_series(
-            u, y, breaks, self._limits, self.settings.nonfinite
-        )
-        if dropped_last:
-            self._break_next = True
-        return self._take(uu, yy, bb)
-
-    def _take(self, uu: FloatArray, yy: FloatArray, bb: BoolArray) -> Estimate:
+    def _take(self, uu: FloatArray, yy: FloatArray, bb: BoolArray) -> None:
         """Feed validated samples, fitting whenever the schedule says (see update_many)."""
         if uu.size == 0:
-            return self._publish()
-        if self._break_next:
-            bb = bb.copy()
-            bb[0] = True
-            self._break_next = False
+            self._publish()
+            return
         if self._memory is None:
             stored = self._unsettled(uu)
             if stored.any():  # idle: samples since the last one stored
@@ -389,7 +339,8 @@ class WindowedIdentifier:
                 start += take
                 if self._kept >= self._next_fit:
                     self._fit()
-            return self._publish()
+            self._publish()
+            return
         # memory mode: rows are pairs of consecutive samples whose input moved
         if self._last is None:
             prev_u, prev_y, link = uu[0], yy[0], False
@@ -423,7 +374,7 @@ class WindowedIdentifier:
             if self._rows >= self._next_fit:
                 self._fit()
         self._last = (float(uu[-1]), float(yy[-1]))
-        return self._publish()
+        self._publish()
 
     def refit(self) -> Estimate:
         """Fit the window now instead of at the next scheduled sample; the new estimate.
@@ -477,6 +428,7 @@ class WindowedIdentifier:
 
     def _publish(self) -> Estimate:
         est = self._estimate
+        assert est is not None  # (reset made one)
         if self._memory is not None and self._reported is None:
             key = (self._rows, self._samples > 1, self._reason)  # the memory changes with rows
             reason = self._advice.reason(self._reason, key, self.excitation_advice)
@@ -493,10 +445,10 @@ class WindowedIdentifier:
             confidence = self._quick_confidence()
             if is_held != was_held or confidence_moved(confidence, est.confidence, floor=1e-12):
                 self._rebuild()
-                est = self._estimate
+                est = self.estimate
         if est.samples != self._samples:
-            self._estimate = est.with_samples(self._samples)
-        return self._estimate
+            self._estimate = est = est.with_samples(self._samples)
+        return est
 
     def _schedule(self) -> None:
         s = self.settings
@@ -546,7 +498,7 @@ class WindowedIdentifier:
     ) -> tuple[Structure, WindowFit] | str:
         """The batch iteration from the paper's start, then the warm iterations from its
         result: the structure and the fit, or why it failed."""
-        found = cold_fit(self._structure, self._sign_known_now, u, y, b)
+        found = cold_fit(self._structure, self._sign_now, u, y, b)
         if isinstance(found, str):
             return found
         structure, p = found
@@ -570,7 +522,7 @@ class WindowedIdentifier:
             self._cold_failed(started)
             return
         self._structure, outcome = started
-        self._sign_known_now = True
+        self._sign_now = True
         self._restarted = True
         self._needs_cold = False
         self._cold_failures = 0
