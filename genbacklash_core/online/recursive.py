@@ -88,9 +88,6 @@ from genbacklash_core.estimate import (
     confidence_of,
     relative_std_of,
 )
-from genbacklash_core.identify import _switching
-from genbacklash_core.samples import run_lengths
-from genbacklash_core.structure import Structure
 
 from .advice import AdviceCache, BranchCoverage, coverage_of, excitation_advice
 from .base import OnlineIdentifier
@@ -98,16 +95,12 @@ from .covariance import natural_covariance, natural_from_theta, natural_variance
 from .divergence import ErrorScale
 from .fits import cold_fit
 from .inputs import (
-    deadband,
     settings_or_default,
     template,
 )
 from .iteration import MemorySolution, ewma, settle_memory, solve_memory, theta_problem
 from .memory import BinnedRows, pair_series
 from .rows import (
-    CascadeLags,
-    SampleRing,
-    cascade_memory_rows,
     memory_regression,
     row_width,
     settling_samples,
@@ -115,6 +108,7 @@ from .rows import (
 from .seed import SeedPrior, prior_weights
 from .settings import RecursiveSettings
 from .state import confidence_moved, held, settled_state
+from .stream import RowStream, window_cascade_rows
 from .tracking import DeadZoneDrift, dead_zone_drift, with_tracking
 
 __all__ = ["RecursiveIdentifier", "RecursiveSettings"]
@@ -221,7 +215,7 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
             return ""
         need = 0 if self._ever_started else max(self._min_rows() - len(self._memory), 0)
         cover = self.coverage
-        seen = bool(cover.up.sum() + cover.down.sum()) or self._input_high > self._input_low
+        seen = bool(cover.up.sum() + cover.down.sum()) or self._stream.high > self._stream.low
         queued = any(np.ptp(u) > 0.0 for u, _, _ in self._queue if u.size)
         if not seen and queued:
             return ""  # the samples are not looked at before the first attempt
@@ -262,18 +256,13 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         # the memory, the rows held back while the errors are blown up, the recent samples
         self._memory = self._new_memory(row_width(structure))
         self._held_back: BinnedRows | None = None
-        self._recent = SampleRing(s.buffer)
+        self._stream = RowStream(structure, s.buffer)  # the recent samples; carried signals
         self._pending: list[tuple[FloatArray, IntArray]] = []  # rows of the current block
         self._queue: list[tuple[FloatArray, FloatArray, BoolArray]] = []  # samples not seen
         self._queued = 0
         self._events = 0  # queue flushes (the estimate's excitation and ages change there)
         self._published: tuple[tuple[object, ...], Estimate] | None = None
         self._advice = AdviceCache()  # made again when an event changed the rows
-        # carried signals
-        self._run = 0  # consecutive samples ending at the latest one
-        self._u1 = self._y1 = 0.0  # the latest sample (backlash)
-        self._anchor = (0.0, 0.0)  # u_a, d_a of the latest engaged row (backlash)
-        self._lags = CascadeLags.unknown(structure)  # cascade
         self._drift: DeadZoneDrift | None = None  # the tracking term of the bands
         self._next_drift = 0  # the sample from which the next iterate refits it
         self._drift_at = 0  # the sample it was fitted at
@@ -281,7 +270,6 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         self._settling = 0
         self._settled_at = 0  # sample count of the last settling-horizon update
         self._break_next = False  # a dropped sample ended the previous call
-        self._input_low, self._input_high = math.inf, -math.inf
         # schedule
         self._next_solve = 0
         self._next_attempt = s.initial_samples
@@ -431,88 +419,25 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
     def _piece(self, u: FloatArray, y: FloatArray, b: BoolArray, first: int) -> None:
         """Rows, errors and excitation of a stretch of samples within one block."""
         s = self.settings
-        self._recent.extend(u, y, b)
-        low = np.minimum(np.minimum.accumulate(u), self._input_low)
-        high = np.maximum(np.maximum.accumulate(u), self._input_high)
-        self._input_low, self._input_high = float(low[-1]), float(high[-1])
-        band = deadband(s.input_deadband, high - low)  # per sample: the span seen so far
-        run_before = self._run
-        run = run_lengths(b, run_before)
-        self._run = int(min(run[-1], 1 << 40))
-        if self._structure.cascade:
-            informative = self._piece_cascade(u, y, run, run_before, band, first)
-        else:
-            informative = self._piece_backlash(u, y, run, band, first)
-        self._excitation = ewma(informative, 1.0 / s.excitation_memory, self._excitation)
-
-    def _piece_backlash(
-        self, u: FloatArray, y: FloatArray, run: IntArray, deadband: FloatArray, first: int
-    ) -> FloatArray:
-        """Rows ``[u(t-1), u(t), x(t-1), x(t)]``: consecutive samples whose input moved."""
-        n = u.size
-        u_prev = np.concatenate([[self._u1], u[:-1]])
-        y_prev = np.concatenate([[self._y1], y[:-1]])
-        self._u1, self._y1 = float(u[-1]), float(y[-1])
-        taken = (run >= 2) & (np.abs(u - u_prev) > deadband)  # the sample rule; it moved
-        at = np.flatnonzero(taken)
-        if at.size == 0:
-            if np.any(run < 2):
-                self._anchor = (0.0, 0.0)  # a lost reading: the state is not known
-            return np.zeros(n)
-        rows = np.zeros((at.size, 6))
-        rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3] = u_prev[at], u[at], y_prev[at], y[at]
-        stamps = np.asarray(first + at, dtype=np.intp)
-        if self._mode in (_RUNNING, _HELD):
-            self._anchor_rows(rows, at, run)
-            return self._judge(rows, stamps, at, n)
-        self._pending.append((rows, stamps))  # warming up or stopped: filed at the attempt
-        return np.asarray(taken, dtype=np.float64)
-
-    def _anchor_rows(self, rows: FloatArray, at: IntArray, run: IntArray) -> None:
-        """Fill the anchors (``u_a``, ``d_a``; :func:`memory_regression`) of new backlash
-        rows taken at samples ``at`` of a piece, classified at the current estimate.
-
-        A hold's anchor is the row taken just before it when that row engaged a branch and
-        no reading was lost between them (dwells between them do not matter: the state
-        holds). Later holds of the same episode get none: one more reading per engagement
-        keeps a narrow oscillation from flooding the memory with readings of one point, and
-        was the most accurate choice on Example 1 (parameter RMSE 0.0044 over 1000 samples,
-        against 0.0045 with every hold and 0.0048 without holds)."""
-        p = self._structure.from_theta(self._theta)
-        f1, f2 = _switching(self._structure, p, rows[:, 1], rows[:, 2])  # eqs. (27)-(28)
-        engaged = (f1 + f2) > 0.0
-        direction = np.where(f1 > 0.0, -1.0, 1.0)
-        lost = np.cumsum(run < 2)  # readings lost (chain breaks) up to each sample
-        u_prev = np.concatenate([[self._anchor[0]], rows[:-1, 1]])
-        d_prev = np.concatenate([[self._anchor[1]], np.where(engaged, direction, 0.0)[:-1]])
-        lost_prev = np.concatenate([[0], lost[at[:-1]]])
-        anchored = ~engaged & (d_prev != 0.0) & (lost[at] == lost_prev)
-        rows[:, 4] = np.where(anchored, u_prev, 0.0)
-        rows[:, 5] = np.where(anchored, d_prev, 0.0)
-        # the next piece's first row may anchor on this piece's last one
-        ends_engaged = bool(engaged[-1]) and lost[-1] == lost[at[-1]]
-        self._anchor = (float(rows[-1, 1]), float(direction[-1])) if ends_engaged else (0.0, 0.0)
-
-    def _piece_cascade(
-        self,
-        u: FloatArray,
-        y: FloatArray,
-        run: IntArray,
-        run_before: int,
-        deadband: FloatArray,
-        first: int,
-    ) -> FloatArray:
-        """Rows of eq. (32), the internal ``x`` propagated with the current estimate."""
-        n = u.size
-        if self._mode not in (_RUNNING, _HELD):
-            return np.zeros(n)  # the next batch fit takes the recent samples
-        p = self._structure.from_theta(self._theta)
-        rows, at, self._lags = cascade_memory_rows(
-            self._structure, p, self._lags, u, y, run, run_before, deadband, self._settling
+        running = self._mode in (_RUNNING, _HELD)  # else: warming up or stopped
+        rows, at = self._stream.take(
+            self._structure,
+            self._theta if running else None,
+            u,
+            y,
+            b,
+            s.input_deadband,
+            self._settling,
         )
-        if at.size == 0:
-            return np.zeros(n)
-        return self._judge(rows, np.asarray(first + at, dtype=np.intp), at, n)
+        informative = np.zeros(u.size)
+        if at.size:
+            stamps = np.asarray(first + at, dtype=np.intp)
+            if running:
+                informative = self._judge(rows, stamps, at, u.size)
+            else:  # filed at the next batch-fit attempt
+                self._pending.append((rows, stamps))
+                informative[at] = 1.0
+        self._excitation = ewma(informative, 1.0 / s.excitation_memory, self._excitation)
 
     def _judge(self, rows: FloatArray, stamps: IntArray, at: IntArray, n: int) -> FloatArray:
         """A priori one-step errors of new rows at the current estimate (eqs. 24/35), kept
@@ -667,19 +592,21 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         self._next_attempt = self._samples + (
             self._attempt_interval() if structure.cascade else s.block
         )
-        lags = self._lags
+        lags = self._stream.lags
         if structure.cascade:
             latest = self._ever_started and attempt > 0  # a retried restart: the latest only
             last = s.initial_samples if latest else None
-            u, y = (a.copy() for a in self._recent.window(last))
-            b = self._recent.breaks(last)
+            u, y = (a.copy() for a in self._stream.recent.window(last))
+            b = self._stream.recent.breaks(last)
             found = cold_fit(structure, self._sign_now, u, y, b)
             if isinstance(found, str):
                 self._reason = f"batch fit failed: {found}"
                 return False
             structure, p = found
             memory = self._new_memory(self._memory.width)
-            lags = self._window_rows(structure, p, u, y, b, memory)
+            rows, at, lags = window_cascade_rows(structure, p, u, y, b, s.input_deadband)
+            first = self._samples - self._queued - u.size  # the window ends at the last seen
+            memory.insert(rows, np.asarray(first + at, dtype=np.intp))
         else:
             source = self._held_back if self._mode == _HELD else self._memory
             assert source is not None  # (_attempt_due checked it)
@@ -701,7 +628,7 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
             p,
             memory.rows()[0],
             s.covariance_bound,
-            (self._input_low, self._input_high),
+            (self._stream.low, self._stream.high),
         )
         if isinstance(started, str):
             self._reason = f"batch fit failed: {started}"
@@ -723,7 +650,7 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         self._sign_now = True
         self._memory = memory
         self._held_back = None
-        self._lags = lags
+        self._stream.lags = lags
         self._prior = None
         self._pull = pull
         self._commit(solution)
@@ -740,33 +667,6 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         self._pending = []
         self._reason = ""
         return True
-
-    def _window_rows(
-        self,
-        structure: Structure,
-        p: FloatArray,
-        u: FloatArray,
-        y: FloatArray,
-        b: BoolArray,
-        memory: BinnedRows,
-    ) -> CascadeLags:
-        """File a window's cascade rows at ``p`` (from the first sample on which the internal
-        ``x`` of eq. 36 is determined); the lags after the window."""
-        band = deadband(self.settings.input_deadband, float(np.ptp(u)))
-        rows, at, lags = cascade_memory_rows(
-            structure,
-            p,
-            CascadeLags.unknown(structure),
-            u,
-            y,
-            run_lengths(b, 0),
-            0,
-            np.full(u.size, band),
-            settling_samples(structure, p),
-        )
-        first = self._samples - self._queued - u.size  # the window ends at the last seen
-        memory.insert(rows, np.asarray(first + at, dtype=np.intp))
-        return lags
 
     # ------------------------------------------------------------------ the iteration
 
@@ -785,7 +685,7 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
             self._pull,
             prior,
             weights,
-            (self._input_low, self._input_high),
+            (self._stream.low, self._stream.high),
         )
         if isinstance(step, str):
             self._invalid += 1
