@@ -39,6 +39,7 @@ from genbacklash_core.errors import GenBacklashError
 from genbacklash_core.estimate import Estimate, as_sample
 from genbacklash_core.structure import Structure
 
+from .advice import AdviceCache
 from .inputs import InputLimits, accept_sample, checked_series
 from .seed import SeedPrior, seed_prior
 from .tracking import DeadZoneDrift
@@ -74,6 +75,8 @@ class OnlineIdentifier(ABC, Generic[_S]):
     _sign_now: bool  # the branch sense is known (given, or detected by a fit)
     _samples: int
     _excitation: float
+    _reason: str
+    _advice: AdviceCache  # the warming-up reason's excitation advice
     _drift: DeadZoneDrift | None  # the tracking term of the bands
     _break_next: bool  # a dropped sample ended the previous call
     _estimate: Estimate | None  # None: published again when asked for
@@ -89,6 +92,19 @@ class OnlineIdentifier(ABC, Generic[_S]):
     @abstractmethod
     def reset(self) -> None:
         """Forget all samples and the estimate."""
+
+    def _forget(self) -> None:
+        """What :meth:`reset` forgets in both: the samples, the structure detected, the
+        estimate and what it was published with."""
+        self._structure = self._template
+        self._sign_now = self._sign_known
+        self._samples = 0
+        self._excitation = 0.0
+        self._reason = "warming up"
+        self._drift = None
+        self._break_next = False
+        self._advice = AdviceCache()
+        self._estimate = None
 
     @abstractmethod
     def _take(self, u: FloatArray, y: FloatArray, b: BoolArray) -> None:

@@ -9,27 +9,14 @@ A drivetrain delivers its information in moves and reversals separated by long d
 1 kHz a command held for ten readings repeats one state ten times. So the memory here holds
 *rows*, not samples:
 
-* **The sample rule.** A row pairs ``x(t)`` with ``x(t-1)`` (the cascade: with
-  ``x(t-i)``, ``y(t-j)``); it is formed only when those samples are consecutive on the
-  encoder's clock (``breaks``, :mod:`genbacklash_core.samples`). A lost reading never pairs
-  two states that are not neighbours (that would read the missed motion as a branch engaged
-  too early and bias both gaps small).
-* **Only moves.** A row is kept only when the input moved (a step beyond ``input_deadband``
-  of the input span seen): a dwell or a held command repeats the previous state and carries
-  nothing new, so it never pushes anything out of the memory.
-* **Binned memory.** Rows are filed by the direction of the move (down: the left branch,
-  eq. 18; up: the right branch, eq. 19) and by where the input was, in ``bins`` equal parts of
-  the input range of the rows seen so far. Each direction keeps its newest
-  ``M = 1 / (1 - forgetting)`` rows, except that every region keeps its newest
-  ``ceil(M / (2 bins))`` rows however old. Old information is thus forgotten only as newer
-  rows of the same branch arrive, and never entirely where no new data cover the region: a
-  wearing gap is tracked wherever the joint works (about ``M / 2`` rows of the branch
-  behind), a joint at rest or moving one way for minutes keeps what it knew about the rest,
-  and a narrow sweep does not bend the whole polynomial to its part of the range.
-* **Holds read their anchor.** A row inside the gap holds the state the last engaged
-  branch left (eqs. 20-21); it carries nothing in eq. (29), but the hold just after an
-  engaged row is one more reading of that branch at the engaged row's input, and is used as
-  such (:func:`~genbacklash_core.online.rows.memory_regression`).
+* **Rows of moves.** A row pairs samples that are consecutive on the encoder's clock and
+  between which the input moved; a hold reads the anchor its engaged row left
+  (:mod:`~genbacklash_core.online.stream`). A dwell or a held command adds no row, so it
+  never pushes anything out of the memory.
+* **Binned memory.** Rows are filed by branch and input region; each branch keeps its newest
+  ``M = 1 / (1 - forgetting)`` rows and every region a floor of rows however old
+  (:class:`~genbacklash_core.online.memory.BinnedRows`): old information is forgotten only as
+  newer rows of the same branch arrive, never entirely where no new data cover the region.
 * **One iteration per block.** Every ``block`` samples with new rows, one warm-started
   iteration of the paper's method runs over the whole memory: the rows are re-evaluated at
   the current estimate (eqs. 25-28) and the least squares of eq. (29) / (37) is solved, with
@@ -41,10 +28,10 @@ A drivetrain delivers its information in moves and reversals separated by long d
   Its cost grows with the memory (~40 us for 1000 rows), not with the samples; a block
   without new rows costs nothing and changes nothing.
 * **Cold start from everything seen.** Until the first estimate, every informative row since
-  the start is kept (binned the same way); the batch iteration
-  (:func:`~genbacklash_core.identify.identify_backlash`) runs on them whenever the memory has
-  grown by a quarter. The cascade's internal ``x`` needs an estimate, so it starts from a
-  batch fit over its recent ``buffer`` samples instead.
+  the start is kept (binned the same way); a batch start
+  (:mod:`~genbacklash_core.online.restart`) runs on them whenever the memory has grown by a
+  quarter. The cascade's internal ``x`` needs an estimate, so it starts from a batch fit
+  over its recent ``buffer`` samples instead.
 * **No excitation is not divergence.** Without new rows nothing changes: the estimate holds,
   the state is ``no_excitation`` after ``idle_samples`` samples without information, and the
   confidence fades with the age of the information
@@ -63,14 +50,8 @@ fits' attempts), so they agree to rounding whatever the chunking; between two su
 only the sample count (and the aged confidence) of the estimate changes.
 
 This module holds the identifier itself (the queue, the blocks, when to iterate, hold or
-re-initialise, what it publishes); its iteration stands in
-:mod:`~genbacklash_core.online.iteration` and its divergence test in
-:mod:`~genbacklash_core.online.divergence`. The parts it shares with the windowed identifier
-stand in the sibling modules of :mod:`genbacklash_core.online` (the memory rows and the
-sample rule in ``rows``, :class:`~genbacklash_core.online.memory.BinnedRows` in ``memory``,
-the seed's prior in ``seed``, the batch fit in ``fits``, the covariance in ``covariance``,
-state and confidence in ``state``, excitation advice in ``advice``, the input checks in
-``inputs``, the bands' tracking term in ``tracking``).
+re-initialise, what it publishes); the other parts stand in the sibling modules of
+:mod:`genbacklash_core.online` (see there), one concept each.
 """
 
 from __future__ import annotations
@@ -89,31 +70,29 @@ from genbacklash_core.estimate import (
     relative_std_of,
 )
 
-from .advice import AdviceCache, BranchCoverage, coverage_of, excitation_advice
+from .advice import BranchCoverage, coverage_of, excitation_advice
 from .base import OnlineIdentifier
 from .covariance import natural_covariance, natural_from_theta, natural_variances, scaled_inverse
 from .divergence import ErrorScale
-from .fits import cold_fit
 from .inputs import (
     settings_or_default,
     template,
 )
-from .iteration import MemorySolution, ewma, settle_memory, solve_memory, theta_problem
-from .memory import BinnedRows, pair_series
+from .iteration import MemorySolution, ewma, solve_memory, theta_problem
+from .memory import BinnedRows
+from .restart import backlash_start, cascade_start, rejected
 from .rows import (
-    memory_regression,
     row_width,
     settling_samples,
 )
 from .seed import SeedPrior, prior_weights
 from .settings import RecursiveSettings
 from .state import confidence_moved, held, settled_state
-from .stream import RowStream, window_cascade_rows
-from .tracking import DeadZoneDrift, dead_zone_drift, with_tracking
+from .stream import RowStream
+from .tracking import dead_zone_drift, with_tracking
 
 __all__ = ["RecursiveIdentifier", "RecursiveSettings"]
 
-_MAX_REJECTIONS = 8  # restarts that may be rejected for a poor fit before any fit is taken
 _MAX_INVALID = 8  # consecutive invalid iterates before a re-initialisation
 _DRIFT_EVERY = 250  # samples between two fits of the bands' tracking term (~0.3 ms each)
 
@@ -231,18 +210,14 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
 
     def reset(self) -> None:
         """Forget all samples and the estimate."""
+        self._forget()
         s = self.settings
         structure = self._template
-        self._structure = structure
-        self._sign_now = self._sign_known
         self._mode = _WARMING
         self._ever_started = False
         self._restarts = 0
-        self._samples = 0
-        self._reason = "warming up"
         self._note = ""  # why the last iteration was not taken (the estimate held)
         self._why = ""  # why the identification diverged (held or stopped)
-        self._estimate = None
         size = structure.n_parameters
         # the estimate: theta (eqs. 23/33), (Phi^T Phi + R_0 + prior)^-1, residual variance
         self._theta = np.zeros(size)
@@ -262,14 +237,11 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         self._queued = 0
         self._events = 0  # queue flushes (the estimate's excitation and ages change there)
         self._published: tuple[tuple[object, ...], Estimate] | None = None
-        self._advice = AdviceCache()  # made again when an event changed the rows
-        self._drift: DeadZoneDrift | None = None  # the tracking term of the bands
         self._next_drift = 0  # the sample from which the next iterate refits it
         self._drift_at = 0  # the sample it was fitted at
         self._committed_at = 0  # the sample of the last iterate taken
         self._settling = 0
         self._settled_at = 0  # sample count of the last settling-horizon update
-        self._break_next = False  # a dropped sample ended the previous call
         # schedule
         self._next_solve = 0
         self._next_attempt = s.initial_samples
@@ -278,7 +250,6 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         self._need = self._min_rows()  # fresh rows the next attempt waits for
         self._invalid = 0  # consecutive iterates not taken
         # measures
-        self._excitation = 0.0
         self._errors = ErrorScale()  # the one-step errors' running means (divergence test)
         self._scale_before = math.nan
         blocks = 3 if structure.cascade else 2
@@ -443,16 +414,11 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         """A priori one-step errors of new rows at the current estimate (eqs. 24/35), kept
         for the block's end; which samples informed which block."""
         structure = self._structure
-        p = structure.from_theta(self._theta)
-        # the rows' own information (holds re-read an anchor: no excitation, no new age)
-        phi, target, used, left, right = memory_regression(structure, p, rows, holds=False)
-        errors = target - phi @ self._theta  # a priori one-step errors, eqs. (29)/(37)
-        # their variance is sigma^2 (1 + phi P phi^T): a row where the memory knows little
-        # (a region not seen yet) may miss by more without anything being wrong
-        spread = 1.0 + np.einsum("ij,jk,ik->i", phi, self._unit_cov, phi)
-        self._errors.track(
-            errors * errors,
-            errors * errors / spread,
+        used, left, right = self._errors.judge(
+            structure,
+            self._theta,
+            self._unit_cov,
+            rows,
             ratio=self.settings.divergence_ratio,
             running=self._mode == _RUNNING,  # while held, the scale holds
         )
@@ -576,15 +542,10 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
     # ------------------------------------------------------------------ (re)initialisation
 
     def _initialise(self) -> bool:
-        """Start (or restart) from a batch fit, then iterate over the memory until settled.
-
-        A backlash fits every row of its memory (or, while the errors are blown up, the rows
-        held back since); the cascade its recent samples: the whole buffer at first, the
-        latest ``initial_samples`` on retried restarts. A restart must also fit: its residual
-        may not exceed ``divergence_ratio`` times the running one before the divergence
-        (data holding the fault would not), until a few attempts were rejected (the noise
-        may really have grown). Returns whether it started.
-        """
+        """Start (or restart) from a batch fit (:mod:`~genbacklash_core.online.restart`): a
+        backlash on every row of its memory (or, while the errors are blown up, the rows
+        held back since); the cascade on its recent samples: the whole buffer at first, the
+        latest ``initial_samples`` on retried restarts. Returns whether it started."""
         s = self.settings
         structure = self._structure
         attempt = self._attempts
@@ -592,68 +553,41 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         self._next_attempt = self._samples + (
             self._attempt_interval() if structure.cascade else s.block
         )
-        lags = self._stream.lags
+        span = (self._stream.low, self._stream.high)
         if structure.cascade:
             latest = self._ever_started and attempt > 0  # a retried restart: the latest only
             last = s.initial_samples if latest else None
             u, y = (a.copy() for a in self._stream.recent.window(last))
-            b = self._stream.recent.breaks(last)
-            found = cold_fit(structure, self._sign_now, u, y, b)
-            if isinstance(found, str):
-                self._reason = f"batch fit failed: {found}"
-                return False
-            structure, p = found
-            memory = self._new_memory(self._memory.width)
-            rows, at, lags = window_cascade_rows(structure, p, u, y, b, s.input_deadband)
+            window = (u, y, self._stream.recent.breaks(last))
             first = self._samples - self._queued - u.size  # the window ends at the last seen
-            memory.insert(rows, np.asarray(first + at, dtype=np.intp))
+            memory = self._new_memory(self._memory.width)
+            start = cascade_start(structure, self._sign_now, window, first, memory, s, span)
         else:
             source = self._held_back if self._mode == _HELD else self._memory
             assert source is not None  # (_attempt_due checked it)
-            rows, _ = source.rows()
             self._fresh = 0
-            self._need = max(rows.shape[0] // 4, 1)
-            found = cold_fit(
-                structure,
-                self._sign_now,
-                *pair_series(rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3]),
-            )
-            if isinstance(found, str):
-                self._reason = f"batch fit failed: {found}"
-                return False
-            structure, p = found
-            memory = source
-        started = settle_memory(
-            structure,
-            p,
-            memory.rows()[0],
-            s.covariance_bound,
-            (self._stream.low, self._stream.high),
-        )
-        if isinstance(started, str):
-            self._reason = f"batch fit failed: {started}"
+            self._need = max(len(source) // 4, 1)
+            start = backlash_start(structure, self._sign_now, source, s, span)
+        if isinstance(start, str):
+            self._reason = f"batch fit failed: {start}"
             return False
-        solution, pull = started
-        before = self._scale_before
-        limit = s.divergence_ratio * s.divergence_ratio * before  # (** may overflow)
-        sigma2 = solution.sigma2
-        if attempt < _MAX_REJECTIONS and math.isfinite(before) and sigma2 > limit:
-            self._reason = (
-                f"batch fit rejected: residual {math.sqrt(sigma2):.3g} against "
-                f"{math.sqrt(before):.3g} before the divergence (the data may hold the fault)"
-            )
+        sigma2 = start.solution.sigma2
+        why = rejected(sigma2, self._scale_before, s.divergence_ratio, attempt)
+        if why is not None:
+            self._reason = why
             return False
         if self._ever_started:
             self._restarts += 1
         self._drift, self._next_drift = None, 0  # a new memory: refit the bands' term at once
-        self._structure = structure
+        self._structure = structure = start.structure
         self._sign_now = True
-        self._memory = memory
+        self._memory = start.memory
         self._held_back = None
-        self._stream.lags = lags
+        if start.lags is not None:
+            self._stream.lags = start.lags
         self._prior = None
-        self._pull = pull
-        self._commit(solution)
+        self._pull = start.pull
+        self._commit(start.solution)
         self._errors.restart(max(sigma2, 1e-300))
         self._scale_before = math.nan
         self._attempts = 0
@@ -662,7 +596,8 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         self._next_solve = self._samples + s.block
         self._last_row = [self._samples] * len(self._last_row)
         if structure.cascade:
-            self._settling = settling_samples(structure, structure.from_theta(solution.theta))
+            theta = start.solution.theta
+            self._settling = settling_samples(structure, structure.from_theta(theta))
             self._settled_at = self._samples
         self._pending = []
         self._reason = ""

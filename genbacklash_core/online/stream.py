@@ -5,15 +5,18 @@ pieces (one per block); :class:`RowStream` turns each piece into memory rows
 (:func:`~genbacklash_core.online.rows.memory_regression`) and carries from one piece to the
 next what the rows of the next one need:
 
-* **The sample rule.** A row pairs a sample with the one before it only when they are
-  consecutive on the encoder's clock (``breaks``, :mod:`genbacklash_core.samples`): the run
-  of consecutive samples ending at the latest one is carried.
+* **The sample rule.** A row pairs ``x(t)`` with ``x(t-1)`` (the cascade: with ``x(t-i)``,
+  ``y(t-j)``) only when those samples are consecutive on the encoder's clock (``breaks``,
+  :mod:`genbacklash_core.samples`): a lost reading never pairs two states that are not
+  neighbours (that would read the missed motion as a branch engaged too early and bias
+  both gaps small). The run of consecutive samples ending at the latest one is carried.
 * **Only moves.** A backlash row ``[u(t-1), u(t), x(t-1), x(t)]`` is taken only where the
   input moved by more than ``input_deadband`` of the input span seen so far (the span is
   carried, and the latest sample).
 * **Holds read their anchor.** A row inside the gap holds the state the last engaged
-  branch left (eqs. 20-21); the hold just after an engaged row is one more reading of that
-  branch at the engaged row's input (:meth:`RowStream.take`; the anchor is carried).
+  branch left (eqs. 20-21); it carries nothing in eq. (29), but the hold just after an
+  engaged row is one more reading of that branch at the engaged row's input, and is used as
+  such (:func:`~genbacklash_core.online.rows.memory_regression`; the anchor is carried).
 * **The cascade.** Rows of eq. (32), with the internal ``x`` of eq. (36) propagated with the
   current estimate (the lags are carried; :func:`~.rows.cascade_memory_rows`).
   A batch start files the rows of a window of samples (:func:`window_cascade_rows`).

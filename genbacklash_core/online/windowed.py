@@ -41,7 +41,7 @@ from genbacklash_core.estimate import (
 )
 from genbacklash_core.structure import Structure
 
-from .advice import AdviceCache, BranchCoverage
+from .advice import BranchCoverage
 from .base import OnlineIdentifier
 from .feeds import Feed, RowFeed, SampleFeed
 from .fits import (
@@ -61,7 +61,7 @@ from .inputs import (
 from .seed import SeedPrior
 from .settings import WindowedSettings
 from .state import FITTED_STATES, confidence_moved, held, settled_state
-from .tracking import DeadZoneDrift, with_tracking
+from .tracking import with_tracking
 
 __all__ = ["WindowedIdentifier", "WindowedSettings"]
 
@@ -125,24 +125,18 @@ class WindowedIdentifier(OnlineIdentifier[WindowedSettings]):
 
     def reset(self) -> None:
         """Forget all samples and the estimate."""
+        self._forget()
         s = self.settings
         # a backlash alone remembers rows by branch and input region; a cascade, samples
         self._feed: Feed = (
             SampleFeed(s.window) if self._template.cascade else RowFeed(s.window, s.bins)
         )
-        self._break_next = False  # a dropped sample ended the previous call
         self._base_confidence = 0.0  # confidence of the last fit, before ageing
-        self._advice = AdviceCache()  # made again when rows, samples or reason change
-        self._structure = self._template
-        self._sign_now = self._sign_known
         self._p: FloatArray | None = None  # equation-error estimate (warm start)
         self._reported: FloatArray | None = None  # published (refined when asked)
         self._covariance: FloatArray | None = None
         self._residual = math.nan
-        self._excitation = 0.0
         self._state = EstimatorState.WARMING_UP
-        self._reason = "warming up"
-        self._samples = 0
         self._fit_samples = 0  # samples at the last fit
         self._fit_progress = 0  # the feed's progress at the last fit
         self._next_fit = self.min_samples
@@ -155,7 +149,6 @@ class WindowedIdentifier(OnlineIdentifier[WindowedSettings]):
         self._seed: SeedPrior | None = None  # a saved estimate the window still leans on
         self._seed_samples = 0  # samples of the window the seed stands for
         self._seed_progress = 0  # the feed's progress when the seed was planted
-        self._drift: DeadZoneDrift | None = None  # the tracking term of the bands
         self._estimate = Estimate.empty(self._structure)
 
     @property
