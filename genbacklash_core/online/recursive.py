@@ -67,18 +67,17 @@ from genbacklash_core.estimate import (
     EstimatorState,
     aged_confidence,
     confidence_of,
-    relative_std_of,
 )
 
 from .advice import BranchCoverage, coverage_of, excitation_advice
 from .base import OnlineIdentifier
-from .covariance import natural_covariance, natural_from_theta, natural_variances, scaled_inverse
+from .covariance import natural_covariance, natural_from_theta, scaled_inverse
 from .divergence import ErrorScale
 from .inputs import (
     settings_or_default,
     template,
 )
-from .iteration import MemorySolution, ewma, solve_memory, theta_problem
+from .iteration import Iterate, ewma, theta_problem
 from .memory import BinnedRows
 from .restart import backlash_start, cascade_start, rejected
 from .rows import (
@@ -204,7 +203,7 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
     def from_seed(self) -> bool:
         """True while the estimate still leans on a seed (:meth:`seed`): the memory has not
         refilled a branch since (and no re-initialisation replaced the seed)."""
-        return self._prior is not None and bool(
+        return self._current.prior is not None and bool(
             np.any(prior_weights(self._structure, self._memory) > 0.0)
         )
 
@@ -216,18 +215,8 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         self._mode = _WARMING
         self._ever_started = False
         self._restarts = 0
-        self._note = ""  # why the last iteration was not taken (the estimate held)
         self._why = ""  # why the identification diverged (held or stopped)
-        size = structure.n_parameters
-        # the estimate: theta (eqs. 23/33), (Phi^T Phi + R_0 + prior)^-1, residual variance
-        self._theta = np.zeros(size)
-        self._last_valid = self._theta.copy()
-        self._unit_cov = np.eye(size)
-        self._sigma2 = math.nan
-        self._pull = np.zeros((size, size))  # R_0, towards the current estimate
-        self._prior: SeedPrior | None = None  # a seed's information, fading as rows come
-        self._version = 0  # bumped whenever the estimate changes
-        self._summary: tuple[int, list[float], float] | None = None
+        self._current = Iterate(structure.n_parameters)  # theta, its information, its version
         # the memory, the rows held back while the errors are blown up, the recent samples
         self._memory = self._new_memory(row_width(structure))
         self._held_back: BinnedRows | None = None
@@ -248,7 +237,6 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         self._attempts = 0
         self._fresh = 0  # rows filed since the last batch-fit attempt (backlash)
         self._need = self._min_rows()  # fresh rows the next attempt waits for
-        self._invalid = 0  # consecutive iterates not taken
         # measures
         self._errors = ErrorScale()  # the one-step errors' running means (divergence test)
         self._scale_before = math.nan
@@ -300,12 +288,7 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         cov = scaled_inverse(prior.information)
         assert cov is not None  # (_check_seed)
         s = self.settings
-        self._theta = prior.theta.copy()
-        self._last_valid = prior.theta.copy()
-        self._unit_cov = cov
-        self._sigma2 = prior.sigma2
-        self._pull = prior.information / s.covariance_bound  # R_0: P <= bound * P_seed
-        self._prior = prior
+        self._current.seed(prior, cov, s.covariance_bound)
         self._errors.restart(prior.sigma2)
         self._last_row = [self._samples] * len(self._last_row)
         if self._structure.cascade:
@@ -314,8 +297,6 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         self._ever_started = True
         self._next_solve = self._samples + s.block
         self._reason = f"seeded from a saved estimate ({estimate.state.value})"
-        self._next_drift = 0
-        self._version += 1
         return self.estimate
 
     def _check_seed(self, prior: SeedPrior) -> None:
@@ -355,7 +336,7 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         if u.size == 0:
             return
         if self._mode in (_RUNNING, _HELD):
-            why = theta_problem(self._structure, self._theta)
+            why = theta_problem(self._structure, self._current.theta)
             if why is not None:  # e.g. a corrupted state: never iterate from it
                 self._stop(why)
         start = 0
@@ -393,7 +374,7 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         running = self._mode in (_RUNNING, _HELD)  # else: warming up or stopped
         rows, at = self._stream.take(
             self._structure,
-            self._theta if running else None,
+            self._current.theta if running else None,
             u,
             y,
             b,
@@ -416,8 +397,8 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         structure = self._structure
         used, left, right = self._errors.judge(
             structure,
-            self._theta,
-            self._unit_cov,
+            self._current.theta,
+            self._current.unit_cov,
             rows,
             ratio=self.settings.divergence_ratio,
             running=self._mode == _RUNNING,  # while held, the scale holds
@@ -494,7 +475,7 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         if self._structure.cascade and self._samples - self._settled_at >= s.check_every:
             self._settled_at = self._samples
             self._settling = settling_samples(
-                self._structure, self._structure.from_theta(self._theta)
+                self._structure, self._structure.from_theta(self._current.theta)
             )
 
     def _end_held_block(self) -> None:
@@ -585,9 +566,8 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         self._held_back = None
         if start.lags is not None:
             self._stream.lags = start.lags
-        self._prior = None
-        self._pull = start.pull
-        self._commit(start.solution)
+        self._current.start(start.solution, start.pull)
+        self._committed()
         self._errors.restart(max(sigma2, 1e-300))
         self._scale_before = math.nan
         self._attempts = 0
@@ -608,38 +588,15 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
     def _iterate(self) -> None:
         """One iteration over the memory; an invalid iterate is not taken (the estimate
         holds), and ``_MAX_INVALID`` of them in a row re-initialise from the memory."""
-        rows, _ = self._memory.rows()
-        prior = self._prior
-        weights = None if prior is None else prior_weights(self._structure, self._memory)
-        if weights is not None and not np.any(weights > 0.0):
-            self._prior = prior = weights = None  # the memory has refilled: the seed is gone
-        step = solve_memory(
-            self._structure,
-            self._theta,
-            rows,
-            self._pull,
-            prior,
-            weights,
-            (self._stream.low, self._stream.high),
-        )
-        if isinstance(step, str):
-            self._invalid += 1
-            self._note = f"the last iteration was not taken ({step})"
-            if self._invalid >= _MAX_INVALID:
-                self._stop(f"{self._invalid} iterations in a row left the valid set ({step})")
-            return
-        self._commit(step)
+        span = (self._stream.low, self._stream.high)
+        why = self._current.step(self._structure, self._memory, span)
+        if why is None:
+            self._committed()
+        elif self._current.invalid >= _MAX_INVALID:
+            self._stop(f"{self._current.invalid} iterations in a row left the valid set ({why})")
 
-    def _commit(self, solution: MemorySolution) -> None:
-        """Take an iterate as the current estimate."""
-        self._theta = solution.theta
-        self._unit_cov = solution.unit_covariance
-        if math.isfinite(solution.sigma2):
-            self._sigma2 = solution.sigma2
-        self._last_valid = solution.theta.copy()
-        self._invalid = 0
-        self._note = ""
-        self._version += 1
+    def _committed(self) -> None:
+        """An iterate was taken: its sample, and the bands' tracking term when due."""
         self._committed_at = self._samples
         self._track_drift()
 
@@ -654,8 +611,7 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         self._scale_before = self._errors.long
         self._attempts = 0
         self._fresh = self._need = len(self._memory)  # (the memory is due now)
-        self._theta = self._valid_theta()
-        self._version += 1
+        self._current.restore(self._structure)
         self._why = why
         self._initialise()
 
@@ -670,17 +626,9 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         self._next_drift = self._samples + _DRIFT_EVERY
         self._drift_at = self._samples
         rows, stamps = self._memory.rows()
-        p = np.array(natural_from_theta(structure, self._theta.tolist()))
+        p = np.array(natural_from_theta(structure, self._current.theta.tolist()))
         cols = (rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3])
         self._drift = dead_zone_drift(structure, p, cols, float(self._samples) - stamps)
-
-    def _valid_theta(self) -> FloatArray:
-        """The last valid estimate (the current one unless it was corrupted)."""
-        return (
-            self._theta
-            if theta_problem(self._structure, self._theta) is None
-            else self._last_valid.copy()
-        )
 
     # ------------------------------------------------------------------ the estimate
 
@@ -702,14 +650,9 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
             return Estimate.empty(
                 structure, self._samples, excitation, EstimatorState.WARMING_UP, reason
             )
-        theta = self._theta
-        sigma2 = self._sigma2 if math.isfinite(self._sigma2) else self._errors.long
-        if self._summary is None or self._summary[0] != self._version:
-            theta_list = theta.tolist()
-            p_list = natural_from_theta(structure, theta_list)
-            variances = natural_variances(structure, theta_list, sigma2 * self._unit_cov)
-            self._summary = (self._version, p_list, relative_std_of(p_list, variances))
-        _, p_list, rel = self._summary
+        current = self._current
+        sigma2 = current.sigma2 if math.isfinite(current.sigma2) else self._errors.long
+        p_list, rel = current.summary(structure, sigma2)
         idle = self._samples - max(self._last_row)  # since the newest informative row
         age = self._samples - min(self._last_row)  # of the branch whose newest row is oldest
         if self._mode in (_HELD, _STOPPED):
@@ -721,7 +664,7 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         confidence = aged_confidence(
             confidence_of(state, rel, s.converged_std), float(age), s.confidence_half_life
         )
-        key = (self._version, self._events, state, self._reason, self._note, self._restarts)
+        key = (current.version, self._events, state, self._reason, current.note, self._restarts)
         if self._published is not None and self._published[0] == key:
             last = self._published[1]
             if not confidence_moved(confidence, last.confidence, floor=0.0):
@@ -742,12 +685,12 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
                 reason = f"{self._reason}; {reason}"
             if self._restarts:
                 reason += f"; re-initialised {self._restarts} time(s)"
-        if self._note and state is not EstimatorState.DIVERGED:
-            reason += f"; {self._note}"
+        if current.note and state is not EstimatorState.DIVERGED:
+            reason += f"; {current.note}"
         recent = self._errors.recent
         residual = recent if math.isfinite(recent) else sigma2
-        theta_copy = theta.copy()
-        cov_theta = sigma2 * self._unit_cov  # sigma^2 (Phi^T Phi + R_0 + prior)^-1
+        theta_copy = current.theta.copy()
+        cov_theta = sigma2 * current.unit_cov  # sigma^2 (Phi^T Phi + R_0 + prior)^-1
         drift = self._drift
         p_now = np.array(p_list)
         # the drift goes on between its fits (one per _DRIFT_EVERY samples): counted to the
