@@ -17,12 +17,11 @@ The window length trades accuracy against tracking: the estimate is a least-squa
 ``W`` samples, so its standard deviation falls like ``1/sqrt(W)``, while a parameter that drifts
 linearly is tracked with a lag of about ``W/2 + K/2`` samples.
 
-This module holds the identifier itself: the schedule, the window or row memory it feeds, and
-what it publishes. The parts it shares with the recursive identifier stand in the sibling
-modules of :mod:`genbacklash_core.online` (rows and the sample rule in ``rows``, the row
-memory in ``memory``, the fits in ``fits``, the seed's prior in ``seed``, the covariance in
-``covariance``, state and confidence in ``state``, excitation advice in ``advice``, the input
-checks in ``inputs``, the bands' tracking term in ``tracking``).
+This module holds the identifier itself: the schedule, the cold and warm fits, and what it
+publishes. What it fits on (the rows of a backlash alone, the samples of a cascade) stands in
+:mod:`~genbacklash_core.online.feeds`; the interface it shares with the recursive identifier
+in :mod:`~genbacklash_core.online.base`, and the other parts in the sibling modules of
+:mod:`genbacklash_core.online` (see there), one concept each.
 """
 
 from __future__ import annotations
