@@ -11,6 +11,8 @@ Both identifiers follow one interface (``update(u, y) -> Estimate``, ``update_ma
 The modules below them hold one concept each, and what the two share stands once:
 
 ========================  ==============================================================
+``base``                  the interface both share: construction, sample intake, the
+                          seed's start (:class:`~.base.OnlineIdentifier`)
 ``settings``              the two frozen settings dataclasses
 ``inputs``                structure and settings arguments, non-finite samples, the input
                           deadband
@@ -20,6 +22,9 @@ The modules below them hold one concept each, and what the two share stands once
 ``advice``                branch coverage and excitation advice
 ``seed``                  a saved estimate as prior information (``seed``)
 ``fits``                  the windowed fits and the batch (re-)initialisation both use
+``feeds``                 the windowed identifier's data: rows (a backlash) or samples
+``stream``                the recursive identifier's rows as samples come
+``restart``               the recursive identifier's batch start
 ``iteration``             the recursive identifier's iteration over its memory
 ``divergence``            the recursive identifier's divergence test (error scales)
 ``covariance``            the delta method of eq. (34): natural parameters and covariance

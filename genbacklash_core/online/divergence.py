@@ -10,7 +10,8 @@ the bar it is judged against, and it holds while the errors are blown up. A thir
 the raw squared errors, is the residual the estimate reports.
 
 (The windowed identifier needs no such test: each fit sees its whole window again, and rows
-far off an accepted fit are forgotten instead, see its ``_purge_outliers``.)
+far off an accepted fit are forgotten instead, see
+:meth:`~genbacklash_core.online.feeds.RowFeed.purge`.)
 
 Examples
 --------
@@ -31,9 +32,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from genbacklash_core._typing import FloatArray
+from genbacklash_core._typing import BoolArray, FloatArray
+from genbacklash_core.structure import Structure
 
 from .iteration import ewma
+from .rows import memory_regression
 
 __all__ = ["ErrorScale"]
 
@@ -67,6 +70,31 @@ class ErrorScale:
             limit = ratio * ratio * self.long  # (not **: an OverflowError for a huge ratio)
             self.long = ewma(np.minimum(squared, limit), 1.0 / _LONG_MEMORY, self.long)
             self.count += squared.size
+
+    def judge(
+        self,
+        structure: Structure,
+        theta: FloatArray,
+        unit_cov: FloatArray,
+        rows: FloatArray,
+        *,
+        ratio: float,
+        running: bool,
+    ) -> tuple[BoolArray, BoolArray, BoolArray]:
+        """Take the a priori one-step errors of new memory ``rows`` at ``theta`` (eqs.
+        29/37), normalised by their spread ``1 + phi P phi^T`` (``P``: ``unit_cov``), as in
+        :meth:`track`. Returns which rows carry information of their own, and which of those
+        are of the left and of the right branch
+        (:func:`~genbacklash_core.online.rows.memory_regression`)."""
+        p = structure.from_theta(theta)
+        # the rows' own information (holds re-read an anchor: no excitation, no new age)
+        phi, target, used, left, right = memory_regression(structure, p, rows, holds=False)
+        errors = target - phi @ theta  # a priori one-step errors, eqs. (29)/(37)
+        # their variance is sigma^2 (1 + phi P phi^T): a row where the memory knows little
+        # (a region not seen yet) may miss by more without anything being wrong
+        spread = 1.0 + np.einsum("ij,jk,ik->i", phi, unit_cov, phi)
+        self.track(errors * errors, errors * errors / spread, ratio=ratio, running=running)
+        return used, left, right
 
     def blown(self, ratio: float) -> bool:
         """The short-term error exceeds ``ratio`` times its scale (in RMS), once the scale

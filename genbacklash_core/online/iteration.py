@@ -10,8 +10,10 @@ seed, the seed's information ``W`` weighted by what the memory has not refilled
     (Phi^T Phi + R_0 + W) theta_new = Phi^T z + R_0 theta + W theta_seed
 
 :func:`solve_memory` is that one iteration; :func:`settle_memory` iterates it from a batch
-fit until the estimate stops moving (a start or restart). :func:`ewma` is the running
-average the identifier keeps its errors and its excitation with.
+fit until the estimate stops moving (a start or restart). :class:`Iterate` is the current
+estimate the iterations update: an iterate that leaves the valid set is not taken, and the
+last valid one stands. :func:`ewma` is the running average the identifier keeps its errors
+and its excitation with.
 
 Examples
 --------
@@ -42,13 +44,22 @@ import numpy as np
 
 from genbacklash_core._typing import FloatArray
 from genbacklash_core.errors import GenBacklashError
+from genbacklash_core.estimate import relative_std_of
 from genbacklash_core.structure import Structure
 
-from .covariance import scaled_inverse
+from .covariance import natural_from_theta, natural_variances, scaled_inverse
+from .memory import BinnedRows
 from .rows import memory_regression
-from .seed import SeedPrior
+from .seed import SeedPrior, prior_weights
 
-__all__ = ["MemorySolution", "ewma", "settle_memory", "solve_memory", "theta_problem"]
+__all__ = [
+    "Iterate",
+    "MemorySolution",
+    "ewma",
+    "settle_memory",
+    "solve_memory",
+    "theta_problem",
+]
 
 _INIT_ITERATIONS = 10  # warm iterations over the memory after a batch fit
 _INIT_TOL = 1e-6  # they stop when no parameter moves more than this (relative)
@@ -154,6 +165,94 @@ def settle_memory(
     if not math.isfinite(found.sigma2):
         return f"only {found.rows} informative rows for {structure.n_parameters} parameters"
     return found, pull
+
+
+class Iterate:
+    """The recursive identifier's current estimate and how it was reached.
+
+    ``theta`` (eqs. 23/33), its unit covariance ``(Phi^T Phi + R_0 + W)^-1``, the residual
+    variance ``sigma2`` (NaN until known), the pull ``R_0`` and a seed's prior ``W`` (until
+    the memory has refilled), the last valid ``theta``, the iterations not taken in a row
+    and why (``note``), and a ``version`` bumped whenever the estimate changes.
+
+    Parameters
+    ----------
+    size : int
+        Parameters of the separated vector.
+    """
+
+    def __init__(self, size: int) -> None:
+        self.theta = np.zeros(size)
+        self.last_valid = self.theta.copy()
+        self.unit_cov = np.eye(size)
+        self.sigma2 = math.nan
+        self.pull = np.zeros((size, size))  # R_0, towards the current estimate
+        self.prior: SeedPrior | None = None  # a seed's information, fading as rows come
+        self.version = 0
+        self.invalid = 0  # consecutive iterations not taken
+        self.note = ""  # why the last iteration was not taken (the estimate held)
+        self._summary: tuple[int, list[float], float] | None = None
+
+    def seed(self, prior: SeedPrior, unit_cov: FloatArray, covariance_bound: float) -> None:
+        """Start from a saved estimate's ``prior`` (``unit_cov``: its information's inverse)."""
+        self.theta = prior.theta.copy()
+        self.last_valid = prior.theta.copy()
+        self.unit_cov = unit_cov
+        self.sigma2 = prior.sigma2
+        self.pull = prior.information / covariance_bound  # R_0: P <= bound * P_seed
+        self.prior = prior
+        self.version += 1
+
+    def start(self, solution: MemorySolution, pull: FloatArray) -> None:
+        """Start from a batch start's settled ``solution`` and its ``pull``."""
+        self.prior = None
+        self.pull = pull
+        self.commit(solution)
+
+    def commit(self, solution: MemorySolution) -> None:
+        """Take an iterate as the current estimate."""
+        self.theta = solution.theta
+        self.unit_cov = solution.unit_covariance
+        if math.isfinite(solution.sigma2):
+            self.sigma2 = solution.sigma2
+        self.last_valid = solution.theta.copy()
+        self.invalid = 0
+        self.note = ""
+        self.version += 1
+
+    def step(
+        self, structure: Structure, memory: BinnedRows, input_range: tuple[float, float]
+    ) -> str | None:
+        """One iteration over ``memory`` (:func:`solve_memory`), the seed's prior weighted by
+        what the memory has not refilled; taken, or why not (the estimate then holds)."""
+        rows, _ = memory.rows()
+        prior = self.prior
+        weights = None if prior is None else prior_weights(structure, memory)
+        if weights is not None and not np.any(weights > 0.0):
+            self.prior = prior = weights = None  # the memory has refilled: the seed is gone
+        step = solve_memory(structure, self.theta, rows, self.pull, prior, weights, input_range)
+        if isinstance(step, str):
+            self.invalid += 1
+            self.note = f"the last iteration was not taken ({step})"
+            return step
+        self.commit(step)
+        return None
+
+    def restore(self, structure: Structure) -> None:
+        """Go back to the last valid estimate if the current one was corrupted."""
+        if theta_problem(structure, self.theta) is not None:
+            self.theta = self.last_valid.copy()
+        self.version += 1
+
+    def summary(self, structure: Structure, sigma2: float) -> tuple[list[float], float]:
+        """The natural parameters (eq. 34) and their largest relative standard deviation
+        at residual variance ``sigma2``; computed once per version."""
+        if self._summary is None or self._summary[0] != self.version:
+            theta_list = self.theta.tolist()
+            p_list = natural_from_theta(structure, theta_list)
+            variances = natural_variances(structure, theta_list, sigma2 * self.unit_cov)
+            self._summary = (self.version, p_list, relative_std_of(p_list, variances))
+        return self._summary[1], self._summary[2]
 
 
 def ewma(values: FloatArray, alpha: float, start: float) -> float:

@@ -25,7 +25,11 @@ and levels the bins by water filling; :class:`BinnedRows` (the recursive identif
 structures) holds rows of any width (:func:`~genbacklash_core.online.rows.row_width`), keeps
 ``per_direction`` rows per direction of the move (``1 / (1 - forgetting)``, the branch
 memory) and a floor per region however old, and stamps each row with its sample so the
-divergence test and the tracking term can age it.
+divergence test and the tracking term can age it. With the recursive identifier's floor of
+``ceil(M / (2 bins))`` rows, a wearing gap is tracked wherever the joint works (about
+``M / 2`` rows of the branch behind), a joint at rest or moving one way for minutes keeps
+what it knew about the rest, and a narrow sweep does not bend the whole polynomial to its
+part of the range.
 
 Examples
 --------

@@ -9,27 +9,14 @@ A drivetrain delivers its information in moves and reversals separated by long d
 1 kHz a command held for ten readings repeats one state ten times. So the memory here holds
 *rows*, not samples:
 
-* **The sample rule.** A row pairs ``x(t)`` with ``x(t-1)`` (the cascade: with
-  ``x(t-i)``, ``y(t-j)``); it is formed only when those samples are consecutive on the
-  encoder's clock (``breaks``, :mod:`genbacklash_core.samples`). A lost reading never pairs
-  two states that are not neighbours (that would read the missed motion as a branch engaged
-  too early and bias both gaps small).
-* **Only moves.** A row is kept only when the input moved (a step beyond ``input_deadband``
-  of the input span seen): a dwell or a held command repeats the previous state and carries
-  nothing new, so it never pushes anything out of the memory.
-* **Binned memory.** Rows are filed by the direction of the move (down: the left branch,
-  eq. 18; up: the right branch, eq. 19) and by where the input was, in ``bins`` equal parts of
-  the input range of the rows seen so far. Each direction keeps its newest
-  ``M = 1 / (1 - forgetting)`` rows, except that every region keeps its newest
-  ``ceil(M / (2 bins))`` rows however old. Old information is thus forgotten only as newer
-  rows of the same branch arrive, and never entirely where no new data cover the region: a
-  wearing gap is tracked wherever the joint works (about ``M / 2`` rows of the branch
-  behind), a joint at rest or moving one way for minutes keeps what it knew about the rest,
-  and a narrow sweep does not bend the whole polynomial to its part of the range.
-* **Holds read their anchor.** A row inside the gap holds the state the last engaged
-  branch left (eqs. 20-21); it carries nothing in eq. (29), but the hold just after an
-  engaged row is one more reading of that branch at the engaged row's input, and is used as
-  such (:func:`~genbacklash_core.online.rows.memory_regression`).
+* **Rows of moves.** A row pairs samples that are consecutive on the encoder's clock and
+  between which the input moved; a hold reads the anchor its engaged row left
+  (:mod:`~genbacklash_core.online.stream`). A dwell or a held command adds no row, so it
+  never pushes anything out of the memory.
+* **Binned memory.** Rows are filed by branch and input region; each branch keeps its newest
+  ``M = 1 / (1 - forgetting)`` rows and every region a floor of rows however old
+  (:class:`~genbacklash_core.online.memory.BinnedRows`): old information is forgotten only as
+  newer rows of the same branch arrive, never entirely where no new data cover the region.
 * **One iteration per block.** Every ``block`` samples with new rows, one warm-started
   iteration of the paper's method runs over the whole memory: the rows are re-evaluated at
   the current estimate (eqs. 25-28) and the least squares of eq. (29) / (37) is solved, with
@@ -41,10 +28,10 @@ A drivetrain delivers its information in moves and reversals separated by long d
   Its cost grows with the memory (~40 us for 1000 rows), not with the samples; a block
   without new rows costs nothing and changes nothing.
 * **Cold start from everything seen.** Until the first estimate, every informative row since
-  the start is kept (binned the same way); the batch iteration
-  (:func:`~genbacklash_core.identify.identify_backlash`) runs on them whenever the memory has
-  grown by a quarter. The cascade's internal ``x`` needs an estimate, so it starts from a
-  batch fit over its recent ``buffer`` samples instead.
+  the start is kept (binned the same way); a batch start
+  (:mod:`~genbacklash_core.online.restart`) runs on them whenever the memory has grown by a
+  quarter. The cascade's internal ``x`` needs an estimate, so it starts from a batch fit
+  over its recent ``buffer`` samples instead.
 * **No excitation is not divergence.** Without new rows nothing changes: the estimate holds,
   the state is ``no_excitation`` after ``idle_samples`` samples without information, and the
   confidence fades with the age of the information
@@ -63,14 +50,8 @@ fits' attempts), so they agree to rounding whatever the chunking; between two su
 only the sample count (and the aged confidence) of the estimate changes.
 
 This module holds the identifier itself (the queue, the blocks, when to iterate, hold or
-re-initialise, what it publishes); its iteration stands in
-:mod:`~genbacklash_core.online.iteration` and its divergence test in
-:mod:`~genbacklash_core.online.divergence`. The parts it shares with the windowed identifier
-stand in the sibling modules of :mod:`genbacklash_core.online` (the memory rows and the
-sample rule in ``rows``, :class:`~genbacklash_core.online.memory.BinnedRows` in ``memory``,
-the seed's prior in ``seed``, the batch fit in ``fits``, the covariance in ``covariance``,
-state and confidence in ``state``, excitation advice in ``advice``, the input checks in
-``inputs``, the bands' tracking term in ``tracking``).
+re-initialise, what it publishes); the other parts stand in the sibling modules of
+:mod:`genbacklash_core.online` (see there), one concept each.
 """
 
 from __future__ import annotations
@@ -79,57 +60,45 @@ import math
 
 import numpy as np
 
-from genbacklash_core._typing import ArrayLike, BoolArray, FloatArray, IntArray
+from genbacklash_core._typing import BoolArray, FloatArray, IntArray
 from genbacklash_core.errors import GenBacklashError
 from genbacklash_core.estimate import (
     Estimate,
     EstimatorState,
     aged_confidence,
-    as_sample,
     confidence_of,
-    relative_std_of,
 )
-from genbacklash_core.identify import _switching
-from genbacklash_core.samples import run_lengths
-from genbacklash_core.structure import Structure
 
-from .advice import AdviceCache, BranchCoverage, coverage_of, excitation_advice
-from .covariance import natural_covariance, natural_from_theta, natural_variances, scaled_inverse
+from .advice import BranchCoverage, coverage_of, excitation_advice
+from .base import OnlineIdentifier
+from .covariance import natural_covariance, natural_from_theta, scaled_inverse
 from .divergence import ErrorScale
-from .fits import cold_fit
 from .inputs import (
-    InputLimits,
-    accept_sample,
-    checked_series,
-    deadband,
     settings_or_default,
     template,
 )
-from .iteration import MemorySolution, ewma, settle_memory, solve_memory, theta_problem
-from .memory import BinnedRows, pair_series
+from .iteration import Iterate, ewma, theta_problem
+from .memory import BinnedRows
+from .restart import backlash_start, cascade_start, rejected
 from .rows import (
-    CascadeLags,
-    SampleRing,
-    cascade_memory_rows,
-    memory_regression,
     row_width,
     settling_samples,
 )
-from .seed import SeedPrior, prior_weights, seed_prior
+from .seed import SeedPrior, prior_weights
 from .settings import RecursiveSettings
 from .state import confidence_moved, held, settled_state
-from .tracking import DeadZoneDrift, dead_zone_drift, with_tracking
+from .stream import RowStream
+from .tracking import dead_zone_drift, with_tracking
 
 __all__ = ["RecursiveIdentifier", "RecursiveSettings"]
 
-_MAX_REJECTIONS = 8  # restarts that may be rejected for a poor fit before any fit is taken
 _MAX_INVALID = 8  # consecutive invalid iterates before a re-initialisation
 _DRIFT_EVERY = 250  # samples between two fits of the bands' tracking term (~0.3 ms each)
 
 _WARMING, _RUNNING, _HELD, _STOPPED = "warming", "running", "held", "stopped"
 
 
-class RecursiveIdentifier:
+class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
     """Online identification over a binned memory of regression rows (see the module notes).
 
     Parameters
@@ -184,28 +153,12 @@ class RecursiveIdentifier:
         sign: float | None = None,
         settings: RecursiveSettings | None = None,
     ) -> None:
-        self._template, self._sign_known = template(degree, na, nb, sign)
-        self.settings = settings = settings_or_default(settings, RecursiveSettings)
-        both_branches = 2 * settings.branch_memory
-        # larger samples would overflow the regression: treated like NaN (``nonfinite``);
-        # the longest regression here is the cascade's buffer or both branches' memories
-        self._limits = InputLimits.of(self._template.degree, max(settings.buffer, both_branches))
-        self._estimate: Estimate | None = None
-        self.reset()
+        shape = template(degree, na, nb, sign)
+        settings = settings_or_default(settings, RecursiveSettings)
+        # the longest regression: the cascade's buffer or both branches' memories
+        super().__init__(shape, settings, max(settings.buffer, 2 * settings.branch_memory))
 
-    # ------------------------------------------------------------------ public interface
-
-    @property
-    def structure(self) -> Structure:
-        """The model structure (with the detected sense once known)."""
-        return self._structure
-
-    @property
-    def estimate(self) -> Estimate:
-        """The latest estimate."""
-        if self._estimate is None:
-            self._estimate = self._publish()
-        return self._estimate
+    _CHECK_FOLLOWS = True  # (it always did)
 
     @property
     def restarts(self) -> int:
@@ -240,7 +193,7 @@ class RecursiveIdentifier:
             return ""
         need = 0 if self._ever_started else max(self._min_rows() - len(self._memory), 0)
         cover = self.coverage
-        seen = bool(cover.up.sum() + cover.down.sum()) or self._input_high > self._input_low
+        seen = bool(cover.up.sum() + cover.down.sum()) or self._stream.high > self._stream.low
         queued = any(np.ptp(u) > 0.0 for u, _, _ in self._queue if u.size)
         if not seen and queued:
             return ""  # the samples are not looked at before the first attempt
@@ -250,66 +203,41 @@ class RecursiveIdentifier:
     def from_seed(self) -> bool:
         """True while the estimate still leans on a seed (:meth:`seed`): the memory has not
         refilled a branch since (and no re-initialisation replaced the seed)."""
-        return self._prior is not None and bool(
+        return self._current.prior is not None and bool(
             np.any(prior_weights(self._structure, self._memory) > 0.0)
         )
 
     def reset(self) -> None:
         """Forget all samples and the estimate."""
+        self._forget()
         s = self.settings
         structure = self._template
-        self._structure = structure
-        self._sign_now = self._sign_known
         self._mode = _WARMING
         self._ever_started = False
         self._restarts = 0
-        self._samples = 0
-        self._reason = "warming up"
-        self._note = ""  # why the last iteration was not taken (the estimate held)
         self._why = ""  # why the identification diverged (held or stopped)
-        self._estimate = None
-        size = structure.n_parameters
-        # the estimate: theta (eqs. 23/33), (Phi^T Phi + R_0 + prior)^-1, residual variance
-        self._theta = np.zeros(size)
-        self._last_valid = self._theta.copy()
-        self._unit_cov = np.eye(size)
-        self._sigma2 = math.nan
-        self._pull = np.zeros((size, size))  # R_0, towards the current estimate
-        self._prior: SeedPrior | None = None  # a seed's information, fading as rows come
-        self._version = 0  # bumped whenever the estimate changes
-        self._summary: tuple[int, list[float], float] | None = None
+        self._current = Iterate(structure.n_parameters)  # theta, its information, its version
         # the memory, the rows held back while the errors are blown up, the recent samples
         self._memory = self._new_memory(row_width(structure))
         self._held_back: BinnedRows | None = None
-        self._recent = SampleRing(s.buffer)
+        self._stream = RowStream(structure, s.buffer)  # the recent samples; carried signals
         self._pending: list[tuple[FloatArray, IntArray]] = []  # rows of the current block
         self._queue: list[tuple[FloatArray, FloatArray, BoolArray]] = []  # samples not seen
         self._queued = 0
         self._events = 0  # queue flushes (the estimate's excitation and ages change there)
         self._published: tuple[tuple[object, ...], Estimate] | None = None
-        self._advice = AdviceCache()  # made again when an event changed the rows
-        # carried signals
-        self._run = 0  # consecutive samples ending at the latest one
-        self._u1 = self._y1 = 0.0  # the latest sample (backlash)
-        self._anchor = (0.0, 0.0)  # u_a, d_a of the latest engaged row (backlash)
-        self._lags = CascadeLags.unknown(structure)  # cascade
-        self._drift: DeadZoneDrift | None = None  # the tracking term of the bands
         self._next_drift = 0  # the sample from which the next iterate refits it
         self._drift_at = 0  # the sample it was fitted at
         self._committed_at = 0  # the sample of the last iterate taken
         self._settling = 0
         self._settled_at = 0  # sample count of the last settling-horizon update
-        self._break_next = False  # a dropped sample ended the previous call
-        self._input_low, self._input_high = math.inf, -math.inf
         # schedule
         self._next_solve = 0
         self._next_attempt = s.initial_samples
         self._attempts = 0
         self._fresh = 0  # rows filed since the last batch-fit attempt (backlash)
         self._need = self._min_rows()  # fresh rows the next attempt waits for
-        self._invalid = 0  # consecutive iterates not taken
         # measures
-        self._excitation = 0.0
         self._errors = ErrorScale()  # the one-step errors' running means (divergence test)
         self._scale_before = math.nan
         blocks = 3 if structure.cascade else 2
@@ -356,24 +284,12 @@ class RecursiveIdentifier:
         >>> after.state.value, bool(np.max(np.abs(after.parameters - truth.parameters())) < 0.02)
         ('converged', True)
         """
-        prior = seed_prior(self._template, self._sign_known, estimate)
+        prior = self._restart_from(estimate)
         cov = scaled_inverse(prior.information)
-        if cov is None:  # seed_prior checked that it is positive definite
-            raise GenBacklashError("cannot seed: the estimate's information is singular")
-        self.reset()
+        assert cov is not None  # (_check_seed)
         s = self.settings
-        saved = estimate.structure
-        self._structure = Structure(saved.degree, saved.na, saved.nb, saved.sign)
-        self._sign_now = True
-        self._theta = prior.theta.copy()
-        self._last_valid = prior.theta.copy()
-        self._unit_cov = cov
-        self._sigma2 = prior.sigma2
-        self._pull = prior.information / s.covariance_bound  # R_0: P <= bound * P_seed
-        self._prior = prior
+        self._current.seed(prior, cov, s.covariance_bound)
         self._errors.restart(prior.sigma2)
-        self._excitation = estimate.excitation
-        self._samples = estimate.samples
         self._last_row = [self._samples] * len(self._last_row)
         if self._structure.cascade:
             self._settling = settling_samples(self._structure, prior.p)
@@ -381,40 +297,11 @@ class RecursiveIdentifier:
         self._ever_started = True
         self._next_solve = self._samples + s.block
         self._reason = f"seeded from a saved estimate ({estimate.state.value})"
-        self._drift, self._next_drift = None, 0  # the saved covariance carries its bands
-        self._version += 1
         return self.estimate
 
-    def update(self, u: float, y: float, *, follows: bool = True) -> Estimate:
-        """Take one sample. Returns the current estimate.
-
-        ``follows=False``: the sample does not follow the previous one on the encoder's
-        clock (a lost reading in between), so no row pairs the two.
-        """
-        uf, yf = as_sample(u, y)
-        if not isinstance(follows, (bool, np.bool_)):
-            raise GenBacklashError(f"follows must be True or False, got {follows!r}")
-        if not accept_sample(uf, yf, self._limits, self.settings.nonfinite, self._samples):
-            self._break_next = True  # dropped: the next sample does not follow the last
-            return self.estimate
-        self._take(np.array([uf]), np.array([yf]), np.array([not follows]))
-        return self.estimate
-
-    def update_many(self, u: ArrayLike, y: ArrayLike, breaks: ArrayLike | None = None) -> Estimate:
-        """Take a series of samples; the same as :meth:`update` on each, vectorised.
-
-        ``breaks[k]`` True: sample ``k`` does not follow sample ``k-1`` on the encoder's clock
-        (a lost reading, a gap; :func:`~genbacklash_core.samples.sample_breaks`), so no row
-        pairs them; ``breaks[0]`` refers to the previous call's last sample. Default: every
-        sample follows its predecessor.
-        """
-        uu, yy, bb, dropped_last = checked_series(
-            u, y, breaks, self._limits, self.settings.nonfinite
-        )
-        if dropped_last:
-            self._break_next = True
-        self._take(uu, yy, bb)
-        return self.estimate
+    def _check_seed(self, prior: SeedPrior) -> None:
+        if scaled_inverse(prior.information) is None:  # seed_prior checked that it is
+            raise GenBacklashError("cannot seed: the estimate's information is singular")
 
     def refit(self) -> Estimate:
         """Iterate over the memory now, with the rows since the last block boundary, instead
@@ -448,12 +335,8 @@ class RecursiveIdentifier:
         self._estimate = None
         if u.size == 0:
             return
-        if self._break_next:
-            b = b.copy()
-            b[0] = True
-            self._break_next = False
         if self._mode in (_RUNNING, _HELD):
-            why = theta_problem(self._structure, self._theta)
+            why = theta_problem(self._structure, self._current.theta)
             if why is not None:  # e.g. a corrupted state: never iterate from it
                 self._stop(why)
         start = 0
@@ -488,103 +371,35 @@ class RecursiveIdentifier:
     def _piece(self, u: FloatArray, y: FloatArray, b: BoolArray, first: int) -> None:
         """Rows, errors and excitation of a stretch of samples within one block."""
         s = self.settings
-        self._recent.extend(u, y, b)
-        low = np.minimum(np.minimum.accumulate(u), self._input_low)
-        high = np.maximum(np.maximum.accumulate(u), self._input_high)
-        self._input_low, self._input_high = float(low[-1]), float(high[-1])
-        band = deadband(s.input_deadband, high - low)  # per sample: the span seen so far
-        run_before = self._run
-        run = run_lengths(b, run_before)
-        self._run = int(min(run[-1], 1 << 40))
-        if self._structure.cascade:
-            informative = self._piece_cascade(u, y, run, run_before, band, first)
-        else:
-            informative = self._piece_backlash(u, y, run, band, first)
-        self._excitation = ewma(informative, 1.0 / s.excitation_memory, self._excitation)
-
-    def _piece_backlash(
-        self, u: FloatArray, y: FloatArray, run: IntArray, deadband: FloatArray, first: int
-    ) -> FloatArray:
-        """Rows ``[u(t-1), u(t), x(t-1), x(t)]``: consecutive samples whose input moved."""
-        n = u.size
-        u_prev = np.concatenate([[self._u1], u[:-1]])
-        y_prev = np.concatenate([[self._y1], y[:-1]])
-        self._u1, self._y1 = float(u[-1]), float(y[-1])
-        taken = (run >= 2) & (np.abs(u - u_prev) > deadband)  # the sample rule; it moved
-        at = np.flatnonzero(taken)
-        if at.size == 0:
-            if np.any(run < 2):
-                self._anchor = (0.0, 0.0)  # a lost reading: the state is not known
-            return np.zeros(n)
-        rows = np.zeros((at.size, 6))
-        rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3] = u_prev[at], u[at], y_prev[at], y[at]
-        stamps = np.asarray(first + at, dtype=np.intp)
-        if self._mode in (_RUNNING, _HELD):
-            self._anchor_rows(rows, at, run)
-            return self._judge(rows, stamps, at, n)
-        self._pending.append((rows, stamps))  # warming up or stopped: filed at the attempt
-        return np.asarray(taken, dtype=np.float64)
-
-    def _anchor_rows(self, rows: FloatArray, at: IntArray, run: IntArray) -> None:
-        """Fill the anchors (``u_a``, ``d_a``; :func:`memory_regression`) of new backlash
-        rows taken at samples ``at`` of a piece, classified at the current estimate.
-
-        A hold's anchor is the row taken just before it when that row engaged a branch and
-        no reading was lost between them (dwells between them do not matter: the state
-        holds). Later holds of the same episode get none: one more reading per engagement
-        keeps a narrow oscillation from flooding the memory with readings of one point, and
-        was the most accurate choice on Example 1 (parameter RMSE 0.0044 over 1000 samples,
-        against 0.0045 with every hold and 0.0048 without holds)."""
-        p = self._structure.from_theta(self._theta)
-        f1, f2 = _switching(self._structure, p, rows[:, 1], rows[:, 2])  # eqs. (27)-(28)
-        engaged = (f1 + f2) > 0.0
-        direction = np.where(f1 > 0.0, -1.0, 1.0)
-        lost = np.cumsum(run < 2)  # readings lost (chain breaks) up to each sample
-        u_prev = np.concatenate([[self._anchor[0]], rows[:-1, 1]])
-        d_prev = np.concatenate([[self._anchor[1]], np.where(engaged, direction, 0.0)[:-1]])
-        lost_prev = np.concatenate([[0], lost[at[:-1]]])
-        anchored = ~engaged & (d_prev != 0.0) & (lost[at] == lost_prev)
-        rows[:, 4] = np.where(anchored, u_prev, 0.0)
-        rows[:, 5] = np.where(anchored, d_prev, 0.0)
-        # the next piece's first row may anchor on this piece's last one
-        ends_engaged = bool(engaged[-1]) and lost[-1] == lost[at[-1]]
-        self._anchor = (float(rows[-1, 1]), float(direction[-1])) if ends_engaged else (0.0, 0.0)
-
-    def _piece_cascade(
-        self,
-        u: FloatArray,
-        y: FloatArray,
-        run: IntArray,
-        run_before: int,
-        deadband: FloatArray,
-        first: int,
-    ) -> FloatArray:
-        """Rows of eq. (32), the internal ``x`` propagated with the current estimate."""
-        n = u.size
-        if self._mode not in (_RUNNING, _HELD):
-            return np.zeros(n)  # the next batch fit takes the recent samples
-        p = self._structure.from_theta(self._theta)
-        rows, at, self._lags = cascade_memory_rows(
-            self._structure, p, self._lags, u, y, run, run_before, deadband, self._settling
+        running = self._mode in (_RUNNING, _HELD)  # else: warming up or stopped
+        rows, at = self._stream.take(
+            self._structure,
+            self._current.theta if running else None,
+            u,
+            y,
+            b,
+            s.input_deadband,
+            self._settling,
         )
-        if at.size == 0:
-            return np.zeros(n)
-        return self._judge(rows, np.asarray(first + at, dtype=np.intp), at, n)
+        informative = np.zeros(u.size)
+        if at.size:
+            stamps = np.asarray(first + at, dtype=np.intp)
+            if running:
+                informative = self._judge(rows, stamps, at, u.size)
+            else:  # filed at the next batch-fit attempt
+                self._pending.append((rows, stamps))
+                informative[at] = 1.0
+        self._excitation = ewma(informative, 1.0 / s.excitation_memory, self._excitation)
 
     def _judge(self, rows: FloatArray, stamps: IntArray, at: IntArray, n: int) -> FloatArray:
         """A priori one-step errors of new rows at the current estimate (eqs. 24/35), kept
         for the block's end; which samples informed which block."""
         structure = self._structure
-        p = structure.from_theta(self._theta)
-        # the rows' own information (holds re-read an anchor: no excitation, no new age)
-        phi, target, used, left, right = memory_regression(structure, p, rows, holds=False)
-        errors = target - phi @ self._theta  # a priori one-step errors, eqs. (29)/(37)
-        # their variance is sigma^2 (1 + phi P phi^T): a row where the memory knows little
-        # (a region not seen yet) may miss by more without anything being wrong
-        spread = 1.0 + np.einsum("ij,jk,ik->i", phi, self._unit_cov, phi)
-        self._errors.track(
-            errors * errors,
-            errors * errors / spread,
+        used, left, right = self._errors.judge(
+            structure,
+            self._current.theta,
+            self._current.unit_cov,
+            rows,
             ratio=self.settings.divergence_ratio,
             running=self._mode == _RUNNING,  # while held, the scale holds
         )
@@ -660,7 +475,7 @@ class RecursiveIdentifier:
         if self._structure.cascade and self._samples - self._settled_at >= s.check_every:
             self._settled_at = self._samples
             self._settling = settling_samples(
-                self._structure, self._structure.from_theta(self._theta)
+                self._structure, self._structure.from_theta(self._current.theta)
             )
 
     def _end_held_block(self) -> None:
@@ -708,15 +523,10 @@ class RecursiveIdentifier:
     # ------------------------------------------------------------------ (re)initialisation
 
     def _initialise(self) -> bool:
-        """Start (or restart) from a batch fit, then iterate over the memory until settled.
-
-        A backlash fits every row of its memory (or, while the errors are blown up, the rows
-        held back since); the cascade its recent samples: the whole buffer at first, the
-        latest ``initial_samples`` on retried restarts. A restart must also fit: its residual
-        may not exceed ``divergence_ratio`` times the running one before the divergence
-        (data holding the fault would not), until a few attempts were rejected (the noise
-        may really have grown). Returns whether it started.
-        """
+        """Start (or restart) from a batch fit (:mod:`~genbacklash_core.online.restart`): a
+        backlash on every row of its memory (or, while the errors are blown up, the rows
+        held back since); the cascade on its recent samples: the whole buffer at first, the
+        latest ``initial_samples`` on retried restarts. Returns whether it started."""
         s = self.settings
         structure = self._structure
         attempt = self._attempts
@@ -724,66 +534,40 @@ class RecursiveIdentifier:
         self._next_attempt = self._samples + (
             self._attempt_interval() if structure.cascade else s.block
         )
-        lags = self._lags
+        span = (self._stream.low, self._stream.high)
         if structure.cascade:
             latest = self._ever_started and attempt > 0  # a retried restart: the latest only
             last = s.initial_samples if latest else None
-            u, y = (a.copy() for a in self._recent.window(last))
-            b = self._recent.breaks(last)
-            found = cold_fit(structure, self._sign_now, u, y, b)
-            if isinstance(found, str):
-                self._reason = f"batch fit failed: {found}"
-                return False
-            structure, p = found
+            u, y = (a.copy() for a in self._stream.recent.window(last))
+            window = (u, y, self._stream.recent.breaks(last))
+            first = self._samples - self._queued - u.size  # the window ends at the last seen
             memory = self._new_memory(self._memory.width)
-            lags = self._window_rows(structure, p, u, y, b, memory)
+            start = cascade_start(structure, self._sign_now, window, first, memory, s, span)
         else:
             source = self._held_back if self._mode == _HELD else self._memory
             assert source is not None  # (_attempt_due checked it)
-            rows, _ = source.rows()
             self._fresh = 0
-            self._need = max(rows.shape[0] // 4, 1)
-            found = cold_fit(
-                structure,
-                self._sign_now,
-                *pair_series(rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3]),
-            )
-            if isinstance(found, str):
-                self._reason = f"batch fit failed: {found}"
-                return False
-            structure, p = found
-            memory = source
-        started = settle_memory(
-            structure,
-            p,
-            memory.rows()[0],
-            s.covariance_bound,
-            (self._input_low, self._input_high),
-        )
-        if isinstance(started, str):
-            self._reason = f"batch fit failed: {started}"
+            self._need = max(len(source) // 4, 1)
+            start = backlash_start(structure, self._sign_now, source, s, span)
+        if isinstance(start, str):
+            self._reason = f"batch fit failed: {start}"
             return False
-        solution, pull = started
-        before = self._scale_before
-        limit = s.divergence_ratio * s.divergence_ratio * before  # (** may overflow)
-        sigma2 = solution.sigma2
-        if attempt < _MAX_REJECTIONS and math.isfinite(before) and sigma2 > limit:
-            self._reason = (
-                f"batch fit rejected: residual {math.sqrt(sigma2):.3g} against "
-                f"{math.sqrt(before):.3g} before the divergence (the data may hold the fault)"
-            )
+        sigma2 = start.solution.sigma2
+        why = rejected(sigma2, self._scale_before, s.divergence_ratio, attempt)
+        if why is not None:
+            self._reason = why
             return False
         if self._ever_started:
             self._restarts += 1
         self._drift, self._next_drift = None, 0  # a new memory: refit the bands' term at once
-        self._structure = structure
+        self._structure = structure = start.structure
         self._sign_now = True
-        self._memory = memory
+        self._memory = start.memory
         self._held_back = None
-        self._lags = lags
-        self._prior = None
-        self._pull = pull
-        self._commit(solution)
+        if start.lags is not None:
+            self._stream.lags = start.lags
+        self._current.start(start.solution, start.pull)
+        self._committed()
         self._errors.restart(max(sigma2, 1e-300))
         self._scale_before = math.nan
         self._attempts = 0
@@ -792,76 +576,27 @@ class RecursiveIdentifier:
         self._next_solve = self._samples + s.block
         self._last_row = [self._samples] * len(self._last_row)
         if structure.cascade:
-            self._settling = settling_samples(structure, structure.from_theta(solution.theta))
+            theta = start.solution.theta
+            self._settling = settling_samples(structure, structure.from_theta(theta))
             self._settled_at = self._samples
         self._pending = []
         self._reason = ""
         return True
-
-    def _window_rows(
-        self,
-        structure: Structure,
-        p: FloatArray,
-        u: FloatArray,
-        y: FloatArray,
-        b: BoolArray,
-        memory: BinnedRows,
-    ) -> CascadeLags:
-        """File a window's cascade rows at ``p`` (from the first sample on which the internal
-        ``x`` of eq. 36 is determined); the lags after the window."""
-        band = deadband(self.settings.input_deadband, float(np.ptp(u)))
-        rows, at, lags = cascade_memory_rows(
-            structure,
-            p,
-            CascadeLags.unknown(structure),
-            u,
-            y,
-            run_lengths(b, 0),
-            0,
-            np.full(u.size, band),
-            settling_samples(structure, p),
-        )
-        first = self._samples - self._queued - u.size  # the window ends at the last seen
-        memory.insert(rows, np.asarray(first + at, dtype=np.intp))
-        return lags
 
     # ------------------------------------------------------------------ the iteration
 
     def _iterate(self) -> None:
         """One iteration over the memory; an invalid iterate is not taken (the estimate
         holds), and ``_MAX_INVALID`` of them in a row re-initialise from the memory."""
-        rows, _ = self._memory.rows()
-        prior = self._prior
-        weights = None if prior is None else prior_weights(self._structure, self._memory)
-        if weights is not None and not np.any(weights > 0.0):
-            self._prior = prior = weights = None  # the memory has refilled: the seed is gone
-        step = solve_memory(
-            self._structure,
-            self._theta,
-            rows,
-            self._pull,
-            prior,
-            weights,
-            (self._input_low, self._input_high),
-        )
-        if isinstance(step, str):
-            self._invalid += 1
-            self._note = f"the last iteration was not taken ({step})"
-            if self._invalid >= _MAX_INVALID:
-                self._stop(f"{self._invalid} iterations in a row left the valid set ({step})")
-            return
-        self._commit(step)
+        span = (self._stream.low, self._stream.high)
+        why = self._current.step(self._structure, self._memory, span)
+        if why is None:
+            self._committed()
+        elif self._current.invalid >= _MAX_INVALID:
+            self._stop(f"{self._current.invalid} iterations in a row left the valid set ({why})")
 
-    def _commit(self, solution: MemorySolution) -> None:
-        """Take an iterate as the current estimate."""
-        self._theta = solution.theta
-        self._unit_cov = solution.unit_covariance
-        if math.isfinite(solution.sigma2):
-            self._sigma2 = solution.sigma2
-        self._last_valid = solution.theta.copy()
-        self._invalid = 0
-        self._note = ""
-        self._version += 1
+    def _committed(self) -> None:
+        """An iterate was taken: its sample, and the bands' tracking term when due."""
         self._committed_at = self._samples
         self._track_drift()
 
@@ -876,8 +611,7 @@ class RecursiveIdentifier:
         self._scale_before = self._errors.long
         self._attempts = 0
         self._fresh = self._need = len(self._memory)  # (the memory is due now)
-        self._theta = self._valid_theta()
-        self._version += 1
+        self._current.restore(self._structure)
         self._why = why
         self._initialise()
 
@@ -892,17 +626,9 @@ class RecursiveIdentifier:
         self._next_drift = self._samples + _DRIFT_EVERY
         self._drift_at = self._samples
         rows, stamps = self._memory.rows()
-        p = np.array(natural_from_theta(structure, self._theta.tolist()))
+        p = np.array(natural_from_theta(structure, self._current.theta.tolist()))
         cols = (rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3])
         self._drift = dead_zone_drift(structure, p, cols, float(self._samples) - stamps)
-
-    def _valid_theta(self) -> FloatArray:
-        """The last valid estimate (the current one unless it was corrupted)."""
-        return (
-            self._theta
-            if theta_problem(self._structure, self._theta) is None
-            else self._last_valid.copy()
-        )
 
     # ------------------------------------------------------------------ the estimate
 
@@ -924,14 +650,9 @@ class RecursiveIdentifier:
             return Estimate.empty(
                 structure, self._samples, excitation, EstimatorState.WARMING_UP, reason
             )
-        theta = self._theta
-        sigma2 = self._sigma2 if math.isfinite(self._sigma2) else self._errors.long
-        if self._summary is None or self._summary[0] != self._version:
-            theta_list = theta.tolist()
-            p_list = natural_from_theta(structure, theta_list)
-            variances = natural_variances(structure, theta_list, sigma2 * self._unit_cov)
-            self._summary = (self._version, p_list, relative_std_of(p_list, variances))
-        _, p_list, rel = self._summary
+        current = self._current
+        sigma2 = current.sigma2 if math.isfinite(current.sigma2) else self._errors.long
+        p_list, rel = current.summary(structure, sigma2)
         idle = self._samples - max(self._last_row)  # since the newest informative row
         age = self._samples - min(self._last_row)  # of the branch whose newest row is oldest
         if self._mode in (_HELD, _STOPPED):
@@ -943,7 +664,7 @@ class RecursiveIdentifier:
         confidence = aged_confidence(
             confidence_of(state, rel, s.converged_std), float(age), s.confidence_half_life
         )
-        key = (self._version, self._events, state, self._reason, self._note, self._restarts)
+        key = (current.version, self._events, state, self._reason, current.note, self._restarts)
         if self._published is not None and self._published[0] == key:
             last = self._published[1]
             if not confidence_moved(confidence, last.confidence, floor=0.0):
@@ -964,12 +685,12 @@ class RecursiveIdentifier:
                 reason = f"{self._reason}; {reason}"
             if self._restarts:
                 reason += f"; re-initialised {self._restarts} time(s)"
-        if self._note and state is not EstimatorState.DIVERGED:
-            reason += f"; {self._note}"
+        if current.note and state is not EstimatorState.DIVERGED:
+            reason += f"; {current.note}"
         recent = self._errors.recent
         residual = recent if math.isfinite(recent) else sigma2
-        theta_copy = theta.copy()
-        cov_theta = sigma2 * self._unit_cov  # sigma^2 (Phi^T Phi + R_0 + prior)^-1
+        theta_copy = current.theta.copy()
+        cov_theta = sigma2 * current.unit_cov  # sigma^2 (Phi^T Phi + R_0 + prior)^-1
         drift = self._drift
         p_now = np.array(p_list)
         # the drift goes on between its fits (one per _DRIFT_EVERY samples): counted to the

@@ -17,12 +17,11 @@ The window length trades accuracy against tracking: the estimate is a least-squa
 ``W`` samples, so its standard deviation falls like ``1/sqrt(W)``, while a parameter that drifts
 linearly is tracked with a lag of about ``W/2 + K/2`` samples.
 
-This module holds the identifier itself: the schedule, the window or row memory it feeds, and
-what it publishes. The parts it shares with the recursive identifier stand in the sibling
-modules of :mod:`genbacklash_core.online` (rows and the sample rule in ``rows``, the row
-memory in ``memory``, the fits in ``fits``, the seed's prior in ``seed``, the covariance in
-``covariance``, state and confidence in ``state``, excitation advice in ``advice``, the input
-checks in ``inputs``, the bands' tracking term in ``tracking``).
+This module holds the identifier itself: the schedule, the cold and warm fits, and what it
+publishes. What it fits on (the rows of a backlash alone, the samples of a cascade) stands in
+:mod:`~genbacklash_core.online.feeds`; the interface it shares with the recursive identifier
+in :mod:`~genbacklash_core.online.base`, and the other parts in the sibling modules of
+:mod:`genbacklash_core.online` (see there), one concept each.
 """
 
 from __future__ import annotations
@@ -31,49 +30,37 @@ import math
 
 import numpy as np
 
-from genbacklash_core._typing import ArrayLike, BoolArray, FloatArray
+from genbacklash_core._typing import BoolArray, FloatArray
 from genbacklash_core.estimate import (
     Estimate,
     EstimatorState,
     aged_confidence,
-    as_sample,
     confidence_of,
     relative_std,
 )
-from genbacklash_core.samples import run_lengths
 from genbacklash_core.structure import Structure
 
-from .advice import AdviceCache, BranchCoverage, excitation_advice
+from .advice import BranchCoverage
+from .base import OnlineIdentifier
+from .feeds import Feed, RowFeed, SampleFeed
 from .fits import (
     FitFailure,
     WindowFit,
-    block_conditioning,
     cold_fit,
     conditioning_floor,
     fit_window,
-    outlier_rows,
     parameter_blocks,
     poorly_excited,
-    refine_window,
 )
 from .inputs import (
-    InputLimits,
-    accept_sample,
-    checked_series,
     deadband,
     settings_or_default,
     template,
 )
-from .memory import RowMemory
-from .rows import (
-    SampleRing,
-    WindowRows,
-    settling_samples,
-)
-from .seed import SeedPrior, seed_prior
+from .seed import SeedPrior
 from .settings import WindowedSettings
 from .state import FITTED_STATES, confidence_moved, held, settled_state
-from .tracking import DeadZoneDrift, dead_zone_drift, with_tracking
+from .tracking import with_tracking
 
 __all__ = ["WindowedIdentifier", "WindowedSettings"]
 
@@ -81,7 +68,7 @@ __all__ = ["WindowedIdentifier", "WindowedSettings"]
 # --------------------------------------------------------------------------- the identifier
 
 
-class WindowedIdentifier:
+class WindowedIdentifier(OnlineIdentifier[WindowedSettings]):
     """Online identification by warm-started batch iterations over a sliding window.
 
     Parameters
@@ -125,24 +112,9 @@ class WindowedIdentifier:
         sign: float | None = None,
         settings: WindowedSettings | None = None,
     ) -> None:
-        self._template, self._sign_known = template(degree, na, nb, sign)
-        self.settings = settings = settings_or_default(settings, WindowedSettings)
-        # larger samples would overflow the regression: treated like NaN (``nonfinite``);
-        # the longest regression here is the window's (the recursive memory's is longer)
-        self._limits = InputLimits.of(self._template.degree, settings.window)
-        self.reset()
-
-    # ---- public interface
-
-    @property
-    def structure(self) -> Structure:
-        """The model structure (with the detected sense once known)."""
-        return self._structure
-
-    @property
-    def estimate(self) -> Estimate:
-        """The latest estimate."""
-        return self._estimate
+        shape = template(degree, na, nb, sign)
+        settings = settings_or_default(settings, WindowedSettings)
+        super().__init__(shape, settings, settings.window)  # the longest regression: the window
 
     @property
     def min_samples(self) -> int:
@@ -152,32 +124,20 @@ class WindowedIdentifier:
 
     def reset(self) -> None:
         """Forget all samples and the estimate."""
+        self._forget()
         s = self.settings
-        self._ring = SampleRing(s.window)
         # a backlash alone remembers rows by branch and input region; a cascade, samples
-        self._memory = None if self._template.cascade else RowMemory(s.window, s.bins)
-        self._last: tuple[float, float] | None = None  # the latest sample (memory mode)
-        self._break_next = False  # a dropped sample ended the previous call
+        self._feed: Feed = (
+            SampleFeed(s.window) if self._template.cascade else RowFeed(s.window, s.bins)
+        )
         self._base_confidence = 0.0  # confidence of the last fit, before ageing
-        self._advice = AdviceCache()  # made again when rows, samples or reason change
-        self._rows = 0  # rows taken (memory mode)
-        self._idle = 0  # samples since the last informative row (cascade: stored sample)
-        self._structure = self._template
-        self._sign_known_now = self._sign_known
         self._p: FloatArray | None = None  # equation-error estimate (warm start)
         self._reported: FloatArray | None = None  # published (refined when asked)
         self._covariance: FloatArray | None = None
         self._residual = math.nan
-        self._excitation = 0.0
         self._state = EstimatorState.WARMING_UP
-        self._reason = "warming up"
-        self._samples = 0
-        self._kept = 0  # samples stored in the window (cascade: settled dwells left out)
-        self._still = 0  # samples at the latest input, its move included (cascade)
-        self._held_u = math.nan  # that value
-        self._dwell: int | None = None  # dwell samples the cascade stores (see _set_p)
-        self._last_fit_at = 0
-        self._last_fit_rows = 0
+        self._fit_samples = 0  # samples at the last fit
+        self._fit_progress = 0  # the feed's progress at the last fit
         self._next_fit = self.min_samples
         self._failures = 0
         self._restarted = True
@@ -187,48 +147,19 @@ class WindowedIdentifier:
         self._span_ref = 0.0  # widest input span of an accepted fit
         self._seed: SeedPrior | None = None  # a saved estimate the window still leans on
         self._seed_samples = 0  # samples of the window the seed stands for
-        self._seed_rows = 0  # rows taken when the seed was planted (memory mode)
-        self._drift: DeadZoneDrift | None = None  # the tracking term of the bands
+        self._seed_progress = 0  # the feed's progress when the seed was planted
         self._estimate = Estimate.empty(self._structure)
 
     @property
     def coverage(self) -> BranchCoverage | None:
         """Rows per branch and input region in the memory (a backlash alone; None for the
         cascade, which remembers samples)."""
-        return None if self._memory is None else self._memory.coverage()
-
-    def _held(self) -> int:
-        """How much the memory holds: rows (backlash alone) or samples (cascade)."""
-        return len(self._ring) if self._memory is None else len(self._memory)
-
-    def _progress(self) -> int:
-        """The counter fits are scheduled on: rows taken (backlash alone) or samples
-        stored (cascade)."""
-        return self._kept if self._memory is None else self._rows
+        return self._feed.coverage()
 
     def _set_p(self, p: FloatArray) -> None:
-        """Take ``p`` as the equation-error estimate; for the cascade also the samples of a
-        dwell its window stores: twice the linear block's settling horizon at ``p`` (to
-        1e-4 of a step)."""
+        """Take ``p`` as the equation-error estimate (and the cascade's settling horizon)."""
         self._p = p
-        if self._memory is None:
-            self._dwell = 2 * settling_samples(self._structure, p)
-
-    def _unsettled(self, uu: FloatArray) -> BoolArray:
-        """Which samples the cascade's window stores: all but those of a dwell (the input
-        held at one value) past ``_dwell`` samples (:meth:`_set_p`). After that the linear block has
-        settled (eqs. 30-31 at a fixed point): the samples repeat one steady state, and
-        leaving them out keeps the window's series that of the same dynamics (a reading
-        lost among them changes nothing either: the state did not move)."""
-        moved = np.empty(uu.size, dtype=bool)
-        moved[0] = uu[0] != self._held_u
-        np.not_equal(uu[1:], uu[:-1], out=moved[1:])
-        run = run_lengths(moved, self._still)  # samples at this input, the move included
-        self._still = int(min(run[-1], 1 << 40))
-        self._held_u = float(uu[-1])
-        if self._dwell is None:  # no estimate yet: every sample
-            return np.ones(uu.size, dtype=bool)
-        return np.asarray(run <= self._dwell + 1)  # the move and `_dwell` held samples
+        self._feed.settle(self._structure, p)
 
     def seed(self, estimate: Estimate) -> Estimate:
         """Continue from a saved ``estimate`` (e.g. a checkpoint's) instead of a cold start.
@@ -275,20 +206,14 @@ class WindowedIdentifier:
         >>> after.state.value, bool(np.max(np.abs(after.parameters - truth.parameters())) < 0.02)
         ('converged', True)
         """
-        prior = seed_prior(self._template, self._sign_known, estimate)
-        self.reset()
+        prior = self._restart_from(estimate)
         s = self.settings
-        structure = estimate.structure
-        self._structure = Structure(structure.degree, structure.na, structure.nb, structure.sign)
-        self._sign_known_now = True
         self._seed = prior
         self._seed_samples = min(s.window, estimate.samples) if estimate.samples else s.window
         self._set_p(prior.p.copy())
         self._reported = prior.p.copy()
         self._covariance = np.array(estimate.covariance, dtype=np.float64)
-        self._drift = None  # the saved covariance carries the saved bands
         self._residual = estimate.residual
-        self._excitation = estimate.excitation
         rel = relative_std(prior.p, self._covariance)
         settled = estimate.state in (EstimatorState.CONVERGED, EstimatorState.NO_EXCITATION)
         self._state = settled_state(settled, rel, s.converged_std)
@@ -297,12 +222,11 @@ class WindowedIdentifier:
         )
         self._needs_cold = False
         self._restarted = False  # the next fit continues from the seed (steadiness test)
-        self._samples = estimate.samples
-        self._last_fit_at = self._samples if self._memory is not None else self._kept
-        self._last_fit_rows = self._seed_rows = self._rows
-        self._next_fit = self._progress() + self.min_samples
+        self._fit_samples = self._samples
+        self._fit_progress = self._seed_progress = self._feed.progress
+        self._next_fit = self._feed.progress + self.min_samples
         self._rebuild()
-        return self._estimate
+        return self.estimate
 
     @property
     def from_seed(self) -> bool:
@@ -314,116 +238,30 @@ class WindowedIdentifier:
         """Share of the seed's samples still counted (those new samples did not replace)."""
         if self._seed is None:
             return 0.0
-        if self._memory is not None:  # the rows taken since the seed replace it
-            kept = self._seed_samples - (self._rows - self._seed_rows)
-        else:
-            kept = min(self._seed_samples, self.settings.window - self._held())
+        kept = self._feed.seed_left(self._seed_samples, self._seed_progress)
         return max(kept, 0) / self._seed_samples
 
-    def update(self, u: float, y: float, *, follows: bool = True) -> Estimate:
-        """Take one sample; refit when due. Returns the current estimate.
-
-        ``follows=False``: the sample does not follow the previous one on the encoder's
-        clock (a lost reading in between): no regression row pairs the two.
-        """
-        uf, yf = as_sample(u, y)
-        if not accept_sample(uf, yf, self._limits, self.settings.nonfinite, self._samples):
-            self._break_next = True  # dropped: the next sample does not follow the last
-            return self._estimate
-        if self._memory is None:
-            return self._take(np.array([uf]), np.array([yf]), np.array([not follows]))
+    def _take_one(self, u: float, y: float, follows: bool) -> None:
+        feed = self._feed
+        if not isinstance(feed, RowFeed):
+            self._intake(np.array([u]), np.array([y]), np.array([not follows]))
+            return
         # one sample, without arrays (the per-sample path of a hand-written loop)
-        self._ring.push(uf, yf, not follows or self._break_next)
-        last = self._last
-        if last is not None and follows and not self._break_next and uf != last[0]:
-            self._memory.add_one(last[0], uf, last[1], yf)  # a row of eq. (24)
-            self._rows += 1
-            self._idle = 0
-        else:
-            self._idle += 1
+        feed.push(u, y, follows and not self._break_next)
         self._break_next = False
-        self._last = (uf, yf)
         self._samples += 1
-        if self._rows >= self._next_fit:
+        if feed.rows >= self._next_fit:
             self._fit()
-        return self._publish()
+        self._publish()
 
-    def update_many(self, u: ArrayLike, y: ArrayLike, breaks: ArrayLike | None = None) -> Estimate:
-        """Take a series of samples; identical to :meth:`update` on each, vectorised.
-
-        ``breaks[k]`` True: sample ``k`` does not follow sample ``k-1`` (``breaks[0]``: the
-        previous call's last sample) on the encoder's clock; see
-        :mod:`genbacklash_core.samples`. Default: every sample follows its predecessor.
-        """
-        uu, yy, bb, dropped_last = checked_series(
-            u, y, breaks, self._limits, self.settings.nonfinite
-        )
-        if dropped_last:
-            self._break_next = True
-        return self._take(uu, yy, bb)
-
-    def _take(self, uu: FloatArray, yy: FloatArray, bb: BoolArray) -> Estimate:
+    def _take(self, uu: FloatArray, yy: FloatArray, bb: BoolArray) -> None:
         """Feed validated samples, fitting whenever the schedule says (see update_many)."""
-        if uu.size == 0:
-            return self._publish()
-        if self._break_next:
-            bb = bb.copy()
-            bb[0] = True
-            self._break_next = False
-        if self._memory is None:
-            stored = self._unsettled(uu)
-            if stored.any():  # idle: samples since the last one stored
-                self._idle = int(uu.size - 1 - np.flatnonzero(stored)[-1])
-            else:
-                self._idle += int(uu.size)
-            if not stored.all():  # a settled dwell: counted as seen, not stored
-                self._samples += int(uu.size - np.count_nonzero(stored))
-                uu, yy, bb = uu[stored], yy[stored], bb[stored]
-            start = 0
-            while start < uu.size:
-                take = min(uu.size - start, self._next_fit - self._kept)
-                part = slice(start, start + take)
-                self._ring.extend(uu[part], yy[part], bb[part])
-                self._samples += take
-                self._kept += take
-                start += take
-                if self._kept >= self._next_fit:
+        if uu.size:
+            for count in self._feed.take(uu, yy, bb, lambda: self._next_fit):
+                self._samples += count
+                if self._feed.progress >= self._next_fit:
                     self._fit()
-            return self._publish()
-        # memory mode: rows are pairs of consecutive samples whose input moved
-        if self._last is None:
-            prev_u, prev_y, link = uu[0], yy[0], False
-        else:
-            prev_u, prev_y = self._last
-            link = not bool(bb[0])
-        u_prev = np.concatenate([[prev_u], uu[:-1]])
-        y_prev = np.concatenate([[prev_y], yy[:-1]])
-        follows = ~bb
-        follows[0] = link
-        row = follows & (uu != u_prev)  # a held command or a dwell adds no row
-        counts = np.cumsum(row)  # rows up to each sample of the call
-        start = 0
-        while start < uu.size:
-            need = self._next_fit - self._rows
-            before = int(counts[start - 1]) if start else 0
-            hit = int(np.searchsorted(counts[start:], before + max(need, 1)))
-            stop = uu.size if hit >= counts.size - start else start + hit + 1
-            part = slice(start, stop)
-            self._ring.extend(uu[part], yy[part], bb[part])  # the refinement's recent series
-            taken = row[part]
-            if taken.any():
-                m = self._memory
-                m.add(u_prev[part][taken], uu[part][taken], y_prev[part][taken], yy[part][taken])
-                self._rows += int(np.count_nonzero(taken))
-                self._idle = stop - 1 - (start + int(np.flatnonzero(taken)[-1]))
-            else:
-                self._idle += stop - start
-            self._samples += stop - start
-            start = stop
-            if self._rows >= self._next_fit:
-                self._fit()
-        self._last = (float(uu[-1]), float(yy[-1]))
-        return self._publish()
+        self._publish()
 
     def refit(self) -> Estimate:
         """Fit the window now instead of at the next scheduled sample; the new estimate.
@@ -432,7 +270,7 @@ class WindowedIdentifier:
         estimate may be up to ``K`` samples old. The schedule restarts from here. Right
         after :meth:`seed`, until ``min_samples`` new samples arrived, the seed stands.
         """
-        if self._held() >= (1 if self._seed is None else self.min_samples):
+        if len(self._feed) >= (1 if self._seed is None else self.min_samples):
             self._fit(early=True)
         return self._publish()
 
@@ -449,43 +287,44 @@ class WindowedIdentifier:
         confidence = self._base_confidence
         if state not in FITTED_STATES:
             return state, reason, confidence
-        if held(self._idle, s.idle_samples):
+        if held(self._feed.idle, s.idle_samples):
             state = EstimatorState.NO_EXCITATION
             reason = (
-                f"estimate held: no information for {self._idle} samples (the input rests "
+                f"estimate held: no information for {self._feed.idle} samples (the input rests "
                 f"or repeats); {self._reason}"
             )
-        return state, reason, aged_confidence(confidence, float(self._idle), s.confidence_half_life)
+        return (
+            state,
+            reason,
+            aged_confidence(confidence, float(self._feed.idle), s.confidence_half_life),
+        )
 
     def excitation_advice(self) -> str:
         """What the data have not shown yet, and what motion would show it ("" when the
         memory covers both branches over the input range seen). A backlash alone only."""
-        memory = self._memory
-        if memory is None:
-            return ""
-        need = self.min_samples - len(memory) if self._p is None else 0
-        return excitation_advice(
-            memory.coverage(),
-            moved=not (self._samples > 1 and self._rows == 0),
-            rows_needed=max(need, 0),
-        )
+        need = self.min_samples - len(self._feed) if self._p is None else 0
+        return self._feed.advice(self._samples, need)
 
     def _quick_confidence(self) -> float:
         """The published confidence from the cached one of the last fit (cheap)."""
         s = self.settings
-        return aged_confidence(self._base_confidence, float(self._idle), s.confidence_half_life)
+        return aged_confidence(
+            self._base_confidence, float(self._feed.idle), s.confidence_half_life
+        )
 
     def _publish(self) -> Estimate:
         est = self._estimate
-        if self._memory is not None and self._reported is None:
-            key = (self._rows, self._samples > 1, self._reason)  # the memory changes with rows
+        assert est is not None  # (reset made one)
+        feed = self._feed
+        if isinstance(feed, RowFeed) and self._reported is None:
+            key = (feed.rows, self._samples > 1, self._reason)  # the memory changes with rows
             reason = self._advice.reason(self._reason, key, self.excitation_advice)
             if reason != est.reason:
                 self._estimate = est = Estimate.empty(
                     self._structure, self._samples, self._excitation, self._state, reason
                 )
         if self._reported is not None:  # held and aged by the samples without information
-            is_held = held(self._idle, self.settings.idle_samples)
+            is_held = held(self._feed.idle, self.settings.idle_samples)
             was_held = est.state is EstimatorState.NO_EXCITATION and self._state in (
                 EstimatorState.CONVERGED,
                 EstimatorState.CONVERGING,
@@ -493,43 +332,32 @@ class WindowedIdentifier:
             confidence = self._quick_confidence()
             if is_held != was_held or confidence_moved(confidence, est.confidence, floor=1e-12):
                 self._rebuild()
-                est = self._estimate
+                est = self.estimate
         if est.samples != self._samples:
-            self._estimate = est.with_samples(self._samples)
-        return self._estimate
+            self._estimate = est = est.with_samples(self._samples)
+        return est
 
     def _schedule(self) -> None:
         s = self.settings
-        k = max(s.refit_every, math.ceil(s.refit_fraction * self._held()))
+        k = max(s.refit_every, math.ceil(s.refit_fraction * len(self._feed)))
         if self._needs_cold and self._cold_failures:  # back off while cold starts fail,
             # but retry at least every W/8 samples: slow references excite the system slowly
             k = min(s.refit_every * 2 ** min(self._cold_failures, 10), max(s.window // 8, 1))
-        self._last_fit_at = self._samples if self._memory is not None else self._kept
-        self._last_fit_rows = self._rows
-        self._next_fit = self._progress() + k
-
-    def _data(self) -> tuple[FloatArray, FloatArray, BoolArray]:
-        """What a fit takes: the memory's rows as pairs, or the window of samples."""
-        if self._memory is not None:
-            return self._memory.series()
-        u, y = self._ring.window()
-        return u, y, self._ring.breaks()
+        self._fit_samples = self._samples
+        self._fit_progress = self._feed.progress
+        self._next_fit = self._feed.progress + k
 
     def _fit(self, early: bool = False) -> None:
-        u, y, b = self._data()
+        u, y, b = self._feed.data()
         if self._needs_cold:
             self._cold_start(u, y, b)
         else:
-            recent = self._progress() - (
-                self._last_fit_at if self._memory is None else self._last_fit_rows
-            )
+            recent = self._feed.progress - self._fit_progress
             if early:  # refit(): judge the excitation on as many samples as the scheduled fit
                 # would have, not on the few since the last fit (a record ending at rest
                 # would otherwise freeze a converged estimate as `no_excitation`)
-                span = self._next_fit - (
-                    self._last_fit_at if self._memory is None else self._last_fit_rows
-                )
-                recent = max(recent, min(span, self._held()))
+                span = self._next_fit - self._fit_progress
+                recent = max(recent, min(span, len(self._feed)))
             self._warm_fit(u, y, b, recent)
         self._schedule()
         self._rebuild()
@@ -546,7 +374,7 @@ class WindowedIdentifier:
     ) -> tuple[Structure, WindowFit] | str:
         """The batch iteration from the paper's start, then the warm iterations from its
         result: the structure and the fit, or why it failed."""
-        found = cold_fit(self._structure, self._sign_known_now, u, y, b)
+        found = cold_fit(self._structure, self._sign_now, u, y, b)
         if isinstance(found, str):
             return found
         structure, p = found
@@ -570,7 +398,7 @@ class WindowedIdentifier:
             self._cold_failed(started)
             return
         self._structure, outcome = started
-        self._sign_known_now = True
+        self._sign_now = True
         self._restarted = True
         self._needs_cold = False
         self._cold_failures = 0
@@ -605,7 +433,7 @@ class WindowedIdentifier:
         if weight <= 0.0:
             self._seed = None
         prior = None if self._seed is None else self._seed.scaled(weight)
-        memory = self._memory is not None
+        memory = self._feed.by_rows
         if memory and recent <= 0:  # nothing new since the last fit: the estimate holds
             return
         outcome = fit_window(
@@ -623,7 +451,7 @@ class WindowedIdentifier:
             breaks=b,
         )
         if memory:  # the share of the samples since the last fit that added a row
-            share = recent / max(self._samples - self._last_fit_at, 1)
+            share = recent / max(self._samples - self._fit_samples, 1)
             outcome.excitation = min(share, 1.0)
         floor = conditioning_floor(
             self._structure, self._conditioning_ref, s.min_conditioning, s.min_linear_conditioning
@@ -632,7 +460,7 @@ class WindowedIdentifier:
         conditioning = None
         if rows is not None and (isinstance(outcome, WindowFit) or not outcome.no_information):
             # a fit (or an invalid one) on data that excite a block too little: no information
-            conditioning = self._recent_conditioning(rows)
+            conditioning = self._feed.conditioning(self._structure, rows, s.excitation_window)
             poor = poorly_excited(self._structure, conditioning, floor)
             if poor is not None:
                 outcome = FitFailure(poor, outcome.excitation, True)
@@ -660,25 +488,6 @@ class WindowedIdentifier:
             self._needs_cold = True
             self._cold_start(u, y, b)
 
-    def _purge_outliers(self, p: FloatArray, residual: float) -> None:
-        """Forget the rows the accepted model cannot have produced: one-step prediction
-        errors beyond ``OUTLIER_SIGMAS`` robust standard deviations (a burst of garbage
-        readings would otherwise stay for good in the regions rarely visited)."""
-        assert self._memory is not None
-        _, u1, y0, y1 = self._memory.rows()
-        drop = outlier_rows(self._structure, p, u1, y0, y1, residual)
-        if drop is not None and self._memory.discard(drop):
-            self._next_fit = min(self._next_fit, self._rows + self.settings.refit_every)
-
-    def _recent_conditioning(self, rows: WindowRows) -> FloatArray:
-        """Block conditioning of the rows from the latest ``excitation_window`` samples; in
-        memory mode of all the rows (the memory keeps every region it has seen)."""
-        if self._memory is not None:
-            return block_conditioning(self._structure, rows.phi.T @ rows.phi)
-        recent = int(np.count_nonzero(rows.informative[-self.settings.excitation_window :]))
-        phi = rows.phi[rows.phi.shape[0] - recent :]  # rows follow the informative samples
-        return block_conditioning(self._structure, phi.T @ phi)
-
     def _accept(
         self,
         fit: WindowFit,
@@ -689,7 +498,7 @@ class WindowedIdentifier:
     ) -> None:
         s = self.settings
         if conditioning is None:
-            conditioning = self._recent_conditioning(fit.rows)
+            conditioning = self._feed.conditioning(self._structure, fit.rows, s.excitation_window)
         self._conditioning_ref = np.maximum(self._conditioning_ref, conditioning)
         self._span_ref = max(self._span_ref, float(np.ptp(u)))
         self._set_p(fit.p)
@@ -699,26 +508,16 @@ class WindowedIdentifier:
             start = fit.p if self._restarted or previous is None else previous
             if self._structure.problem(start, (float(u.min()), float(u.max()))) is not None:
                 start = fit.p
-            if self._memory is not None:  # refine on the recent series: the free-run
-                # simulation error needs samples in order, not rows filed by region
-                ru, ry = self._ring.window()
-                rb = self._ring.breaks()
-                refined = None
-                if ru.size > 4 * self._structure.n_parameters:
-                    refined = refine_window(
-                        self._structure, start, ru, ry, fit, s.refine_iterations, rb
-                    )
-            else:
-                refined = refine_window(self._structure, start, u, y, fit, s.refine_iterations, b)
+            refined = self._feed.refine(self._structure, start, fit, s.refine_iterations)
             if refined is not None:
                 reported = refined
-        if self._memory is not None:
-            self._purge_outliers(fit.p, fit.residual)
+        if self._feed.purge(self._structure, fit.p, fit.residual):  # rows forgotten: refit soon
+            self._next_fit = min(self._next_fit, self._feed.progress + s.refit_every)
         previous = None if self._restarted else self._reported
         self._restarted = False
         self._reported = reported
         self._covariance = fit.covariance
-        self._drift = self._track_drift(reported)
+        self._drift = self._feed.drift(self._structure, reported)
         self._residual = fit.residual
         self._excitation = fit.excitation
         rel = relative_std(reported, fit.covariance)
@@ -736,16 +535,6 @@ class WindowedIdentifier:
             self._reason = f"{why}; relative std {rel:.3g}"
             if fit.reason:
                 self._reason += f"; stopped early: {fit.reason}"
-
-    def _track_drift(self, reported: FloatArray) -> DeadZoneDrift | None:
-        """The memory's rows, each aged by the rows taken since, fitted with dead zones
-        that drift (the tracking term of the bands, :mod:`genbacklash_core.online.tracking`); on
-        the rows' own clock, so chunking does not matter. None for the cascade."""
-        if self._memory is None:
-            return None
-        order, _ = self._memory.stamps()
-        age = self._memory.taken - order
-        return dead_zone_drift(self._structure, reported, self._memory.rows(), age)
 
     def _rebuild(self) -> None:
         if self._reported is not None and self._covariance is not None:

@@ -382,7 +382,7 @@ def test_recovers_when_the_estimate_is_pushed_off() -> None:
     data = EX1.generate(8, n_samples=3000)
     ident = RecursiveIdentifier(3)
     ident.update_many(data.u[:1000], data.y[:1000])
-    ident._theta[1] = -ident._theta[1]  # corrupt the state: c_left < 0
+    ident._current.theta[1] = -ident._current.theta[1]  # corrupt the state: c_left < 0
     est = ident.update(float(data.u[1000]), float(data.y[1000]))
     assert ident.restarts == 1  # re-initialised at once from the memory
     assert est.state is EstimatorState.CONVERGED
@@ -497,7 +497,7 @@ def test_divergence_after_a_seed_reinitialises_from_the_buffer() -> None:
     ident = RecursiveIdentifier(3)
     ident.seed(saved)
     ident.update_many(u[:1000], y[:1000])
-    ident._theta[1] = -ident._theta[1]  # corrupt the state: c_left < 0
+    ident._current.theta[1] = -ident._current.theta[1]  # corrupt the state: c_left < 0
     est = ident.update(float(u[1000]), float(y[1000]))
     assert ident.restarts == 1 and not ident.from_seed
     assert est.state is EstimatorState.CONVERGED

@@ -1,0 +1,188 @@
+"""What both online identifiers share: construction, the sample intake and the seed's start.
+
+:class:`OnlineIdentifier` is the base of
+:class:`~genbacklash_core.online.windowed.WindowedIdentifier` and
+:class:`~genbacklash_core.online.recursive.RecursiveIdentifier`. It holds the parts of the
+interface that are the same for both (``update(u, y) -> Estimate``, ``update_many``, the
+``structure`` and ``estimate`` properties; :mod:`genbacklash_core.estimate`):
+
+* **Construction.** The structure to start from and whether the branch sense is known
+  (:func:`~.inputs.template`), the settings, and the input limits of the longest regression
+  the identifier forms (:class:`~.inputs.InputLimits`).
+* **The intake.** A sample is checked once (:func:`~.inputs.accept_sample`,
+  :func:`~.inputs.checked_series`); a dropped sample breaks the chain of the sample rule
+  (:mod:`genbacklash_core.samples`): the next sample taken does not follow the one before
+  it. What an identifier does with the samples is its own (``_take``).
+* **The seed's start.** A saved estimate becomes prior information
+  (:func:`~genbacklash_core.online.seed.seed_prior`), the identifier forgets all samples and
+  takes the saved structure, branch sense, sample count and excitation; each identifier then
+  continues from it in its own way (``seed``).
+
+Examples
+--------
+>>> import numpy as np
+>>> from genbacklash_core.online import RecursiveIdentifier, WindowedIdentifier
+>>> [isinstance(c(3), OnlineIdentifier) for c in (WindowedIdentifier, RecursiveIdentifier)]
+[True, True]
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import ClassVar, Generic, Protocol, TypeVar
+
+import numpy as np
+
+from genbacklash_core._typing import ArrayLike, BoolArray, FloatArray
+from genbacklash_core.data import NonFinitePolicy
+from genbacklash_core.errors import GenBacklashError
+from genbacklash_core.estimate import Estimate, as_sample
+from genbacklash_core.structure import Structure
+
+from .advice import AdviceCache
+from .inputs import InputLimits, accept_sample, checked_series
+from .seed import SeedPrior, seed_prior
+from .tracking import DeadZoneDrift
+
+__all__ = ["OnlineIdentifier"]
+
+
+class _Settings(Protocol):
+    @property
+    def nonfinite(self) -> NonFinitePolicy: ...
+
+
+_S = TypeVar("_S", bound=_Settings)
+
+
+class OnlineIdentifier(ABC, Generic[_S]):
+    """The interface both online identifiers share (see the module notes).
+
+    Parameters
+    ----------
+    template : (Structure, bool)
+        The structure to start from and whether its branch sense is known
+        (:func:`~genbacklash_core.online.inputs.template`).
+    settings : WindowedSettings or RecursiveSettings
+    longest : int
+        Rows of the longest regression the identifier forms (the input limits).
+    """
+
+    _CHECK_FOLLOWS: ClassVar[bool] = False  # update() rejects a `follows` that is not a bool
+
+    settings: _S
+    _structure: Structure
+    _sign_now: bool  # the branch sense is known (given, or detected by a fit)
+    _samples: int
+    _excitation: float
+    _reason: str
+    _advice: AdviceCache  # the warming-up reason's excitation advice
+    _drift: DeadZoneDrift | None  # the tracking term of the bands
+    _break_next: bool  # a dropped sample ended the previous call
+    _estimate: Estimate | None  # None: published again when asked for
+
+    def __init__(self, template: tuple[Structure, bool], settings: _S, longest: int) -> None:
+        self._template, self._sign_known = template
+        self.settings = settings
+        # larger samples would overflow the regression: treated like NaN (``nonfinite``)
+        self._limits = InputLimits.of(self._template.degree, longest)
+        self._estimate = None
+        self.reset()
+
+    @abstractmethod
+    def reset(self) -> None:
+        """Forget all samples and the estimate."""
+
+    def _forget(self) -> None:
+        """What :meth:`reset` forgets in both: the samples, the structure detected, the
+        estimate and what it was published with."""
+        self._structure = self._template
+        self._sign_now = self._sign_known
+        self._samples = 0
+        self._excitation = 0.0
+        self._reason = "warming up"
+        self._drift = None
+        self._break_next = False
+        self._advice = AdviceCache()
+        self._estimate = None
+
+    @abstractmethod
+    def _take(self, u: FloatArray, y: FloatArray, b: BoolArray) -> None:
+        """Take validated samples (``b``: the sample rule's breaks, the carried one set)."""
+
+    @abstractmethod
+    def _publish(self) -> Estimate:
+        """The estimate from the current internals."""
+
+    @property
+    def structure(self) -> Structure:
+        """The model structure (with the detected sense once known)."""
+        return self._structure
+
+    @property
+    def estimate(self) -> Estimate:
+        """The latest estimate."""
+        if self._estimate is None:
+            self._estimate = self._publish()
+        return self._estimate
+
+    def update(self, u: float, y: float, *, follows: bool = True) -> Estimate:
+        """Take one sample. Returns the current estimate.
+
+        ``follows=False``: the sample does not follow the previous one on the encoder's
+        clock (a lost reading in between), so no row pairs the two.
+        """
+        uf, yf = as_sample(u, y)
+        if self._CHECK_FOLLOWS and not isinstance(follows, (bool, np.bool_)):
+            raise GenBacklashError(f"follows must be True or False, got {follows!r}")
+        if not accept_sample(uf, yf, self._limits, self.settings.nonfinite, self._samples):
+            self._break_next = True  # dropped: the next sample does not follow the last
+            return self.estimate
+        self._take_one(uf, yf, follows)
+        return self.estimate
+
+    def _take_one(self, u: float, y: float, follows: bool) -> None:
+        """Take one validated sample."""
+        self._intake(np.array([u]), np.array([y]), np.array([not follows]))
+
+    def update_many(self, u: ArrayLike, y: ArrayLike, breaks: ArrayLike | None = None) -> Estimate:
+        """Take a series of samples; the same as :meth:`update` on each, vectorised.
+
+        ``breaks[k]`` True: sample ``k`` does not follow sample ``k-1`` on the encoder's clock
+        (a lost reading, a gap; :func:`~genbacklash_core.samples.sample_breaks`), so no row
+        pairs them; ``breaks[0]`` refers to the previous call's last sample. Default: every
+        sample follows its predecessor.
+        """
+        uu, yy, bb, dropped_last = checked_series(
+            u, y, breaks, self._limits, self.settings.nonfinite
+        )
+        if dropped_last:
+            self._break_next = True
+        self._intake(uu, yy, bb)
+        return self.estimate
+
+    def _intake(self, u: FloatArray, y: FloatArray, b: BoolArray) -> None:
+        """Carry the break of a dropped sample to the first sample taken; then ``_take``."""
+        if u.size and self._break_next:
+            b = b.copy()
+            b[0] = True
+            self._break_next = False
+        self._take(u, y, b)
+
+    def _restart_from(self, estimate: Estimate) -> SeedPrior:
+        """The seed's start (see the module notes): the saved estimate as prior information,
+        all samples forgotten, the saved structure, sample count and excitation taken.
+        Raises :class:`GenBacklashError` (the identifier unchanged) when it cannot seed."""
+        prior = seed_prior(self._template, self._sign_known, estimate)
+        self._check_seed(prior)
+        self.reset()
+        saved = estimate.structure
+        self._structure = Structure(saved.degree, saved.na, saved.nb, saved.sign)
+        self._sign_now = True
+        self._samples = estimate.samples
+        self._excitation = estimate.excitation
+        self._drift = None  # the saved covariance carries the saved bands
+        return prior
+
+    def _check_seed(self, prior: SeedPrior) -> None:
+        """Raise :class:`GenBacklashError` when ``prior`` cannot seed this identifier."""
