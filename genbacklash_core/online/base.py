@@ -156,9 +156,9 @@ class OnlineIdentifier(ABC, Generic[_S]):
         uu, yy, bb, dropped_last = checked_series(
             u, y, breaks, self._limits, self.settings.nonfinite
         )
-        if dropped_last:
+        self._intake(uu, yy, bb)  # a break pending from the previous call goes first
+        if dropped_last:  # then this call's own: its last sample was dropped
             self._break_next = True
-        self._intake(uu, yy, bb)
         return self.estimate
 
     def _intake(self, u: FloatArray, y: FloatArray, b: BoolArray) -> None:

@@ -260,7 +260,7 @@ def test_the_model_term_moves_the_band_and_nothing_the_compensation_reads(
     published covariance differs, and it is never the smaller."""
     import dataclasses
 
-    from genbacklash_core.online import recursive, windowed
+    from genbacklash_core.online import feeds, recursive
 
     cfg = OperationSettings(duration=20.0, phases=(("operation", 20.0),), wear=0.0)
     hidden = HiddenEffects(period=0.5, harmonics=((0.004, 0.0),))
@@ -280,7 +280,7 @@ def test_the_model_term_moves_the_band_and_nothing_the_compensation_reads(
         fit = dead_zone_drift(*args)  # type: ignore[arg-type]
         return None if fit is None else dataclasses.replace(fit, model_covariance=None)
 
-    for module in (windowed, recursive):
+    for module in (feeds, recursive):  # the windowed identifier's drift is its feed's
         monkeypatch.setattr(module, "dead_zone_drift", without)
     without_term = run()
     wider = 0
