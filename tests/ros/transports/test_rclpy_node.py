@@ -121,6 +121,45 @@ def test_node_rejects_bad_parameters_with_the_reason(ros_args: list[str]) -> Non
 
 
 @needs_rclpy
+def test_the_compensated_command_is_published_before_the_periodic_outputs_are_built(
+    ros_args: list[str],
+) -> None:
+    """A command at which a diagnostics report comes due: its compensated command is
+    published before the report is built (the pipeline's ``answer``, then ``periodic``),
+    so building the estimates and reports never delays the answer."""
+    from std_msgs.msg import Float64MultiArray
+
+    from genbacklash_ros.node.pipeline import BacklashPipeline, Output
+    from genbacklash_ros.transports import rclpy_node
+
+    node = rclpy_node.BacklashIdentifierNode()
+    events: list[tuple[str, str]] = []
+    pipe = node._pipeline
+    assert isinstance(pipe, BacklashPipeline)
+    build = pipe.diagnostics
+
+    def diagnostics(stamp_ns: int, *, stale: bool = False) -> Output:
+        events.append(("built", "diagnostics"))
+        return build(stamp_ns, stale=stale)
+
+    pipe.diagnostics = diagnostics  # type: ignore[method-assign]
+    node._publish = lambda outputs: events.extend(("published", o.topic) for o in outputs)  # type: ignore[method-assign]
+    try:
+        for value, ms in ((0.1, 1), (0.2, 1_200)):  # a report is due 1 s after the first
+            info = {"source_timestamp": ms * 1_000_000}
+            node._on_command(Float64MultiArray(data=[value, 0.0]), info)
+        assert events == [
+            ("published", "compensated_command"),
+            ("published", "compensated_command"),
+            ("built", "diagnostics"),
+            ("published", "diagnostics"),
+        ]
+    finally:
+        node.finish()
+        node.destroy_node()
+
+
+@needs_rclpy
 def test_message_conversion_round_trip() -> None:
     from genbacklash_ros.node.messages import Float64MultiArray, Header, JointState, Time
     from genbacklash_ros.transports import rclpy_node
