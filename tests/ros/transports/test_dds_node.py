@@ -37,6 +37,7 @@ from genbacklash_ros.transports.dds_types import (
     MultiArrayLayout_,
 )
 
+from ._answer_first import ANSWER_FIRST, recorded
 from ._dds import Received, Subscriber, diagnostic_values, start_node, stop_node, wait_for
 
 HERE = Path(__file__).parent
@@ -252,18 +253,11 @@ def test_the_compensated_command_is_published_before_the_periodic_outputs_are_bu
     building the estimates and reports never delays the answer."""
     from genbacklash_ros.node.messages import Float64MultiArray
     from genbacklash_ros.node.parameters import NodeParameters
-    from genbacklash_ros.node.pipeline import Output
     from genbacklash_ros.transports.dds_node import DdsNode, _Event
 
     node = DdsNode(NodeParameters(joint="j"), domain_id=DOMAIN, clock=lambda: 10**15)
-    events: list[tuple[str, str]] = []
-    build = node.pipeline.diagnostics
-
-    def diagnostics(stamp_ns: int, *, stale: bool = False) -> Output:
-        events.append(("built", "diagnostics"))
-        return build(stamp_ns, stale=stale)
-
-    pending = [  # a report is due 1 s of data time after the first command
+    events, publish = recorded(node.pipeline)
+    pending = [
         _Event(1_000_000, 1, "command", Float64MultiArray(data=(0.1, 0.0))),
         _Event(1_200_000_000, 2, "command", Float64MultiArray(data=(0.2, 0.0))),
     ]
@@ -273,19 +267,11 @@ def test_the_compensated_command_is_published_before_the_periodic_outputs_are_bu
             out.extend(pending)
             pending.clear()
 
-    monkeypatch.setattr(node.pipeline, "diagnostics", diagnostics)
     monkeypatch.setattr(node, "_take", take)
-    monkeypatch.setattr(
-        node, "_publish", lambda outputs: events.extend(("published", o.topic) for o in outputs)
-    )
+    monkeypatch.setattr(node, "_publish", publish)
     try:
         assert node._process_available()
-        assert events == [
-            ("published", "compensated_command"),
-            ("published", "compensated_command"),
-            ("built", "diagnostics"),
-            ("published", "diagnostics"),
-        ]
+        assert events == ANSWER_FIRST
     finally:
         node.stop()
         node.spin()

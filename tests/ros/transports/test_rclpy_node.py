@@ -21,6 +21,7 @@ import pytest
 
 from genbacklash_ros.cli.node import choose_transport, ros2_main
 
+from ._answer_first import ANSWER_FIRST, recorded
 from ._ros2 import domain_id, params_file, rclpy_missing
 
 needs_rclpy = pytest.mark.skipif(bool(rclpy_missing()), reason=rclpy_missing() or "-")
@@ -129,31 +130,16 @@ def test_the_compensated_command_is_published_before_the_periodic_outputs_are_bu
     so building the estimates and reports never delays the answer."""
     from std_msgs.msg import Float64MultiArray
 
-    from genbacklash_ros.node.pipeline import BacklashPipeline, Output
     from genbacklash_ros.transports import rclpy_node
 
     node = rclpy_node.BacklashIdentifierNode()
-    events: list[tuple[str, str]] = []
-    pipe = node._pipeline
-    assert isinstance(pipe, BacklashPipeline)
-    build = pipe.diagnostics
-
-    def diagnostics(stamp_ns: int, *, stale: bool = False) -> Output:
-        events.append(("built", "diagnostics"))
-        return build(stamp_ns, stale=stale)
-
-    pipe.diagnostics = diagnostics  # type: ignore[method-assign]
-    node._publish = lambda outputs: events.extend(("published", o.topic) for o in outputs)  # type: ignore[method-assign]
+    events, publish = recorded(node._pipeline)
+    node._publish = publish  # type: ignore[method-assign]
     try:
-        for value, ms in ((0.1, 1), (0.2, 1_200)):  # a report is due 1 s after the first
+        for value, ms in ((0.1, 1), (0.2, 1_200)):
             info = {"source_timestamp": ms * 1_000_000}
             node._on_command(Float64MultiArray(data=[value, 0.0]), info)
-        assert events == [
-            ("published", "compensated_command"),
-            ("published", "compensated_command"),
-            ("built", "diagnostics"),
-            ("published", "diagnostics"),
-        ]
+        assert events == ANSWER_FIRST
     finally:
         node.finish()
         node.destroy_node()
