@@ -1053,6 +1053,8 @@ class BacklashPipeline:
 
     def on_encoder(self, msg: object, receive_ns: int) -> list[Output]:
         """An encoder message received at ``receive_ns``: any periodic outputs now due."""
+        if self._answered is not None or self._due:  # an answer's step comes first
+            return [*self.periodic(), *self.on_encoder(msg, receive_ns)]
         try:
             header_ns, value = read_encoder(msg, self._encoder_kind, joint=self._joint)
         except MessageError as err:
@@ -1108,6 +1110,8 @@ class BacklashPipeline:
         "motor_encoder"``; ignored otherwise): any periodic outputs now due."""
         if not self._align.motor:
             return []
+        if self._answered is not None or self._due:  # an answer's step comes first
+            return [*self.periodic(), *self.on_motor(msg, receive_ns)]
         try:
             header_ns, value = read_encoder(msg, self._motor_kind, joint=self._motor_joint)
         except MessageError as err:

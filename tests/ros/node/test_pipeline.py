@@ -249,6 +249,12 @@ def test_periodic_outputs_not_taken_come_with_the_next_reading() -> None:
     assert [o.topic for o in outputs] == ["diagnostics"]
     assert outputs[0].stamp_ns == 1200 * MS  # the command's step, on the command's time
     assert pipe.periodic() == []
+    # also when the next message is one the adapters refuse
+    assert pipe.answer(Float64(0.3), receive_ns=2400 * MS) is not None
+    refused = JointState(Header(Time.from_ns(2401 * MS)), ("j",), ())  # no position
+    outputs = pipe.on_encoder(refused, receive_ns=2401 * MS)
+    assert [(o.topic, o.stamp_ns) for o in outputs] == [("diagnostics", 2400 * MS)]
+    assert pipe.stats.dropped["encoder_invalid"] == 1
 
 
 # --------------------------------------------------------------------------- compensation
