@@ -1,8 +1,10 @@
 """Six joints at 1 kHz through one node under rclpy, next to a plain rclpy echo (issue 24).
 
     python bench/six_joint.py [--seconds S] [--transport rclpy|dds] [--seed N] [--quick]
+                              [--domain ID]
 
-Three processes share a DDS domain of their own (an id in 201-231, apart from the tests'):
+Three processes share a DDS domain of their own (``--domain``, else an id in 201-231 at
+random, apart from the tests'):
 the node (``genbacklash node --transport rclpy`` with ``joints: [joint_1 .. joint_6]`` and
 ``command_indices: [0 .. 5]``; defaults otherwise), a plain rclpy echo (this script with
 ``--role echo``: every ``std_msgs/Float64MultiArray`` taken on ``/six_joint/ping`` published
@@ -10,18 +12,20 @@ back on ``/six_joint/pong``; default QoS, ``rclpy.spin_once``) and the player (t
 rclpy). The arm: six drivetrains of the operation scenario's backlash with dead zones 0.6x to
 2x (:func:`genbacklash_core.scenarios.arm_records`; each joint its own motion; commands and
 readings at 1 kHz, no jitter, no loss). Once the node and the echo have matched, at each 1 ms
-tick (sleeping until its deadline) the player publishes the command ``[u_1 .. u_6, k]`` on
-``/command`` (element 6, the sequence number, is no joint's: the node passes it through), the
-six-joint ``sensor_msgs/JointState`` stamped after it on ``/encoder`` (sensor-data QoS) and a
-ping ``[k]``. An executor thread of the player takes ``/compensated_command``, the pongs,
-every ``/backlash_identifier/<joint>/estimate`` and ``/diagnostics``.
+tick the player publishes the command ``[u_1 .. u_6, k]`` on ``/command`` (element 6, the
+sequence number, is no joint's: the node passes it through), the six-joint
+``sensor_msgs/JointState`` stamped after it on ``/encoder`` (sensor-data QoS) and a ping
+``[k]``. Between ticks, on the same thread, it takes the pongs, ``/compensated_command``,
+every ``/backlash_identifier/<joint>/estimate`` and ``/diagnostics`` from a wait set of its
+own (:class:`Replies`; no executor).
 
 Measured, over every command from the first (the first 5 s included): commands answered (a
 compensated array with that ``k``), per joint the share of answered arrays whose element
-differs from the command in the second half (compensated), latency (receive time in the
-callback less publish time, the player's monotonic clock) of the compensated command and of
-the pong in the same run, the node's CPU fraction (``utime + stime`` from
-``/proc/<pid>/stat`` from the first command to the last reply, divided by that wall time)
+differs from the command in the second half (compensated), latency (the time the reply was
+taken less the publish time of the message it answers, the command's or the ping's, on the
+player's monotonic clock) of the compensated command and of the pong in the same run, the
+node's CPU fraction (``utime + stime`` from ``/proc/<pid>/stat`` from the first command to
+the last reply, divided by that wall time; the echo's and the player's over the same time)
 and each joint's largest |parameter error| of its last estimate against its truth.
 Targets (issue 24): every estimate within 0.05, 100 % answered with all six compensated, at
 most 0.6 of a core, median and p99 within 1.5x the echo's.
@@ -84,7 +88,8 @@ def echo(lifetime_s: float) -> int:
 @dataclass
 class Played:
     sent: np.ndarray  # publish time per command, monotonic ns
-    back: np.ndarray  # compensated array received, monotonic ns (0: never)
+    ping_sent: np.ndarray  # publish time per ping, monotonic ns
+    back: np.ndarray  # compensated array taken, monotonic ns (0: never)
     pong: np.ndarray
     values: np.ndarray  # the compensated arrays received (NaN where none)
     commands: np.ndarray  # the arrays sent
@@ -92,8 +97,10 @@ class Played:
     status_names: set[str]
     faults: set[str]  # fault names any joint's diagnostics reported
     late: int
-    cpu_s: float
+    cpu_s: float  # the node's
     wall_s: float
+    player_cpu_s: float  # this process's, over the same wall time
+    echo_cpu_s: float
 
 
 def cpu_seconds(pid: int) -> float:
@@ -102,11 +109,52 @@ def cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def play(u: np.ndarray, y: np.ndarray, node_pid: int) -> Played:
+class Replies:
+    """The player's subscriptions taken on the player's one thread, between its ticks.
+
+    An rcl wait set of their own (no executor, no second thread): :meth:`until` waits on it
+    until a deadline and hands each message taken to its handler with the time it was
+    taken (monotonic ns). rclpy's executor cost the player about 0.2 ms of CPU a message,
+    and on a thread of its own it took the interpreter lock in turn with the publishing
+    thread; the node and the echo then competed with it for the machine's two cores. Both
+    replies come through here alike: the echo's pongs are taken before the node's arrays
+    in each round, so the order favours the echo if anything.
+    """
+
+    def __init__(self, node: Any, handlers: list[tuple[Any, Any]]) -> None:
+        from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+
+        self._handlers = handlers  # (subscription, handler(msg, taken_ns))
+        self._wait_set = _rclpy.WaitSet(len(handlers), 0, 0, 0, 0, 0, node.context.handle)
+
+    def take(self) -> int:
+        """Take everything pending (without waiting); the number taken."""
+        taken = 0
+        for sub, handler in self._handlers:
+            handle, msg_type, raw = sub.handle, sub.msg_type, sub.raw
+            while (got := handle.take_message(msg_type, raw)) is not None:
+                handler(got[0], time.monotonic_ns())
+                taken += 1
+        return taken
+
+    def until(self, deadline_ns: int) -> None:
+        """Take what comes until ``deadline_ns`` (monotonic)."""
+        ws = self._wait_set
+        while True:
+            self.take()
+            wait = deadline_ns - time.monotonic_ns()
+            if wait <= 0:
+                return
+            ws.clear_entities()
+            for sub, _ in self._handlers:
+                ws.add_subscription(sub.handle)
+            ws.wait(wait)
+
+
+def play(u: np.ndarray, y: np.ndarray, node_pid: int, echo_pid: int) -> Played:
     """Publish the arm's commands and readings in real time; what came back."""
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
-    from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import qos_profile_sensor_data
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
@@ -115,6 +163,7 @@ def play(u: np.ndarray, y: np.ndarray, node_pid: int) -> Played:
     rclpy.init()
     node = rclpy.create_node("six_joint_player")
     sent = np.zeros(n, dtype=np.int64)
+    ping_sent = np.zeros(n, dtype=np.int64)
     back = np.zeros(n, dtype=np.int64)
     pong = np.zeros(n, dtype=np.int64)
     values = np.full((n, m + 1), np.nan)
@@ -122,46 +171,52 @@ def play(u: np.ndarray, y: np.ndarray, node_pid: int) -> Played:
     names: set[str] = set()
     faults: set[str] = set()
 
-    def on_compensated(msg: Any) -> None:
-        now = time.monotonic_ns()
+    def on_compensated(msg: Any, now: int) -> None:
         k = int(msg.data[m])
         if 0 <= k < n and not back[k]:
             back[k] = now
             values[k] = msg.data
 
-    def on_pong(msg: Any) -> None:
-        now = time.monotonic_ns()
+    def on_pong(msg: Any, now: int) -> None:
         k = int(msg.data[0])
         if 0 <= k < n and not pong[k]:
             pong[k] = now
 
     def on_estimate(joint: str) -> Any:
-        def take(msg: Any) -> None:
+        def take(msg: Any, now: int) -> None:
             estimates[joint] = list(msg.data)
 
         return take
 
-    def on_diagnostics(msg: Any) -> None:
+    def on_diagnostics(msg: Any, now: int) -> None:
         for status in msg.status:
             names.add(str(status.name))
             for kv in status.values:
                 if kv.key == "faults" and kv.value != "none":
                     faults.update(kv.value.split(","))
 
-    node.create_subscription(Float64MultiArray, "/compensated_command", on_compensated, 2000)
-    node.create_subscription(Float64MultiArray, PONG, on_pong, 2000)
-    for joint in JOINTS:
-        node.create_subscription(
-            Float64MultiArray, f"/backlash_identifier/{joint}/estimate", on_estimate(joint), 10
-        )
-    node.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, 10)
+    def subscribe(msg_type: Any, topic: str, handler: Any, depth: int) -> tuple[Any, Any]:
+        # the handler is called by Replies, not by an executor: none spins this node
+        return node.create_subscription(msg_type, topic, lambda _: None, depth), handler
+
+    handlers = [
+        subscribe(Float64MultiArray, PONG, on_pong, 2000),
+        subscribe(Float64MultiArray, "/compensated_command", on_compensated, 2000),
+        *(
+            subscribe(
+                Float64MultiArray,
+                f"/backlash_identifier/{joint}/estimate",
+                on_estimate(joint),
+                10,
+            )
+            for joint in JOINTS
+        ),
+        subscribe(DiagnosticArray, "/diagnostics", on_diagnostics, 10),
+    ]
+    replies = Replies(node, handlers)
     command = node.create_publisher(Float64MultiArray, "/command", 10)
     encoder = node.create_publisher(JointState, "/encoder", qos_profile_sensor_data)
     ping = node.create_publisher(Float64MultiArray, PING, 10)
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
-    spinner = threading.Thread(target=executor.spin, daemon=True)
-    spinner.start()
     commands = np.vstack([u, np.arange(n, dtype=np.float64)]).T
     try:
         deadline = time.monotonic() + 60.0
@@ -172,17 +227,17 @@ def play(u: np.ndarray, y: np.ndarray, node_pid: int) -> Played:
         ):
             if time.monotonic() > deadline:
                 raise RuntimeError("the node's or the echo's endpoints did not match in 60 s")
-            time.sleep(0.05)
-        time.sleep(1.0)  # let discovery settle both ways
+            replies.until(time.monotonic_ns() + 50_000_000)
+        replies.until(time.monotonic_ns() + 1_000_000_000)  # let discovery settle both ways
         rows = commands.tolist()
         readings = y.T.tolist()
         joints = list(JOINTS)
-        cpu0, start = cpu_seconds(node_pid), time.monotonic_ns()
+        cpu0, echo0, start = cpu_seconds(node_pid), cpu_seconds(echo_pid), time.monotonic_ns()
+        own0 = time.process_time()
         late = 0
         for k in range(n):
             tick = start + k * TICK_NS
-            while (wait := tick - time.monotonic_ns()) > 0:
-                time.sleep(wait / 1e9)
+            replies.until(tick)
             if time.monotonic_ns() - tick > TICK_NS:
                 late += 1
             sent[k] = time.monotonic_ns()
@@ -190,6 +245,7 @@ def play(u: np.ndarray, y: np.ndarray, node_pid: int) -> Played:
             reading = JointState(name=joints, position=readings[k])
             reading.header.stamp = node.get_clock().now().to_msg()
             encoder.publish(reading)
+            ping_sent[k] = time.monotonic_ns()
             ping.publish(Float64MultiArray(data=[float(k)]))
         # replies in flight (a node behind works off its backlog): until all came or none
         # for 3 s; the node's CPU and the wall time run to the last reply (at least the play)
@@ -198,16 +254,32 @@ def play(u: np.ndarray, y: np.ndarray, node_pid: int) -> Played:
             count = int((back > 0).sum())
             if count != last_count:
                 quiet_since, last_count = time.monotonic(), count
-            time.sleep(0.05)
+            replies.until(time.monotonic_ns() + 50_000_000)
         cpu = cpu_seconds(node_pid) - cpu0
+        echo_cpu = cpu_seconds(echo_pid) - echo0
+        own = time.process_time() - own0
         end = max(int(back.max()), int(sent[-1]))
         wall = (end - start) / 1e9
-        time.sleep(1.5)  # the last estimates and diagnostics
+        replies.until(time.monotonic_ns() + 1_500_000_000)  # the last estimates, diagnostics
     finally:
-        executor.shutdown(timeout_sec=1.0)
         node.destroy_node()
         rclpy.try_shutdown()
-    return Played(sent, back, pong, values, commands, estimates, names, faults, late, cpu, wall)
+    return Played(
+        sent,
+        ping_sent,
+        back,
+        pong,
+        values,
+        commands,
+        estimates,
+        names,
+        faults,
+        late,
+        cpu,
+        wall,
+        own,
+        echo_cpu,
+    )
 
 
 def pipeline_cost(u: np.ndarray, y: np.ndarray) -> float:
@@ -356,10 +428,10 @@ def latency(sent: np.ndarray, back: np.ndarray) -> tuple[int, float, float, floa
     return int(ok.sum()), float(np.median(ms)), float(np.percentile(ms, 99)), float(ms.max())
 
 
-def run(seconds: float, seed: int, transport: str) -> str:
+def run(seconds: float, seed: int, transport: str, domain_id: int | None = None) -> str:
     models = [worn(OPERATION_BACKLASH, f) for f in FACTORS]
     u, y = arm_data(models, seconds, seed)
-    domain = str(random.randint(201, 231))
+    domain = str(random.randint(201, 231) if domain_id is None else domain_id)
     env = {**os.environ, "ROS_DOMAIN_ID": domain}
     with tempfile.TemporaryDirectory(prefix="six_joint_") as tmp:
         params = Path(tmp) / "six.yaml"
@@ -385,7 +457,7 @@ def run(seconds: float, seed: int, transport: str) -> str:
         )
         os.environ["ROS_DOMAIN_ID"] = domain
         try:
-            played = play(u, y, node.pid)
+            played = play(u, y, node.pid, echo_proc.pid)
         finally:
             for proc in (node, echo_proc):
                 proc.send_signal(signal.SIGINT)
@@ -409,10 +481,10 @@ def report(
 ) -> str:
     n = p.sent.size
     comp = latency(p.sent, p.back)
-    ref = latency(p.sent, p.pong)
+    ref = latency(p.ping_sent, p.pong)
     first5 = p.sent - p.sent[0] < 5_000_000_000
     comp5 = latency(p.sent[first5], p.back[first5])
-    ref5 = latency(p.sent[first5], p.pong[first5])
+    ref5 = latency(p.ping_sent[first5], p.pong[first5])
     half = slice(n // 2, n)
     answered = p.back[half] > 0
     shares = [
@@ -469,7 +541,8 @@ status {code}{", no traceback" if "Traceback" not in log else ", with a tracebac
 {joints_table}
 
 Node CPU: {p.cpu_s:.1f} s over {p.wall_s:.1f} s (first command to last reply) =
-**{cpu:.2f} of a core**. The pipeline alone, the same messages fed in process with no
+**{cpu:.2f} of a core**; over the same time the echo {p.echo_cpu_s / p.wall_s:.2f} and the
+player {p.player_cpu_s / p.wall_s:.2f}. The pipeline alone, the same messages fed in process with no
 middleware (after the run; CPU time per second of data, every identification in line, one
 BLAS thread as in the node):
 {alone:.2f} of a core. The element no joint uses came back unchanged in every answered
@@ -498,6 +571,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--transport", choices=("rclpy", "dds"), default="rclpy")
     parser.add_argument("--quick", action="store_true", help="5 s (a smoke test)")
     parser.add_argument(
+        "--domain",
+        type=int,
+        default=None,
+        help="ROS_DOMAIN_ID of the three processes (default: one at random in 201-231)",
+    )
+    parser.add_argument(
         "--blas",
         type=int,
         metavar="ROUNDS",
@@ -513,7 +592,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.blas:
         print(blas_comparison(args.seconds, args.seed, args.blas))
         return 0
-    text = run(args.seconds, args.seed, args.transport)
+    text = run(args.seconds, args.seed, args.transport, args.domain)
     print(text)
     write_section(f"six_joint_{args.transport}", text)
     return 0

@@ -184,19 +184,29 @@ class MultiJointPipeline:
 
     def on_command(self, msg: CommandMessage, receive_ns: int) -> list[Output]:
         """A command message: one compensated command (every joint's element compensated,
-        the others passing through) and the joints' periodic outputs now due."""
+        the others passing through) and the joints' periodic outputs now due
+        (:meth:`answer`, then :meth:`periodic`)."""
+        answer = self.answer(msg, receive_ns)
+        if answer is None:
+            return self.periodic()
+        return [answer, *self.periodic()]
+
+    def answer(self, msg: CommandMessage, receive_ns: int) -> Output | None:
+        """A command message: its one compensated command alone (None when no joint took
+        it); the joints' periodic outputs it makes due come from :meth:`periodic` (as
+        :meth:`BacklashPipeline.answer`), so that a live transport publishes the answer
+        before any joint builds its estimate or diagnostics."""
         if not isinstance(msg, self._command_class):
             reason = f"expected a {self._command_class.__name__}, got {type(msg).__name__}"
             for pipe in self._pipes.values():
                 pipe.reject("command", reason)
-            return []
+            return None
         kind = self._kind
-        outputs: list[Output] = []
         array = _finite_data(msg) if kind == "float64_multi_array" else None
         data = None if array is None else list(array)
         out_msg: CommandMessage = msg
         stamp: int | None = None
-        for joint, pipe in self._pipes.items():
+        for pipe in self._pipes.values():
             params = pipe.params
             index = params.command_index
             if data is not None and index < len(data):  # every element finite: read it
@@ -208,23 +218,30 @@ class MultiJointPipeline:
                 except MessageError as err:
                     pipe.reject("command", str(err))
                     continue
-            taken = pipe.on_command_value(header_ns, value, receive_ns)
+            taken = pipe.answer_value(header_ns, value, receive_ns)
             if taken is None:
                 continue
-            at, sent, due = taken
+            at, sent = taken
             stamp = at if stamp is None else stamp
             if data is not None:
                 data[index] = float(sent)
             else:
                 out_msg = compensated_command(out_msg, sent, kind, index=index, joint=params.joint)
-            if due:
-                outputs.extend(_tagged(due, joint))
         if stamp is None:
-            return outputs
+            return None
         if data is not None:
             assert isinstance(msg, Float64MultiArray)
             out_msg = Float64MultiArray(msg.layout, tuple(data))
-        outputs.insert(0, Output("compensated_command", out_msg, stamp))
+        return Output("compensated_command", out_msg, stamp)
+
+    def periodic(self) -> list[Output]:
+        """Every joint's :meth:`BacklashPipeline.periodic`, in joint order, each tagged with
+        its joint."""
+        outputs: list[Output] = []
+        for joint, pipe in self._pipes.items():
+            due = pipe.periodic()
+            if due:
+                outputs.extend(_tagged(due, joint))
         return outputs
 
     def on_motor(self, msg: object, receive_ns: int) -> list[Output]:

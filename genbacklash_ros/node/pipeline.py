@@ -96,7 +96,11 @@ Outputs
 * one ``compensated_command`` per accepted command message, of the command's type and time,
   computed by :class:`~genbacklash_core.InverseBacklash` with the current estimate and its
   confidence (the raw command when ``compensate`` is false; limited but uncorrected while
-  there is no model);
+  there is no model). The live transports take a command in two calls,
+  :meth:`BacklashPipeline.answer` (the compensated command alone) and, once it is published,
+  :meth:`BacklashPipeline.periodic` (what it made due): the same outputs as
+  :meth:`BacklashPipeline.on_command`, the answer never waiting for an estimate or a report
+  to be built;
 * ``estimate`` every ``1 / publish_rate`` of data time while an estimate exists;
 * ``diagnostics`` every second of data time: OK while converging or converged, WARN while
   warming up, without excitation or when messages were dropped since the last report (the
@@ -415,6 +419,10 @@ class BacklashPipeline:
             feed_ns=batch_ns,
         )
         self._worker: IdentifierWorker | None = None
+        # the time of a command answered by answer_value whose periodic step has not run
+        # yet (periodic() runs it), and periodic outputs made but not taken yet
+        self._answered: int | None = None
+        self._due: list[Output] = []
         self._start(params)
 
     # ------------------------------------------------------------------ configuration
@@ -474,6 +482,7 @@ class BacklashPipeline:
         """
         if not isinstance(params, NodeParameters):
             raise GenBacklashError(f"params must be NodeParameters, got {params!r}")
+        self._settle_answered()  # the answered command's step, on the parameters it came under
         old = self._params
         self._configure(params)
         if old.restart_needed(params):
@@ -582,7 +591,19 @@ class BacklashPipeline:
 
     def on_command(self, msg: CommandMessage, receive_ns: int) -> list[Output]:
         """A command message received at ``receive_ns``: the compensated command and any
-        periodic outputs now due."""
+        periodic outputs now due (:meth:`answer`, then :meth:`periodic`)."""
+        answer = self.answer(msg, receive_ns)
+        if answer is None:
+            return self.periodic()
+        return [answer, *self.periodic()]
+
+    def answer(self, msg: CommandMessage, receive_ns: int) -> Output | None:
+        """A command message received at ``receive_ns``: its compensated command alone
+        (None when the message is dropped). The periodic outputs it makes due (estimate,
+        diagnostics) are made by :meth:`periodic`, which a live transport calls once it has
+        published the answer, so that building them never delays it; :meth:`on_command` is
+        the two together."""
+        self._settle_answered()
         try:
             if not isinstance(msg, self._command_class):
                 raise MessageError(
@@ -592,14 +613,13 @@ class BacklashPipeline:
             header_ns, value = read_command(msg, kind, index=index, joint=joint)
         except MessageError as err:
             self._drop("command_invalid", f"command: {err}")
-            return []
-        accepted = self.on_command_value(header_ns, value, receive_ns)
+            return None
+        accepted = self.answer_value(header_ns, value, receive_ns)
         if accepted is None:
-            return []
-        stamp, sent, outputs = accepted
+            return None
+        stamp, sent = accepted
         out_msg = compensated_command(msg, sent, kind, index=index, joint=joint)
-        outputs.insert(0, Output("compensated_command", out_msg, stamp))
-        return outputs
+        return Output("compensated_command", out_msg, stamp)
 
     def on_command_value(
         self, header_ns: int | None, value: float, receive_ns: int
@@ -610,8 +630,22 @@ class BacklashPipeline:
 
         :meth:`on_command` is this plus the adapters; a transport that decodes messages
         itself (bag replay reads the value straight from the CDR bytes) calls it directly
-        and writes the compensated value into its own copy of the message.
+        and writes the compensated value into its own copy of the message. It is
+        :meth:`answer_value`, then :meth:`periodic`.
         """
+        accepted = self.answer_value(header_ns, value, receive_ns)
+        if accepted is None:
+            return None
+        return (*accepted, self.periodic())
+
+    def answer_value(
+        self, header_ns: int | None, value: float, receive_ns: int
+    ) -> tuple[int, float] | None:
+        """:meth:`on_command_value` without the periodic outputs: ``(time, compensated
+        value)``, or None when the command is dropped. The periodic step of an accepted
+        command (the data clock, the estimate and diagnostics now due) waits for
+        :meth:`periodic`, or runs at the start of the next call that takes data."""
+        self._settle_answered()
         self._take_results()
         align, health = self._align, self._health
         self._silence.command(int(receive_ns))
@@ -636,9 +670,26 @@ class BacklashPipeline:
         led = self._ledger
         led.commands += 1
         led.compensated += 1
-        outputs: list[Output] = []
-        self._advance(stamp, outputs, heavy=False)
-        return stamp, sent, outputs
+        self._answered = stamp
+        return stamp, sent
+
+    def periodic(self) -> list[Output]:
+        """The periodic outputs the last answered command made due (see :meth:`answer`), and
+        any made since the last call; ``[]`` when none."""
+        self._settle_answered()
+        if not self._due:
+            return []
+        outputs, self._due = self._due, []
+        return outputs
+
+    def _settle_answered(self) -> None:
+        """Run the periodic step of a command answered by :meth:`answer_value` (its outputs
+        kept for :meth:`periodic`): before anything else moves the pipeline on, so the step
+        sees the state the command left, as if it had run in the same call."""
+        stamp = self._answered
+        if stamp is not None:
+            self._answered = None
+            self._advance(stamp, self._due, heavy=False)
 
     def on_batch(
         self,
@@ -679,6 +730,7 @@ class BacklashPipeline:
         per-message path to the last bit (tests/ros/node/test_batch.py). With a thread
         worker the identifier's results are taken at the start of each stretch.
         """
+        self._settle_answered()  # an answer_value's step first (its outputs: periodic())
         kinds = np.asarray(is_command, dtype=bool)
         view = BlockView(
             kinds,
@@ -1001,6 +1053,8 @@ class BacklashPipeline:
 
     def on_encoder(self, msg: object, receive_ns: int) -> list[Output]:
         """An encoder message received at ``receive_ns``: any periodic outputs now due."""
+        if self._answered is not None or self._due:  # an answer's step comes first
+            return [*self.periodic(), *self.on_encoder(msg, receive_ns)]
         try:
             header_ns, value = read_encoder(msg, self._encoder_kind, joint=self._joint)
         except MessageError as err:
@@ -1013,6 +1067,8 @@ class BacklashPipeline:
     ) -> list[Output]:
         """An encoder reading already read from its message (header stamp, 0 when none):
         any periodic outputs now due (:meth:`on_encoder` is this plus the adapters)."""
+        if self._answered is not None or self._due:  # an answer's step comes first
+            return [*self.periodic(), *self.on_encoder_value(header_ns, value, receive_ns)]
         self._take_results()
         self._silence.encoder(int(receive_ns))
         if not math.isfinite(value):
@@ -1054,6 +1110,8 @@ class BacklashPipeline:
         "motor_encoder"``; ignored otherwise): any periodic outputs now due."""
         if not self._align.motor:
             return []
+        if self._answered is not None or self._due:  # an answer's step comes first
+            return [*self.periodic(), *self.on_motor(msg, receive_ns)]
         try:
             header_ns, value = read_encoder(msg, self._motor_kind, joint=self._motor_joint)
         except MessageError as err:
@@ -1073,6 +1131,8 @@ class BacklashPipeline:
         align = self._align
         if not align.motor:
             return []
+        if self._answered is not None or self._due:  # an answer's step comes first
+            return [*self.periodic(), *self.on_motor_value(header_ns, value, receive_ns)]
         self._take_results()
         if not math.isfinite(value):
             self._drop("motor_invalid", f"motor encoder: value {value} is not finite")
@@ -1092,6 +1152,7 @@ class BacklashPipeline:
     def reject(self, stream: Literal["command", "encoder", "motor"], reason: str) -> None:
         """A message of ``stream`` its transport could not read (e.g. bytes that do not
         decode): counted and reported like one the adapters reject."""
+        self._settle_answered()
         self._drop(f"{stream}_invalid", f"{stream}: {reason}")
 
     def finish(self, *, refit: bool = True) -> list[Output]:
@@ -1101,7 +1162,7 @@ class BacklashPipeline:
         worker, refits the windowed identifier on its window when ``refit``, and returns the
         final estimate and diagnostics; checkpoints when a file is set.
         """
-        outputs: list[Output] = []
+        outputs = self.periodic()  # an answered command's, not taken yet
         self._feed(final=True)
         worker = self._worker
         assert worker is not None

@@ -552,7 +552,10 @@ class DdsNode:
             receive_ns = self._receive_ns(event.kind, event.order_ns, now)
             self.stats.received[event.kind] += 1
             if event.kind == "command":
-                outputs = pipe.on_command(event.message, receive_ns)  # type: ignore[arg-type]
+                answer = pipe.answer(event.message, receive_ns)  # type: ignore[arg-type]
+                if answer is not None:  # published before the estimate and diagnostics
+                    self._publish([answer])
+                outputs = pipe.periodic()
             elif event.kind == "encoder":
                 outputs = pipe.on_encoder(event.message, receive_ns)
             else:

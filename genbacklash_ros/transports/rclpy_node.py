@@ -497,8 +497,11 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
         except MessageError as err:
             self.get_logger().warning(f"command: {err}", throttle_duration_sec=5.0)
             return
-        outputs = self._pipeline.on_command(ours, self._receive_ns(info))  # type: ignore[arg-type]
-        self._publish(outputs)
+        pipeline = self._pipeline
+        answer = pipeline.answer(ours, self._receive_ns(info))  # type: ignore[arg-type]
+        if answer is not None:  # published before the estimate and diagnostics are made
+            self._publish([answer])
+        self._publish(pipeline.periodic())
 
     def _on_encoder(self, msg: Any, info: Any) -> None:
         self._data_since_tick = True

@@ -198,6 +198,44 @@ def test_each_joint_is_exactly_a_single_joint_pipeline(
         assert np.array_equal(got[:, index], own), name
 
 
+def test_the_answer_comes_before_any_joint_builds_its_periodic_outputs(
+    fed: tuple[MultiJointPipeline, list[Output]],
+    arm: list[tuple[int, str, Float64MultiArray | JointState]],
+) -> None:
+    """``answer`` (the one compensated array) builds no joint's estimate or diagnostics;
+    ``periodic`` right after makes them: together exactly ``on_command``'s outputs, so the
+    live transports publish the array first and nothing else changes."""
+    _, expected = fed
+    js = JointSet.from_mapping({"joints": list(NAMES), "command_indices": list(INDICES)})
+    pipe = MultiJointPipeline(js)
+    built: list[str] = []
+    for name, joint_pipe in pipe.pipelines.items():
+        original = joint_pipe.diagnostics
+
+        def spy(stamp_ns: int, *, stale: bool = False, _name: str = name, _orig=original):  # type: ignore[no-untyped-def]
+            built.append(_name)
+            return _orig(stamp_ns, stale=stale)
+
+        joint_pipe.diagnostics = spy  # type: ignore[method-assign]
+    outputs: list[Output] = []
+    reports_at_commands = 0
+    for receive_ns, topic, msg in arm:
+        if topic == COMMAND_TOPIC:
+            answer = pipe.answer(msg, receive_ns)  # type: ignore[arg-type]
+            assert built == [] and answer is not None
+            due = pipe.periodic()
+            reports_at_commands += sum(o.topic == "diagnostics" for o in due)
+            outputs += [answer, *due]
+        else:
+            outputs += pipe.on_encoder(msg, receive_ns)
+        built.clear()
+    outputs += pipe.finish()
+    assert reports_at_commands >= len(NAMES) * 10  # every joint's, at commands, each second
+    assert [(o.topic, o.joint, o.message, o.stamp_ns) for o in outputs] == [
+        (o.topic, o.joint, o.message, o.stamp_ns) for o in expected
+    ]
+
+
 def test_estimates_and_diagnostics_are_per_joint(
     fed: tuple[MultiJointPipeline, list[Output]],
 ) -> None:

@@ -191,6 +191,72 @@ def test_replay_is_deterministic(example1: list[Event]) -> None:
     ]
 
 
+def _spy_diagnostics(pipe: BacklashPipeline) -> list[int]:
+    """The data times at which ``pipe`` builds a diagnostics report, as it builds them."""
+    built: list[int] = []
+    original = pipe.diagnostics
+
+    def diagnostics(stamp_ns: int, *, stale: bool = False) -> Output:
+        built.append(stamp_ns)
+        return original(stamp_ns, stale=stale)
+
+    pipe.diagnostics = diagnostics  # type: ignore[method-assign]
+    return built
+
+
+def test_the_answer_comes_before_the_periodic_outputs_are_built() -> None:
+    """``answer`` returns the compensated command alone and builds no estimate or
+    diagnostics; ``periodic`` right after makes them: message by message exactly
+    ``on_command``'s outputs, so a live transport can publish the answer first and change
+    nothing else. Commands at 1 kHz, each just before its reading, as an arm's controller
+    sends them: the commands move the data clock, so the periodic outputs come due at
+    commands."""
+    events = example1_events(seed=3, seconds=4.0, command_hz=1000.0, jitter=0.0)
+    pipe, same = BacklashPipeline(PARAMS), BacklashPipeline(PARAMS)
+    built = _spy_diagnostics(pipe)
+    due_at_commands: Counter[str] = Counter()
+
+    def key(outputs: list[Output]) -> list[tuple[str, Any, int]]:
+        return [(o.topic, o.message, o.stamp_ns) for o in outputs]
+
+    for event in events:
+        if event.kind == "command":
+            answer = pipe.answer(event.msg, event.receive_ns)
+            assert built == [] and answer is not None
+            due = pipe.periodic()
+            due_at_commands.update(o.topic for o in due)
+            got = [answer, *due]
+            assert key(got) == key(same.on_command(event.msg, event.receive_ns))
+        else:
+            got = pipe.on_encoder(event.msg, event.receive_ns)
+            assert key(got) == key(same.on_encoder(event.msg, event.receive_ns))
+        built.clear()
+    assert key(pipe.finish()) == key(same.finish())
+    assert due_at_commands["estimate"] >= 20 and due_at_commands["diagnostics"] >= 3
+
+
+def test_periodic_outputs_not_taken_come_with_the_next_reading() -> None:
+    """An answer whose ``periodic`` was not called: its periodic step runs before the next
+    message moves the pipeline on, and its outputs come first in that call's."""
+    pipe = BacklashPipeline(NodeParameters(command_type="float64"))
+    assert pipe.answer(Float64(0.1), receive_ns=1 * MS) is not None
+    assert pipe.periodic() == []  # the first message starts the data clock: nothing due
+    reading = JointState(Header(Time.from_ns(2 * MS)), ("j",), (0.1,))
+    assert pipe.on_encoder(reading, receive_ns=2 * MS) == []
+    assert pipe.answer(Float64(0.2), receive_ns=1200 * MS) is not None  # a report is due
+    later = JointState(Header(Time.from_ns(1201 * MS)), ("j",), (0.2,))
+    outputs = pipe.on_encoder(later, receive_ns=1201 * MS)
+    assert [o.topic for o in outputs] == ["diagnostics"]
+    assert outputs[0].stamp_ns == 1200 * MS  # the command's step, on the command's time
+    assert pipe.periodic() == []
+    # also when the next message is one the adapters refuse
+    assert pipe.answer(Float64(0.3), receive_ns=2400 * MS) is not None
+    refused = JointState(Header(Time.from_ns(2401 * MS)), ("j",), ())  # no position
+    outputs = pipe.on_encoder(refused, receive_ns=2401 * MS)
+    assert [(o.topic, o.stamp_ns) for o in outputs] == [("diagnostics", 2400 * MS)]
+    assert pipe.stats.dropped["encoder_invalid"] == 1
+
+
 # --------------------------------------------------------------------------- compensation
 
 

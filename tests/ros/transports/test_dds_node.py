@@ -37,6 +37,7 @@ from genbacklash_ros.transports.dds_types import (
     MultiArrayLayout_,
 )
 
+from ._answer_first import ANSWER_FIRST, recorded
 from ._dds import Received, Subscriber, diagnostic_values, start_node, stop_node
 from ._player import wait_for
 
@@ -243,3 +244,35 @@ def test_a_stalled_loop_loses_no_command() -> None:
         assert wait_for(lambda: len(sub.got.compensated) >= sent, 10), len(sub.got.compensated)
     finally:
         sub.close()
+
+
+def test_the_compensated_command_is_published_before_the_periodic_outputs_are_built(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A command at which a diagnostics report comes due: its compensated command is
+    written before the report is built (the pipeline's ``answer``, then ``periodic``), so
+    building the estimates and reports never delays the answer."""
+    from genbacklash_ros.node.messages import Float64MultiArray
+    from genbacklash_ros.node.parameters import NodeParameters
+    from genbacklash_ros.transports.dds_node import DdsNode, _Event
+
+    node = DdsNode(NodeParameters(joint="j"), domain_id=DOMAIN, clock=lambda: 10**15)
+    events, publish = recorded(node.pipeline)
+    pending = [
+        _Event(1_000_000, 1, "command", Float64MultiArray(data=(0.1, 0.0))),
+        _Event(1_200_000_000, 2, "command", Float64MultiArray(data=(0.2, 0.0))),
+    ]
+
+    def take(kind: str, out: list[_Event]) -> None:
+        if kind == "command":
+            out.extend(pending)
+            pending.clear()
+
+    monkeypatch.setattr(node, "_take", take)
+    monkeypatch.setattr(node, "_publish", publish)
+    try:
+        assert node._process_available()
+        assert events == ANSWER_FIRST
+    finally:
+        node.stop()
+        node.spin()

@@ -21,6 +21,7 @@ import pytest
 
 from genbacklash_ros.cli.node import choose_transport, ros2_main
 
+from ._answer_first import ANSWER_FIRST, recorded
 from ._ros2 import domain_id, params_file, rclpy_missing
 
 needs_rclpy = pytest.mark.skipif(bool(rclpy_missing()), reason=rclpy_missing() or "-")
@@ -115,6 +116,30 @@ def test_node_rejects_bad_parameters_with_the_reason(ros_args: list[str]) -> Non
         result = node.set_parameters([Parameter("publish_rate", value=5.0)])[0]
         assert result.successful
         assert node.get_parameter("publish_rate").value == 5.0
+    finally:
+        node.finish()
+        node.destroy_node()
+
+
+@needs_rclpy
+def test_the_compensated_command_is_published_before_the_periodic_outputs_are_built(
+    ros_args: list[str],
+) -> None:
+    """A command at which a diagnostics report comes due: its compensated command is
+    published before the report is built (the pipeline's ``answer``, then ``periodic``),
+    so building the estimates and reports never delays the answer."""
+    from std_msgs.msg import Float64MultiArray
+
+    from genbacklash_ros.transports import rclpy_node
+
+    node = rclpy_node.BacklashIdentifierNode()
+    events, publish = recorded(node._pipeline)
+    node._publish = publish  # type: ignore[method-assign]
+    try:
+        for value, ms in ((0.1, 1), (0.2, 1_200)):
+            info = {"source_timestamp": ms * 1_000_000}
+            node._on_command(Float64MultiArray(data=[value, 0.0]), info)
+        assert events == ANSWER_FIRST
     finally:
         node.finish()
         node.destroy_node()
