@@ -233,3 +233,64 @@ def test_lost_samples_break_the_fits_not_the_gap() -> None:
     assert abs(dropped.model.backlash.c_left - truth.c_left) < 0.02
     with pytest.raises(GenBacklashError, match="one flag per sample"):
         diagnose(u, y, breaks=breaks[:-1])
+
+
+def _tie_models(p: float) -> tuple[np.ndarray, np.ndarray, list[AugmentedModel]]:
+    """A record of a backlash with a light lag after it (pole ``p``), and three models: the
+    truth (a cascade, 6 free parameters), the backlash one sample late (5: it restarts after a
+    loss), and a poor start."""
+    from genbacklash_core.cascade import Cascade
+    from genbacklash_core.diagnose.synthetic import random_walk_input
+    from genbacklash_core.linear import LinearBlock
+
+    u = random_walk_input(N, np.random.default_rng(3))
+    truth = AugmentedModel(
+        Cascade(GeneralBacklash.ideal(1.0 - p, 0.3, 0.3), LinearBlock(a=(1.0,), b=(-p, 0.0)))
+    )
+    y = truth.simulate(u) + np.random.default_rng(4).normal(0.0, 0.01, N)
+    late = AugmentedModel(GeneralBacklash.ideal(1.0, 0.3, 0.3), delay=1)
+    poor = AugmentedModel(GeneralBacklash.ideal(1.0, 0.1, 0.1))
+    return u, y, [truth, late, poor]
+
+
+def test_a_near_tie_near_the_floor_goes_to_the_model_with_fewer_parameters() -> None:
+    """A cascade and a restarting model whose validation misfits differ by more than
+    ``min_gap_drop`` but by less than ``floor_margin - 1`` floors are tied: the one with fewer
+    free parameters is taken; with a lower floor, or none measured, the cascade stays."""
+    from genbacklash_core.diagnose.effects import Detection
+    from genbacklash_core.diagnose.fit import ModelFit
+    from genbacklash_core.diagnose.gap import measure_gap, split_record
+    from genbacklash_core.diagnose.loop import _Candidate, _Run
+
+    u, y, models = _tie_models(0.05)
+    split = split_record(N, 0.3)
+    breaks = np.zeros(N, dtype=bool)
+    breaks[100::97] = True  # lost readings: the candidates are ranked by the validation gap
+    reports = [measure_gap(model, u, y, split) for model in models]
+    cascade, late, start = reports
+    apart = late.gap - cascade.gap
+    assert apart > DiagnoseSettings().min_gap_drop * cascade.gap  # no tie on the 5 % rule
+    candidates = [
+        _Candidate(
+            Detection(name, True, 1.0, 0.0, "a test"),
+            ModelFit(model, 1.0, N, report.gap, 1, True, "a test"),
+            -1000.0,
+        )
+        for name, model, report in zip(
+            ("linear_dynamics", "time_delay"), models[:2], reports[:2], strict=True
+        )
+    ]
+    chosen, rival = candidates
+    assert rival.fit.n_free < chosen.fit.n_free
+    gaps = {id(chosen): cascade, id(rival): late}
+    est = split.estimation
+
+    def run(floor: float | None) -> _Run:
+        return _Run(u, y, split, CATALOG, DiagnoseSettings(), breaks[est], floor)
+
+    slack = DiagnoseSettings().floor_margin - 1.0
+    taken = run(1.5 * apart / slack).simpler_in_tie(start, [rival], chosen, gaps)
+    assert taken is not None and taken[0] is rival
+    assert "times the floor" in taken[2] and "5 free parameters" in taken[2]
+    assert run(0.5 * apart / slack).simpler_in_tie(start, [rival], chosen, gaps) is None
+    assert run(None).simpler_in_tie(start, [rival], chosen, gaps) is None
