@@ -640,11 +640,12 @@ def replay(
                     block.extend(itertools.islice(stream, size))
                     if not block:
                         break
-                    feed.block(block)
-                    count += len(block)
-                    last_log = block[-1].log_time_ns
-                    bar.step(len(block))
-                    block = []
+                    # taken out first: if feeding raises (Ctrl-C), the block is not fed again
+                    taken, block = block, []
+                    feed.block(taken)
+                    count += len(taken)
+                    last_log = taken[-1].log_time_ns
+                    bar.step(len(taken))
             except BagError as err:
                 error = str(err)
             finally:

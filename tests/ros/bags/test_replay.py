@@ -238,3 +238,31 @@ def test_a_replay_leaves_the_collector_as_it_found_it() -> None:
         assert gc.get_threshold()[0] == _GC_YOUNG  # the first still runs
     assert gc.get_threshold() == before
     assert gc.get_freeze_count() == 0
+
+
+def test_a_block_interrupted_while_fed_is_not_fed_again(
+    example_bag: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Ctrl-C while the pipeline takes a block: the interrupt goes up and that block is not
+    fed a second time on the way out (it once was: the messages counted twice)."""
+    from genbacklash_ros.bags import replay as replay_module
+
+    fed: list[int] = []
+    real = replay_module._Feed.block
+
+    def block(self: object, items: list[object]) -> None:
+        fed.append(len(items))
+        if len(fed) == 1:
+            raise KeyboardInterrupt
+        real(self, items)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(replay_module._Feed, "block", block)
+    with pytest.raises(KeyboardInterrupt):
+        replay(
+            example_bag,
+            tmp_path / "out",
+            command_topic=COMMAND_TOPIC,
+            encoder_topic=ENCODER_TOPIC,
+            joint=JOINT,
+        )
+    assert len(fed) == 1
