@@ -9,7 +9,9 @@ taken up once it is ready. Replay's determinism is in tests/ros/bags/test_replay
 
 from __future__ import annotations
 
+import sys
 import threading
+import time
 from typing import Any
 
 import numpy as np
@@ -211,3 +213,29 @@ def test_workers_on_one_thread_take_turns_and_a_bug_in_one_stops_none() -> None:
 def test_pipeline_rejects_a_worker_that_is_not_callable() -> None:
     with pytest.raises(GenBacklashError, match="worker must make"):
         BacklashPipeline(FLOATS, worker=3)  # type: ignore[arg-type]
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="per-thread niceness is Linux's")
+def test_the_identify_thread_runs_below_the_message_thread() -> None:
+    """The answers come first: the identify thread's niceness is the process's plus
+    IDENTIFY_NICENESS (capped at 19); the calling (message) thread keeps its own."""
+    import os
+
+    from genbacklash_ros.node.identify import IDENTIFY_NICENESS
+
+    process = os.getpriority(os.PRIO_PROCESS, 0)
+    thread = IdentifyThread("test-nice")
+    try:
+        tid = thread.thread.native_id
+        assert tid is not None
+
+        def lowered() -> bool:
+            return os.getpriority(os.PRIO_PROCESS, tid) == min(19, process + IDENTIFY_NICENESS)
+
+        deadline = time.monotonic() + WAIT_S
+        while not lowered() and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert lowered()
+        assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) == process
+    finally:
+        thread.close()
