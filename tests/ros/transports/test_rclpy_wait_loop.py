@@ -18,7 +18,9 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -47,9 +49,23 @@ def _reading(value: float, stamp_ns: int) -> Any:
     return msg
 
 
-def test_the_loop_takes_both_topics_in_source_order_and_executors_do_not(
-    ros_init: Callable[..., Any],
-) -> None:
+@dataclass
+class _Wired:
+    node: Any  # the BacklashIdentifierNode
+    command: Any  # the peer's /command publisher
+    encoder: Any  # the peer's /encoder publisher
+    executor: Any  # an executor with the node added
+    loop: Any  # the node's WaitLoop over it
+
+
+@contextmanager
+def _node_and_peer(
+    peer_name: str, callbacks: Callable[[Any], tuple[Callable[..., None], Callable[..., None]]]
+) -> Iterator[_Wired]:
+    """The node, its wait loop and a peer publishing ``/command`` and ``/encoder``, matched
+    both ways (rclpy initialised by the test's ``ros_init``); all torn down after.
+    ``callbacks(encoder publisher)``: the node's command and encoder callbacks, installed
+    before the loop takes the subscriptions over."""
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import qos_profile_sensor_data
@@ -58,14 +74,11 @@ def test_the_loop_takes_both_topics_in_source_order_and_executors_do_not(
 
     from genbacklash_ros.transports import rclpy_node
 
-    ros_init()
     node = rclpy_node.BacklashIdentifierNode()
-    seen: list[tuple[str, float]] = []
-    node._command_sub.callback = lambda msg, info: seen.append(("command", msg.data[0]))
-    node._encoder_sub.callback = lambda msg, info: seen.append(("encoder", msg.position[0]))
-    peer = rclpy.create_node("wait_loop_peer")
+    peer = rclpy.create_node(peer_name)
     command = peer.create_publisher(Float64MultiArray, "/command", 10)
     encoder = peer.create_publisher(JointState, "/encoder", qos_profile_sensor_data)
+    node._command_sub.callback, node._encoder_sub.callback = callbacks(encoder)
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     loop = rclpy_node.WaitLoop(node, executor)
@@ -76,30 +89,47 @@ def test_the_loop_takes_both_topics_in_source_order_and_executors_do_not(
             15.0,
         )
         time.sleep(0.5)  # both directions of discovery
-        # a reading first, then two commands, then a reading: taken in one wake-up, the
-        # commands' subscription first, yet handed on in the order they were published
-        encoder.publish(_reading(0.5, 1))
-        command.publish(Float64MultiArray(data=[1.0]))
-        command.publish(Float64MultiArray(data=[2.0]))
-        encoder.publish(_reading(0.75, 2))
-        time.sleep(0.3)  # all four delivered, none taken yet
-        # an executor spun on the node does not take them while the loop holds them
-        executor.spin_once(timeout_sec=0.2)
-        assert seen == []
-        _until(lambda: len(seen) >= 4, lambda: loop.run_once(0.1), 5.0)
-        assert seen == [("encoder", 0.5), ("command", 1.0), ("command", 2.0), ("encoder", 0.75)]
-        assert loop.taken == 4
-        # closed, the loop gives them back: the executor takes the next one itself
-        loop.close()
-        command.publish(Float64MultiArray(data=[3.0]))
-        _until(lambda: len(seen) >= 5, lambda: executor.spin_once(timeout_sec=0.1), 5.0)
-        assert seen[-1] == ("command", 3.0)
+        yield _Wired(node, command, encoder, executor, loop)
     finally:
         loop.close()
         executor.shutdown()
         peer.destroy_node()
         node.finish()
         node.destroy_node()
+
+
+def test_the_loop_takes_both_topics_in_source_order_and_executors_do_not(
+    ros_init: Callable[..., Any],
+) -> None:
+    from std_msgs.msg import Float64MultiArray
+
+    ros_init()
+    seen: list[tuple[str, float]] = []
+    with _node_and_peer(
+        "wait_loop_peer",
+        lambda _: (
+            lambda msg, info: seen.append(("command", msg.data[0])),
+            lambda msg, info: seen.append(("encoder", msg.position[0])),
+        ),
+    ) as w:
+        # a reading first, then two commands, then a reading: taken in one wake-up, the
+        # commands' subscription first, yet handed on in the order they were published
+        w.encoder.publish(_reading(0.5, 1))
+        w.command.publish(Float64MultiArray(data=[1.0]))
+        w.command.publish(Float64MultiArray(data=[2.0]))
+        w.encoder.publish(_reading(0.75, 2))
+        time.sleep(0.3)  # all four delivered, none taken yet
+        # an executor spun on the node does not take them while the loop holds them
+        w.executor.spin_once(timeout_sec=0.2)
+        assert seen == []
+        _until(lambda: len(seen) >= 4, lambda: w.loop.run_once(0.1), 5.0)
+        assert seen == [("encoder", 0.5), ("command", 1.0), ("command", 2.0), ("encoder", 0.75)]
+        assert w.loop.taken == 4
+        # closed, the loop gives them back: the executor takes the next one itself
+        w.loop.close()
+        w.command.publish(Float64MultiArray(data=[3.0]))
+        _until(lambda: len(seen) >= 5, lambda: w.executor.spin_once(timeout_sec=0.1), 5.0)
+        assert seen[-1] == ("command", 3.0)
 
 
 def test_a_reading_that_comes_while_a_command_is_handled_is_taken_in_the_same_wake_up(
@@ -107,49 +137,25 @@ def test_a_reading_that_comes_while_a_command_is_handled_is_taken_in_the_same_wa
 ) -> None:
     """The loop takes again before it waits (``WaitLoop._drain``): at 1 kHz the reading
     published right after a command is handed on in the wake-up that took the command."""
-    import rclpy
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.qos import qos_profile_sensor_data
-    from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
 
-    from genbacklash_ros.transports import rclpy_node
-
     ros_init()
-    node = rclpy_node.BacklashIdentifierNode()
-    peer = rclpy.create_node("wait_loop_drain_peer")
-    command = peer.create_publisher(Float64MultiArray, "/command", 10)
-    encoder = peer.create_publisher(JointState, "/encoder", qos_profile_sensor_data)
     seen: list[tuple[str, float]] = []
 
-    def on_command(msg: Any, info: Any) -> None:
-        seen.append(("command", msg.data[0]))
-        encoder.publish(_reading(0.25, 2))  # comes while the command is being handled
-        time.sleep(0.05)
+    def callbacks(encoder: Any) -> tuple[Callable[..., None], Callable[..., None]]:
+        def on_command(msg: Any, info: Any) -> None:
+            seen.append(("command", msg.data[0]))
+            encoder.publish(_reading(0.25, 2))  # comes while the command is being handled
+            time.sleep(0.05)
 
-    node._command_sub.callback = on_command
-    node._encoder_sub.callback = lambda msg, info: seen.append(("encoder", msg.position[0]))
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
-    loop = rclpy_node.WaitLoop(node, executor)
-    try:
-        _until(
-            lambda: command.get_subscription_count() and encoder.get_subscription_count(),
-            lambda: time.sleep(0.05),
-            15.0,
-        )
-        time.sleep(0.5)  # both directions of discovery
-        command.publish(Float64MultiArray(data=[1.0]))
+        return on_command, lambda msg, info: seen.append(("encoder", msg.position[0]))
+
+    with _node_and_peer("wait_loop_drain_peer", callbacks) as w:
+        w.command.publish(Float64MultiArray(data=[1.0]))
         time.sleep(0.05)  # delivered, not taken
-        assert loop.run_once(1.0) == 2
+        assert w.loop.run_once(1.0) == 2
         assert seen == [("command", 1.0), ("encoder", 0.25)]
-        assert loop.taken == 2
-    finally:
-        loop.close()
-        executor.shutdown()
-        peer.destroy_node()
-        node.finish()
-        node.destroy_node()
+        assert w.loop.taken == 2
 
 
 def test_services_timer_and_a_clock_made_at_run_time_are_served(
