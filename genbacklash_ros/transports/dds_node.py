@@ -329,7 +329,7 @@ class DdsNode:
         dp = self._participant
         command_ros = _COMMAND_ROS_TYPES[params.command_type]
         encoder_ros = _ENCODER_ROS_TYPES[params.encoder_type]
-        command_type, encoder_type = DDS_TYPES[command_ros], DDS_TYPES[encoder_ros]
+        command_type = DDS_TYPES[command_ros]
         estimate_ros, diagnostics_ros = Float64MultiArray.ros_type, DiagnosticArray.ros_type
         t = self.topics
         # the readers only once this participant knows the endpoints of those running already:
@@ -345,13 +345,15 @@ class DdsNode:
             )
         # one reader per input; a motor encoder (gear_input motor_encoder, dual encoders) is
         # the gear's input
-        inputs: list[tuple[_Kind, str, Any]] = [
-            ("command", command_ros, DEFAULT_QOS),
-            ("encoder", encoder_ros, SENSOR_QOS),
+        # (kind, ROS type, QoS, the parameter that chose the type, the types it may name)
+        inputs: list[tuple[_Kind, str, Any, str, dict[str, str]]] = [
+            ("command", command_ros, DEFAULT_QOS, "command_type", _COMMAND_ROS_TYPES),
+            ("encoder", encoder_ros, SENSOR_QOS, "encoder_type", _ENCODER_ROS_TYPES),
         ]
         if params.motor_input:
+            motor_ros = _ENCODER_ROS_TYPES[params.motor_encoder_type]
             inputs.append(
-                ("motor_encoder", _ENCODER_ROS_TYPES[params.motor_encoder_type], SENSOR_QOS)
+                ("motor_encoder", motor_ros, SENSOR_QOS, "motor_encoder_type", _ENCODER_ROS_TYPES)
             )
         self._readers: dict[_Kind, DataReader[Any]] = {
             kind: DataReader(
@@ -359,7 +361,7 @@ class DdsNode:
                 Topic(dp, dds_topic(t[kind]), DDS_TYPES[ros_type]),
                 qos=endpoint_qos(_deep(qos), ros_type),
             )
-            for kind, ros_type, qos in inputs
+            for kind, ros_type, qos, _, _ in inputs
         }
         self._writers: dict[str, DataWriter[Any]] = {
             "compensated_command": DataWriter(
@@ -392,28 +394,11 @@ class DdsNode:
         self._watch = PublicationWatch(
             dp,
             {
-                dds_topic(t["command"]): Subscribed(
-                    command_type.__idl_typename__,
-                    "command_type",
-                    tuple(_COMMAND_ROS_TYPES.items()),
-                ),
-                dds_topic(t["encoder"]): Subscribed(
-                    encoder_type.__idl_typename__,
-                    "encoder_type",
-                    tuple(_ENCODER_ROS_TYPES.items()),
-                ),
-            }
-            | (
-                {
-                    dds_topic(t["motor_encoder"]): Subscribed(
-                        DDS_TYPES[_ENCODER_ROS_TYPES[params.motor_encoder_type]].__idl_typename__,
-                        "motor_encoder_type",
-                        tuple(_ENCODER_ROS_TYPES.items()),
-                    )
-                }
-                if params.motor_input
-                else {}
-            ),
+                dds_topic(t[kind]): Subscribed(
+                    DDS_TYPES[ros_type].__idl_typename__, parameter, tuple(choices.items())
+                )
+                for kind, ros_type, _, parameter, choices in inputs
+            },
         )
         mask = SampleState.NotRead | ViewState.Any | InstanceState.Any
         self._ready = {kind: ReadCondition(r, mask) for kind, r in self._readers.items()}
