@@ -58,6 +58,7 @@ __all__ = [
 
 MIN_READINGS_PER_COMMAND = 3
 RUN_WINDOW = 63
+_INT64_MIN = int(np.iinfo(np.int64).min)
 MAX_STRETCH = 4.0  # a large step's settling is at most this many times the usual one
 
 
@@ -146,7 +147,7 @@ def settling_keep(
     previous[0] = np.nan if before.last_u is None else before.last_u
     where = np.flatnonzero(u != previous)
     # runs: the carried run ends at the first change; each change starts a new one
-    ends = np.append(where, n)
+    ends = np.concatenate((where, [n]))
     lengths = np.diff(ends).tolist()
     complete = [before.run + int(ends[0])] if where.size and before.last_u is not None else []
     complete += lengths[:-1] if where.size else []
@@ -162,33 +163,42 @@ def settling_keep(
     sizes = np.abs(u[where] - previous[where])
     known = sizes[np.isfinite(sizes)]
     steps = (*before.steps, *known.tolist())[-RUN_WINDOW:]
-    after = SettleState(
+    fields = (
         float(u[-1]),
         last_change,
         run,
         runs,
         tuple(spans),
         steps,
-        before.busy_ns,
+    )
+    medians = (
         _median(runs, before.median_run, bool(complete)),
         _median(spans, before.median_span, len(spans) != len(before.spans) or bool(where.size)),
         _median(steps, before.median_step, bool(known.size)),
     )
+    after = SettleState(*fields, before.busy_ns, *medians)
     if settle_ns <= 0 or not after.applies:
         return np.ones(n, dtype=bool), after
     base = after.limit(settle_ns)
     # a step larger than the usual ones takes a torque-limited servo longer: the time to
     # move grows with the square root of the distance (at most MAX_STRETCH times the base),
-    # and the servo stays busy until the latest such end, across the changes that follow
+    # and the servo stays busy until the latest such end, across the changes that follow.
+    # (A NaN size, the stream's first change, counts as a usual step; an infinite one is
+    # clipped to MAX_STRETCH either way.)
     typical = 0.0 if math.isnan(after.median_step) else after.median_step
-    ratio = np.ones(where.size) if typical <= 0.0 else np.nan_to_num(sizes / typical, nan=1.0)
-    stretch = np.clip(np.sqrt(ratio), 1.0, MAX_STRETCH)
+    if typical <= 0.0:
+        ratio = np.ones(where.size)
+    else:
+        ratio = sizes / typical
+        ratio[np.isnan(ratio)] = 1.0
+    stretch = np.minimum(np.maximum(np.sqrt(ratio), 1.0), MAX_STRETCH)
     ends = t[where] + np.round(base * stretch).astype(np.int64)
-    carried_busy = before.busy_ns if before.busy_ns is not None else np.iinfo(np.int64).min
+    carried_busy = before.busy_ns if before.busy_ns is not None else _INT64_MIN
     busy = np.maximum.accumulate(np.concatenate(([carried_busy], ends)))
-    until = busy[np.searchsorted(where, np.arange(n), side="right")]
+    # sample j holds the changes where[m] <= j: busy[m] repeated over each run
+    until = np.repeat(busy, np.diff(np.concatenate(([0], where, [n]))))
     keep: BoolArray = t >= until
-    return keep, dataclasses.replace(after, busy_ns=int(busy[-1]))
+    return keep, SettleState(*fields, int(busy[-1]), *medians)
 
 
 def _median(values: tuple[float, ...], known: float, changed: bool) -> float:
