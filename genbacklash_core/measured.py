@@ -200,8 +200,10 @@ class _Mean:
 
     def add(self, stamps: IntArray, errors: FloatArray, window: float) -> None:
         """Readings of this kind in order (stamps in ns), each after the last one added."""
-        steps = np.diff(stamps, prepend=stamps[0] if self.last is None else self.last)
-        steps = np.clip(steps / 1e9, 0.0, _MAX_STEP_S)
+        steps = np.empty(stamps.size, dtype=np.int64)  # np.diff with the last one prepended
+        steps[0] = 0 if self.last is None else stamps[0] - self.last
+        np.subtract(stamps[1:], stamps[:-1], out=steps[1:])
+        steps = np.minimum(np.maximum(steps / 1e9, 0.0), _MAX_STEP_S)  # np.clip, no NaN here
         ages = np.cumsum(steps)
         total = float(ages[-1])
         fade = np.exp((ages - total) / window)  # exp(-(age of the newest - age) / window)
@@ -279,9 +281,14 @@ class TrackingJudge:
         ok = np.isfinite(error)
         compensated = w > 0.0
         window = float(self.settings.window)
-        for mean, mask in ((self._on, ok & compensated), (self._off, ok & ~compensated)):
-            if mask.any():
-                mean.add(t[mask], error[mask], window)
+        if ok.all() and (compensated.all() or not compensated.any()):  # one kind, all kept
+            mean = self._on if compensated.all() else self._off
+            if t.size:
+                mean.add(t, error, window)
+        else:
+            for mean, mask in ((self._on, ok & compensated), (self._off, ok & ~compensated)):
+                if mask.any():
+                    mean.add(t[mask], error[mask], window)
         self.verdict = self._judge()
         return self.verdict
 

@@ -20,6 +20,7 @@ Examples
 
 from __future__ import annotations
 
+import bisect
 import math
 
 import numpy as np
@@ -76,11 +77,15 @@ class TrackingStage:
         and ``order``: the messages' places in the batch)."""
         if stamps:
             if cmd_order:
-                k = np.searchsorted(np.asarray(cmd_order), np.asarray(order), side="right") - 1
-                rs = np.where(k >= 0, np.asarray(desired)[np.maximum(k, 0)], self._r)
-                ws = np.where(k >= 0, weight, self._w)
-                self._rs.extend(rs.tolist())
-                self._ws.extend(ws.tolist())
+                # readings before the stretch's first command: the command in force before
+                before = bisect.bisect_left(order, cmd_order[0])
+                if before:
+                    self._rs.extend([self._r] * before)
+                    self._ws.extend([self._w] * before)
+                if before < len(order):
+                    k = np.searchsorted(cmd_order, order[before:], side="right") - 1
+                    self._rs.extend(np.asarray(desired, dtype=np.float64)[k].tolist())
+                    self._ws.extend([float(weight)] * (len(order) - before))
             else:
                 self._rs.extend([self._r] * len(stamps))
                 self._ws.extend([self._w] * len(stamps))
