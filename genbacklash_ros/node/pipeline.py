@@ -423,6 +423,7 @@ class BacklashPipeline:
         # yet (periodic() runs it), and periodic outputs made but not taken yet
         self._answered: int | None = None
         self._due: list[Output] = []
+        self._built_estimate: tuple[Estimate, Float64MultiArray] | None = None
         self._start(params)
 
     # ------------------------------------------------------------------ configuration
@@ -1178,7 +1179,7 @@ class BacklashPipeline:
             return outputs
         est = self.estimate
         if est.available:
-            outputs.append(Output("estimate", estimate_message(est), now, est))
+            outputs.append(Output("estimate", self._estimate_message(est), now, est))
         self._checkpoint(now)
         outputs.append(self.diagnostics(now))
         return outputs
@@ -1381,7 +1382,7 @@ class BacklashPipeline:
         if due.estimate:
             est = self.estimate
             if est.available:
-                outputs.append(Output("estimate", estimate_message(est), now, est))
+                outputs.append(Output("estimate", self._estimate_message(est), now, est))
             clock.estimate_done(now)
         if heavy and due.checkpoint:
             self._checkpoint(now)
@@ -1390,6 +1391,16 @@ class BacklashPipeline:
             outputs.append(self.diagnostics(now))
             clock.diagnostics_done(now)
         clock.settle()
+
+    def _estimate_message(self, est: Estimate) -> Float64MultiArray:
+        """The ``estimate`` message of ``est``: built once per estimate (the messages are
+        frozen; the estimate in use often stays the same over several publish periods)."""
+        built = self._built_estimate
+        if built is not None and built[0] is est:
+            return built[1]
+        message = estimate_message(est)
+        self._built_estimate = (est, message)
+        return message
 
     def _checkpoint(self, now: int) -> None:
         path = self._checkpoint_path
