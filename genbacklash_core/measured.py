@@ -59,6 +59,7 @@ import numpy as np
 
 from ._typing import ArrayLike, FloatArray, IntArray
 from .errors import GenBacklashError
+from .samples import stamp_steps
 
 __all__ = [
     "CLEAR_HELP",
@@ -200,10 +201,8 @@ class _Mean:
 
     def add(self, stamps: IntArray, errors: FloatArray, window: float) -> None:
         """Readings of this kind in order (stamps in ns), each after the last one added."""
-        steps = np.empty(stamps.size, dtype=np.int64)  # np.diff with the last one prepended
-        steps[0] = 0 if self.last is None else stamps[0] - self.last
-        np.subtract(stamps[1:], stamps[:-1], out=steps[1:])
-        steps = np.minimum(np.maximum(steps / 1e9, 0.0), _MAX_STEP_S)  # np.clip, no NaN here
+        steps_ns = stamp_steps(stamps, self.last)
+        steps = np.minimum(np.maximum(steps_ns / 1e9, 0.0), _MAX_STEP_S)  # np.clip, no NaN here
         ages = np.cumsum(steps)
         total = float(ages[-1])
         fade = np.exp((ages - total) / window)  # exp(-(age of the newest - age) / window)
