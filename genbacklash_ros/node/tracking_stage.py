@@ -23,8 +23,6 @@ from __future__ import annotations
 import bisect
 import math
 
-import numpy as np
-
 from genbacklash_core.measured import TrackingJudge, TrackingJudgeSettings, TrackingVerdict
 
 __all__ = ["TrackingStage"]
@@ -77,15 +75,17 @@ class TrackingStage:
         and ``order``: the messages' places in the batch)."""
         if stamps:
             if cmd_order:
-                # readings before the stretch's first command: the command in force before
-                before = bisect.bisect_left(order, cmd_order[0])
-                if before:
-                    self._rs.extend([self._r] * before)
-                    self._ws.extend([self._w] * before)
-                if before < len(order):
-                    k = np.searchsorted(cmd_order, order[before:], side="right") - 1
-                    self._rs.extend(np.asarray(desired, dtype=np.float64)[k].tolist())
-                    self._ws.extend([float(weight)] * (len(order) - before))
+                # each run of readings between two commands pairs with the first of them
+                # (those before the stretch's first command: the command in force before)
+                rs = self._rs
+                start = bisect.bisect_left(order, cmd_order[0])
+                rs.extend([self._r] * start)
+                self._ws.extend([self._w] * start)
+                self._ws.extend([float(weight)] * (len(order) - start))
+                for value, after in zip(desired, (*cmd_order[1:], None), strict=True):
+                    stop = len(order) if after is None else bisect.bisect_left(order, after, start)
+                    rs.extend([value] * (stop - start))
+                    start = stop
             else:
                 self._rs.extend([self._r] * len(stamps))
                 self._ws.extend([self._w] * len(stamps))
