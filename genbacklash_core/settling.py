@@ -46,6 +46,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._typing import ArrayLike, BoolArray
+from .samples import stamp_steps
 
 __all__ = [
     "MAX_STRETCH",
@@ -148,16 +149,18 @@ def settling_keep(
     where = np.flatnonzero(u != previous)
     # runs: the carried run ends at the first change; each change starts a new one
     ends = np.concatenate((where, [n]))
-    lengths = np.diff(ends).tolist()
+    counts = stamp_steps(ends, 0)  # samples before the first change, then in each run
+    lengths = counts[1:].tolist()
     complete = [before.run + int(ends[0])] if where.size and before.last_u is not None else []
     complete += lengths[:-1] if where.size else []
     complete = [r for r in complete if r > 0]
     runs = (*before.runs, *complete)[-RUN_WINDOW:]
     run = int(lengths[-1]) if where.size else before.run + n
-    starts_ns = t[where].tolist()
-    if before.change_ns is not None and before.last_u is not None:
-        starts_ns.insert(0, before.change_ns)
-    spans = (*before.spans, *np.diff(starts_ns).tolist())[-RUN_WINDOW:]
+    starts = t[where]  # the runs' first samples: their spans, the carried run's first
+    gaps = stamp_steps(starts, before.change_ns)
+    if before.change_ns is None or before.last_u is None:
+        gaps = gaps[1:]
+    spans = (*before.spans, *gaps.tolist())[-RUN_WINDOW:]
     carried = before.change_ns
     last_change = int(t[where[-1]]) if where.size else int(t[0] if carried is None else carried)
     sizes = np.abs(u[where] - previous[where])
@@ -192,11 +195,11 @@ def settling_keep(
         ratio = sizes / typical
         ratio[np.isnan(ratio)] = 1.0
     stretch = np.minimum(np.maximum(np.sqrt(ratio), 1.0), MAX_STRETCH)
-    ends = t[where] + np.round(base * stretch).astype(np.int64)
+    ends = starts + np.rint(base * stretch).astype(np.int64)  # np.round, decimals 0
     carried_busy = before.busy_ns if before.busy_ns is not None else _INT64_MIN
     busy = np.maximum.accumulate(np.concatenate(([carried_busy], ends)))
     # sample j holds the changes where[m] <= j: busy[m] repeated over each run
-    until = np.repeat(busy, np.diff(np.concatenate(([0], where, [n]))))
+    until = np.repeat(busy, counts)
     keep: BoolArray = t >= until
     return keep, SettleState(*fields, int(busy[-1]), *medians)
 
