@@ -59,6 +59,7 @@ import numpy as np
 
 from ._typing import ArrayLike, FloatArray, IntArray
 from .errors import GenBacklashError
+from .samples import stamp_steps
 
 __all__ = [
     "CLEAR_HELP",
@@ -200,8 +201,8 @@ class _Mean:
 
     def add(self, stamps: IntArray, errors: FloatArray, window: float) -> None:
         """Readings of this kind in order (stamps in ns), each after the last one added."""
-        steps = np.diff(stamps, prepend=stamps[0] if self.last is None else self.last)
-        steps = np.clip(steps / 1e9, 0.0, _MAX_STEP_S)
+        steps_ns = stamp_steps(stamps, self.last)
+        steps = np.minimum(np.maximum(steps_ns / 1e9, 0.0), _MAX_STEP_S)  # np.clip, no NaN here
         ages = np.cumsum(steps)
         total = float(ages[-1])
         fade = np.exp((ages - total) / window)  # exp(-(age of the newest - age) / window)
@@ -279,9 +280,14 @@ class TrackingJudge:
         ok = np.isfinite(error)
         compensated = w > 0.0
         window = float(self.settings.window)
-        for mean, mask in ((self._on, ok & compensated), (self._off, ok & ~compensated)):
-            if mask.any():
-                mean.add(t[mask], error[mask], window)
+        if ok.all() and (compensated.all() or not compensated.any()):  # one kind, all kept
+            mean = self._on if compensated.all() else self._off
+            if t.size:
+                mean.add(t, error, window)
+        else:
+            for mean, mask in ((self._on, ok & compensated), (self._off, ok & ~compensated)):
+                if mask.any():
+                    mean.add(t[mask], error[mask], window)
         self.verdict = self._judge()
         return self.verdict
 

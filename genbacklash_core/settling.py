@@ -46,6 +46,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._typing import ArrayLike, BoolArray
+from .samples import stamp_steps
 
 __all__ = [
     "MAX_STRETCH",
@@ -58,6 +59,7 @@ __all__ = [
 
 MIN_READINGS_PER_COMMAND = 3
 RUN_WINDOW = 63
+_INT64_MIN = int(np.iinfo(np.int64).min)
 MAX_STRETCH = 4.0  # a large step's settling is at most this many times the usual one
 
 
@@ -146,49 +148,60 @@ def settling_keep(
     previous[0] = np.nan if before.last_u is None else before.last_u
     where = np.flatnonzero(u != previous)
     # runs: the carried run ends at the first change; each change starts a new one
-    ends = np.append(where, n)
-    lengths = np.diff(ends).tolist()
+    ends = np.concatenate((where, [n]))
+    counts = stamp_steps(ends, 0)  # samples before the first change, then in each run
+    lengths = counts[1:].tolist()
     complete = [before.run + int(ends[0])] if where.size and before.last_u is not None else []
     complete += lengths[:-1] if where.size else []
     complete = [r for r in complete if r > 0]
     runs = (*before.runs, *complete)[-RUN_WINDOW:]
     run = int(lengths[-1]) if where.size else before.run + n
-    starts_ns = t[where].tolist()
-    if before.change_ns is not None and before.last_u is not None:
-        starts_ns.insert(0, before.change_ns)
-    spans = (*before.spans, *np.diff(starts_ns).tolist())[-RUN_WINDOW:]
+    starts = t[where]  # the runs' first samples: their spans, the carried run's first
+    gaps = stamp_steps(starts, before.change_ns)
+    if before.change_ns is None or before.last_u is None:
+        gaps = gaps[1:]
+    spans = (*before.spans, *gaps.tolist())[-RUN_WINDOW:]
     carried = before.change_ns
     last_change = int(t[where[-1]]) if where.size else int(t[0] if carried is None else carried)
     sizes = np.abs(u[where] - previous[where])
     known = sizes[np.isfinite(sizes)]
     steps = (*before.steps, *known.tolist())[-RUN_WINDOW:]
-    after = SettleState(
+    fields = (
         float(u[-1]),
         last_change,
         run,
         runs,
         tuple(spans),
         steps,
-        before.busy_ns,
+    )
+    medians = (
         _median(runs, before.median_run, bool(complete)),
         _median(spans, before.median_span, len(spans) != len(before.spans) or bool(where.size)),
         _median(steps, before.median_step, bool(known.size)),
     )
+    after = SettleState(*fields, before.busy_ns, *medians)
     if settle_ns <= 0 or not after.applies:
         return np.ones(n, dtype=bool), after
     base = after.limit(settle_ns)
     # a step larger than the usual ones takes a torque-limited servo longer: the time to
     # move grows with the square root of the distance (at most MAX_STRETCH times the base),
-    # and the servo stays busy until the latest such end, across the changes that follow
+    # and the servo stays busy until the latest such end, across the changes that follow.
+    # (A NaN size, the stream's first change, counts as a usual step; an infinite one is
+    # clipped to MAX_STRETCH either way.)
     typical = 0.0 if math.isnan(after.median_step) else after.median_step
-    ratio = np.ones(where.size) if typical <= 0.0 else np.nan_to_num(sizes / typical, nan=1.0)
-    stretch = np.clip(np.sqrt(ratio), 1.0, MAX_STRETCH)
-    ends = t[where] + np.round(base * stretch).astype(np.int64)
-    carried_busy = before.busy_ns if before.busy_ns is not None else np.iinfo(np.int64).min
+    if typical <= 0.0:
+        ratio = np.ones(where.size)
+    else:
+        ratio = sizes / typical
+        ratio[np.isnan(ratio)] = 1.0
+    stretch = np.minimum(np.maximum(np.sqrt(ratio), 1.0), MAX_STRETCH)
+    ends = starts + np.rint(base * stretch).astype(np.int64)  # np.round, decimals 0
+    carried_busy = before.busy_ns if before.busy_ns is not None else _INT64_MIN
     busy = np.maximum.accumulate(np.concatenate(([carried_busy], ends)))
-    until = busy[np.searchsorted(where, np.arange(n), side="right")]
+    # sample j holds the changes where[m] <= j: busy[m] repeated over each run
+    until = np.repeat(busy, counts)
     keep: BoolArray = t >= until
-    return keep, dataclasses.replace(after, busy_ns=int(busy[-1]))
+    return keep, SettleState(*fields, int(busy[-1]), *medians)
 
 
 def _median(values: tuple[float, ...], known: float, changed: bool) -> float:

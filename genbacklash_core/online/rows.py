@@ -90,13 +90,15 @@ class SampleRing:
         if n > self.size:  # only the last `size` samples survive
             self.count += n - self.size
             u, y, b, n = u[-self.size :], y[-self.size :], b[-self.size :], self.size
-        k = (self.count + np.arange(n)) % self.size
-        self.u[k] = u
-        self.u[k + self.size] = u
-        self.y[k] = y
-        self.y[k + self.size] = y
-        self.b[k] = b
-        self.b[k + self.size] = b
+        size = self.size
+        start = self.count % size
+        first = min(n, size - start)  # up to the end of the ring, the rest from its start
+        rest = n - first
+        for store, values in ((self.u, u), (self.y, y), (self.b, b)):
+            head = values[:first]
+            store[start : start + first] = store[start + size : start + size + first] = head
+            if rest:
+                store[:rest] = store[size : size + rest] = values[first:]
         self.count += n
 
     def __len__(self) -> int:

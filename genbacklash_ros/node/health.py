@@ -272,6 +272,17 @@ def _held_input(stamp: int, commands: list[int], inputs: list[float]) -> float |
     return inputs[k] if k >= 0 else None
 
 
+def _median(values: np.ndarray) -> float:
+    """``np.median`` of a non-empty 1-D array, to the bit (the middle value, or the mean of
+    the two middle ones), from one partition and without its generic machinery."""
+    n = values.size
+    half = n // 2
+    if n % 2:
+        return float(np.partition(values, half)[half])
+    ordered = np.partition(values, (half - 1, half))
+    return (float(ordered[half - 1]) + float(ordered[half])) / 2.0
+
+
 def _one_step_errors(
     y_prev: float,
     band_prev: tuple[float, float],
@@ -289,9 +300,12 @@ def _one_step_errors(
 
     Returns the errors and which readings the clamp put on the band's lower and upper edge
     (the load pushed by a flank)."""
-    previous = np.concatenate(([y_prev], ys[:-1]))
-    low_prev = np.concatenate(([band_prev[0]], low[:-1]))
-    high_prev = np.concatenate(([band_prev[1]], high[:-1]))
+    n = ys.size
+    previous, low_prev, high_prev = np.empty(n), np.empty(n), np.empty(n)
+    if n:  # each shifted by one, the one before first
+        previous[0], previous[1:] = y_prev, ys[:-1]
+        low_prev[0], low_prev[1:] = band_prev[0], low[:-1]
+        high_prev[0], high_prev[1:] = band_prev[1], high[:-1]
     with np.errstate(all="ignore"):
         inside = np.minimum(np.maximum(previous, low_prev), high_prev)
         carry = previous - inside
@@ -1049,8 +1063,9 @@ class StreamHealth:
         gaps = np.array(self._gaps, dtype=np.float64)
         self._gaps = []
         self._gaps_from = stamp
-        median = float(np.median(gaps))
-        if np.mean(np.abs(gaps - median) <= 0.25 * median) >= 0.9:
+        median = _median(gaps)
+        regular = np.count_nonzero(np.abs(gaps - median) <= 0.25 * median)
+        if regular / gaps.size >= 0.9:
             self._enc_period = median
             self._silence = max(SILENCE_MIN_NS, round(SILENCE_PERIODS * median))
             return
@@ -1180,9 +1195,11 @@ class StreamHealth:
             return
         shift = list(self._shift)
         for side, offsets in enumerate((off_low, off_high)):
+            if offsets.size < _SHIFT_MIN_READINGS:  # too few, finite or not
+                continue
             offsets = offsets[np.isfinite(offsets)]
             if offsets.size >= _SHIFT_MIN_READINGS:
-                shift[side] += _SHIFT_SMOOTHING * (float(np.median(offsets)) - shift[side])
+                shift[side] += _SHIFT_SMOOTHING * (_median(offsets) - shift[side])
         self._shift = self._bounded((shift[0], shift[1]), model)
 
     @staticmethod
@@ -1191,7 +1208,9 @@ class StreamHealth:
         bound = SHIFT_PLAY_SHARE * abs(model.c_left + model.c_right)
         if not math.isfinite(bound):
             return (0.0, 0.0)
-        low, high = (min(max(v, -bound), bound) if math.isfinite(v) else 0.0 for v in shift)
+        low, high = shift
+        low = min(max(low, -bound), bound) if math.isfinite(low) else 0.0
+        high = min(max(high, -bound), bound) if math.isfinite(high) else 0.0
         return (low, high)
 
     def _track_quantum(self, ys: np.ndarray) -> None:
@@ -1200,9 +1219,9 @@ class StreamHealth:
         if ys.size > 1:
             with np.errstate(all="ignore"):
                 steps = np.abs(ys[1:] - ys[:-1])
-            steps = steps[steps > 0.0]  # NaN and equal readings out
-            if steps.size:
-                self._quantum = min(self._quantum, float(steps.min()))
+                # NaN and equal readings out (none left: inf, the count unchanged)
+                smallest = float(np.min(steps, where=steps > 0.0, initial=math.inf))
+            self._quantum = min(self._quantum, smallest)
 
     def _track_scale(self, errors: np.ndarray, ys: np.ndarray) -> None:
         """Blend a step's absolute prediction errors into the residual scale (their upper
@@ -1211,7 +1230,7 @@ class StreamHealth:
         if errors.size == 0:
             return
         k = (errors.size - 1) * 3 // 4
-        floor = 1e-3 * float(np.max(np.abs(ys)))
+        floor = 1e-3 * float(np.maximum.reduce(np.abs(ys)))  # np.max without its wrapper
         batch = max(float(np.partition(errors, k)[k]) / 1.15, floor, 1e-300)
         if batch < math.inf:
             scale = self._scale

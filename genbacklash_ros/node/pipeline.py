@@ -308,13 +308,32 @@ class BatchOutputs:
 class _BatchResult:
     """What :meth:`BacklashPipeline.on_batch` fills in as it goes."""
 
-    __slots__ = ("accepted", "outputs", "sent", "stamps")
+    __slots__ = ("_sent", "_stamps", "_where", "accepted", "outputs", "sent", "stamps")
 
     def __init__(self, n: int) -> None:
         self.accepted = np.zeros(n, dtype=bool)
         self.stamps = np.zeros(n, dtype=np.int64)
         self.sent = np.full(n, math.nan)
         self.outputs: list[tuple[int, Output]] = []
+        # the stretches' accepted commands, put in the arrays once at the end
+        self._where: list[int] = []
+        self._stamps: list[int] = []
+        self._sent: list[float] = []
+
+    def commands(self, where: list[int], stamps: list[int], sent: list[float]) -> None:
+        """Accepted commands at the messages ``where``: their times and compensated values."""
+        self._where += where
+        self._stamps += stamps
+        self._sent += sent
+
+    def done(self) -> BatchOutputs:
+        """The batch's outputs."""
+        if self._where:
+            where = np.array(self._where, dtype=np.intp)
+            self.accepted[where] = True
+            self.stamps[where] = self._stamps
+            self.sent[where] = self._sent
+        return BatchOutputs(self.accepted, self.stamps, self.sent, self.outputs)
 
 
 def _seen(
@@ -423,6 +442,7 @@ class BacklashPipeline:
         # yet (periodic() runs it), and periodic outputs made but not taken yet
         self._answered: int | None = None
         self._due: list[Output] = []
+        self._built_estimate: tuple[Estimate, Float64MultiArray] | None = None
         self._start(params)
 
     # ------------------------------------------------------------------ configuration
@@ -763,7 +783,7 @@ class BacklashPipeline:
                     (i, item) for item in self.on_encoder_value(head, value, received)
                 )
             i += 1
-        return BatchOutputs(out.accepted, out.stamps, out.sent, out.outputs)
+        return out.done()
 
     def _quiet(self, view: BlockView, i: int, out: _BatchResult) -> tuple[int, bool]:
         """Take the messages from ``i`` on that make nothing happen but bookkeeping in one
@@ -1000,10 +1020,7 @@ class BacklashPipeline:
             align.add_commands(stamps, values)
             led.commands += c1 - c0
             led.compensated += c1 - c0
-            where = view.cmd_pos[c0:c1]
-            out.accepted[where] = True
-            out.stamps[where] = stamps
-            out.sent[where] = sent
+            out.commands(view.cmd_pos[c0:c1], stamps, sent)
         if e1 > e0:
             last = align.last_enc_ns
             assert last is not None
@@ -1178,7 +1195,7 @@ class BacklashPipeline:
             return outputs
         est = self.estimate
         if est.available:
-            outputs.append(Output("estimate", estimate_message(est), now, est))
+            outputs.append(Output("estimate", self._estimate_message(est), now, est))
         self._checkpoint(now)
         outputs.append(self.diagnostics(now))
         return outputs
@@ -1381,7 +1398,7 @@ class BacklashPipeline:
         if due.estimate:
             est = self.estimate
             if est.available:
-                outputs.append(Output("estimate", estimate_message(est), now, est))
+                outputs.append(Output("estimate", self._estimate_message(est), now, est))
             clock.estimate_done(now)
         if heavy and due.checkpoint:
             self._checkpoint(now)
@@ -1390,6 +1407,16 @@ class BacklashPipeline:
             outputs.append(self.diagnostics(now))
             clock.diagnostics_done(now)
         clock.settle()
+
+    def _estimate_message(self, est: Estimate) -> Float64MultiArray:
+        """The ``estimate`` message of ``est``: built once per estimate (the messages are
+        frozen; the estimate in use often stays the same over several publish periods)."""
+        built = self._built_estimate
+        if built is not None and built[0] is est:
+            return built[1]
+        message = estimate_message(est)
+        self._built_estimate = (est, message)
+        return message
 
     def _checkpoint(self, now: int) -> None:
         path = self._checkpoint_path

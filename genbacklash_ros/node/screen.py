@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from genbacklash_core import Estimate
-from genbacklash_core.samples import lift_bridged
+from genbacklash_core.samples import lift_bridged, stamp_steps
 from genbacklash_ros.node.align import AlignedBatch
 from genbacklash_ros.node.health import HealthEvent, StreamHealth
 from genbacklash_ros.node.sample_rule import keep_breaks, link_breaks
@@ -86,7 +86,7 @@ def linked_breaks(
     >>> linked_breaks(np.array([10, 30, 60]), 10.0, 0, np.array([True, True, False])).tolist()
     [False, False, True]
     """
-    steps = np.rint(np.diff(held, prepend=held[0] if previous is None else previous) / period)
+    steps = np.rint(stamp_steps(held, previous) / period)
     breaks: np.ndarray = steps != 1.0
     if previous is None:
         breaks[0] = True

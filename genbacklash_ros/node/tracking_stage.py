@@ -20,9 +20,8 @@ Examples
 
 from __future__ import annotations
 
+import bisect
 import math
-
-import numpy as np
 
 from genbacklash_core.measured import TrackingJudge, TrackingJudgeSettings, TrackingVerdict
 
@@ -76,11 +75,17 @@ class TrackingStage:
         and ``order``: the messages' places in the batch)."""
         if stamps:
             if cmd_order:
-                k = np.searchsorted(np.asarray(cmd_order), np.asarray(order), side="right") - 1
-                rs = np.where(k >= 0, np.asarray(desired)[np.maximum(k, 0)], self._r)
-                ws = np.where(k >= 0, weight, self._w)
-                self._rs.extend(rs.tolist())
-                self._ws.extend(ws.tolist())
+                # each run of readings between two commands pairs with the first of them
+                # (those before the stretch's first command: the command in force before)
+                rs = self._rs
+                start = bisect.bisect_left(order, cmd_order[0])
+                rs.extend([self._r] * start)
+                self._ws.extend([self._w] * start)
+                self._ws.extend([float(weight)] * (len(order) - start))
+                for value, after in zip(desired, (*cmd_order[1:], None), strict=True):
+                    stop = len(order) if after is None else bisect.bisect_left(order, after, start)
+                    rs.extend([value] * (stop - start))
+                    start = stop
             else:
                 self._rs.extend([self._r] * len(stamps))
                 self._ws.extend([self._w] * len(stamps))
