@@ -255,9 +255,10 @@ def test_the_model_term_moves_the_band_and_nothing_the_compensation_reads(
     make: type, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """The operation scenario with a periodic error on the load (a misfit that follows the
-    motion): with and without the model-error term, every estimate's parameters, state and
-    confidence are the same bits (what the compensator and the guard read); only the
-    published covariance differs, and it is never the smaller."""
+    motion): with and without the model-error terms (the one-step rows' and the free run's),
+    every estimate's parameters, state and confidence are the same bits (what the
+    compensator and the guard read); only the published covariance differs, and it is never
+    the smaller."""
     import dataclasses
 
     from genbacklash_core.online import feeds, recursive
@@ -278,7 +279,9 @@ def test_the_model_term_moves_the_band_and_nothing_the_compensation_reads(
 
     def without(*args: object) -> object:
         fit = dead_zone_drift(*args)  # type: ignore[arg-type]
-        return None if fit is None else dataclasses.replace(fit, model_covariance=None)
+        if fit is None:
+            return None
+        return dataclasses.replace(fit, model_covariance=None, free_run_covariance=None)
 
     for module in (feeds, recursive):  # the windowed identifier's drift is its feed's
         monkeypatch.setattr(module, "dead_zone_drift", without)
