@@ -428,6 +428,13 @@ def free_run_model(
     follows the motion. The free run carries the state from reading to reading: it shows
     the misfit where the rows hide it.
 
+    The online estimate comes from the rows, not from these readings: its free-run
+    residual also holds what a change of the parameters explains (the estimate's own
+    statistical error, repeated at every reading of a hold as one offset, would look like
+    a misfit that never averages out). So the residual is first taken at the free run's
+    linearised optimum, ``r - J (J^T J)^+ J^T r``: the misfit no parameters explain, the
+    one the batch identify's residual shows at its own optimum.
+
     The rounding of a quantised encoder on a load that moves less than a step per reading
     is not white either, but it follows the position, not the branch the load is on, and
     does not bias the dead zones the way a misfit of that size in the direction of ``J``
@@ -442,7 +449,12 @@ def free_run_model(
     if structure.cascade or u.size <= 4 * structure.n_parameters:
         return None
     residual, jac = free_run_residual(structure, p, u, y, breaks)
-    found = correlated_misfit(residual, breaks)
+    informed = np.any(jac != 0.0, axis=0)
+    sub = jac[:, informed]
+    # the misfit no parameters explain: the residual at the free run's linearised optimum
+    # (eq. 23's least squares on the free run's sensitivities), as identify's residual is
+    left = residual - sub @ (np.linalg.pinv(sub.T @ sub) @ (sub.T @ residual))
+    found = correlated_misfit(left, breaks)
     rounding = resolution(y) ** 2 / 12.0  # a uniform rounding error's variance
     misfit = dataclasses.replace(found, lag_one=found.lag_one - rounding)
     cov = model_error_covariance(jac, misfit)
