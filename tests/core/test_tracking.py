@@ -364,3 +364,37 @@ def test_a_branch_the_readings_do_not_engage_gives_no_free_run_term() -> None:
     breaks = np.zeros(u.size, dtype=bool)
     breaks[0] = True
     assert free_run_model(Structure(1), STRAIGHT.parameters(), u, y, breaks) is None
+
+
+def test_the_rows_hide_what_the_free_run_shows_and_only_the_band_takes_it() -> None:
+    """Readings of a load that trails the gear (a 4.5 ms first-order lag after the play):
+    the rows of those readings (consecutive readings whose input moved) leave a misfit the
+    drift and lag fits absorb, so the one-step model term is small; the free run over the
+    same readings shows the misfit, and the band takes its term. Without the readings the
+    fit is the one-step fit alone (no free-run term), and the estimate the fit reports
+    does not depend on them."""
+    s, p = Structure(1), STRAIGHT.parameters()
+    u, x, breaks = _moves(0)
+    trailing = np.empty_like(x)
+    load = x[0]
+    for k, value in enumerate(x):
+        load = 0.8 * load + 0.2 * value
+        trailing[k] = load
+    y = ENCODER_STEP * np.round(trailing / ENCODER_STEP)
+    moved = np.flatnonzero(np.diff(u) != 0.0) + 1
+    rows = (u[moved - 1], u[moved], y[moved - 1], y[moved])
+    age = (moved[-1] - moved).astype(np.float64)
+    alone = dead_zone_drift(s, p, rows, age)
+    fit = dead_zone_drift(s, p, rows, age, (u, y, breaks))
+    assert alone is not None and fit is not None
+    assert alone.free_run is None and alone.free_run_covariance is None
+    np.testing.assert_array_equal(alone.correction, fit.correction)
+    assert fit.free_run is not None and fit.free_run.significant
+    assert fit.free_run_covariance is not None and fit.model_covariance is not None
+
+    def play_var(cov: np.ndarray) -> float:
+        return float(cov[1, 1] + cov[3, 3] + 2 * cov[1, 3])
+
+    assert play_var(fit.free_run_covariance) > 4.0 * play_var(fit.model_covariance)
+    band = fit.tracking_covariance() - alone.tracking_covariance()
+    np.testing.assert_allclose(band, fit.free_run_covariance, rtol=1e-12, atol=1e-18)
