@@ -62,7 +62,8 @@ bands.
 
 The cost is one more solve of a ``(P + 2..4)``-column Gram matrix per fit of the bands, the
 model-error term's pseudo-inverse of a ``P x P`` Gram matrix, and one free run with its
-sensitivities over ``BAND_SAMPLES`` readings (~3-5 ms on a busy machine).
+sensitivities over ``BAND_SAMPLES`` readings (2-8 ms on a busy machine; the recursive
+identifier fits the bands once per 250 samples at most).
 
 A backlash alone only: the cascade's bands are the statistical ones.
 
@@ -146,7 +147,8 @@ class DeadZoneDrift:
         The model error's covariance from ``misfit`` (zeros when it is not significant).
     free_run : Misfit or None
         The correlated part of the free-run residual of ``estimate`` over the recent
-        readings (None: not measured: no readings given, or a branch not engaged in them).
+        readings, the rounding taken out (None: not measured: no readings given, too few,
+        or a branch not engaged in them).
     free_run_covariance : ndarray, shape (P, P), or None
         The model error's covariance from ``free_run`` on the free run's sensitivities
         (zeros when it is not significant).
@@ -439,9 +441,10 @@ def free_run_model(
     is not white either, but it follows the position, not the branch the load is on, and
     does not bias the dead zones the way a misfit of that size in the direction of ``J``
     could: ``q^2 / 12``, ``q`` the readings' step (:func:`resolution`; 0 for readings that
-    are not quantised), is taken out of the lag-1 covariance first. (The batch identify
-    keeps it: there the misfit of a 60 Hz servo is about one step and nothing else bounds
-    it; online the lag term does, :attr:`DeadZoneDrift.rest`.)
+    are not quantised), is taken out of the lag-1 covariance first. The price: a real misfit
+    of about one step is taken out with it (a 60 Hz servo's on the MuJoCo near_ideal
+    drivetrain, which the lag term, :attr:`DeadZoneDrift.rest`, does not always cover:
+    BENCHMARKS.md, issue 22). The batch identify keeps the rounding in its misfit.
 
     None when the readings cannot tell: a cascade, too few readings, or a parameter no
     reading informs (a branch not engaged in the window: its variance would be infinite).
