@@ -9,9 +9,9 @@ against the true dead zones at its data time (the bag's truth, ``c_left``, ``c_r
 0.25 s, interpolated): is ``|estimate - truth| <= 2 sigma``, with sigma the standard
 deviation the replay's report draws (the published covariance)? Coverage is the share of
 those estimates; the target is >= 90 %. Each replay runs twice: with the bands as published
-(*after*) and without their model-error term (*before*: the tracking fit's
-``model_covariance`` dropped, which is the band of the commit before that term, bit for
-bit); the same run, the same records.
+(*after*) and without their free-run model term (*before*: the tracking fit not given the
+recent readings, which is the band of the commit before that term, bit for bit); the same
+run, the same records.
 
 Inputs (the wear scenarios, ``--seeds`` seeds each):
 
@@ -37,7 +37,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import dataclasses
 import json
 import sys
 import tempfile
@@ -59,8 +58,8 @@ from _common import (
 )
 from tqdm import tqdm
 
+from genbacklash_core.online import feeds as feeds_module
 from genbacklash_core.online import recursive as recursive_module
-from genbacklash_core.online import windowed as windowed_module
 from genbacklash_core.online.tracking import DeadZoneDrift, dead_zone_drift
 from genbacklash_core.scenarios import OperationSettings
 from genbacklash_ros.bags.replay import replay
@@ -101,18 +100,18 @@ SCENARIOS: dict[str, Callable[[Path, int], SimulatedBag]] = {
 
 @contextlib.contextmanager
 def model_term(on: bool) -> Iterator[None]:
-    """The bands as published (``on``), or without their model-error term (the bands before
-    it: the fits' ``model_covariance`` dropped, so :meth:`DeadZoneDrift.tracking_covariance`
-    adds the drift's and the lag's terms alone, as the commit before it did)."""
+    """The bands as published (``on``), or without their free-run model term (the bands
+    before it: the tracking fit not given the recent readings, so
+    :meth:`DeadZoneDrift.tracking_covariance` adds the one-step rows' model term alone, as
+    the commit before it did, bit for bit)."""
     if on:
         yield
         return
 
     def without_model(*args: Any) -> DeadZoneDrift | None:
-        fit = dead_zone_drift(*args)
-        return None if fit is None else dataclasses.replace(fit, model_covariance=None)
+        return dead_zone_drift(*args[:4])
 
-    modules = (windowed_module, recursive_module)
+    modules = (feeds_module, recursive_module)  # the windowed identifier's fit is its feed's
     for module in modules:
         module.dead_zone_drift = without_model  # type: ignore[attr-defined]
     try:

@@ -46,6 +46,7 @@ from .structure import Structure
 __all__ = [
     "BatchUncertainty",
     "batch_uncertainty",
+    "free_run_residual",
     "gap_std",
     "parameter_covariance",
     "parameter_std",
@@ -85,11 +86,32 @@ def _fit(
     breaks: np.ndarray | None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The free-run residual ``y - y_sim`` of ``model`` on ``(u, y)`` and its Jacobian."""
-    structure = Structure.of(model)
+    return free_run_residual(Structure.of(model), model.parameters(), u, y, breaks)
+
+
+def free_run_residual(
+    structure: Structure,
+    p: np.ndarray,
+    u: np.ndarray,
+    y: np.ndarray,
+    breaks: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The free-run residual ``y - y_sim`` of the parameter vector ``p`` of ``structure`` on
+    ``(u, y)`` and its Jacobian ``dy_sim/dp`` (a backlash alone starts from the first
+    reading and restarts at the sample rule's ``breaks``): what :func:`batch_uncertainty`
+    reads, and the online bands' free-run model term
+    (:func:`genbacklash_core.online.tracking.free_run_model`).
+
+    >>> s = Structure(1)
+    >>> p = np.array([1.0, 0.1, 1.0, 0.1])
+    >>> r, jac = free_run_residual(s, p, np.array([0.0, 1.0, 0.5]), np.array([0.0, 0.9, 0.5]))
+    >>> np.round(r, 12).tolist(), jac[:, 3].tolist()  # the right branch, then the left
+    ([0.0, 0.0, -0.1], [0.0, -1.0, 0.0])
+    """
     yy = np.asarray(y, dtype=np.float64)
     x0 = 0.0 if structure.cascade else float(yy[0])
     y_sim, jac = simulation_jacobian(
-        structure, model.parameters(), np.asarray(u, dtype=np.float64), yy, x0, breaks
+        structure, np.asarray(p, dtype=np.float64), np.asarray(u, dtype=np.float64), yy, x0, breaks
     )
     return yy - y_sim, jac
 

@@ -46,7 +46,7 @@ from .advice import BranchCoverage, excitation_advice
 from .fits import WindowFit, block_conditioning, outlier_rows, refine_window
 from .memory import RowMemory
 from .rows import SampleRing, WindowRows, settling_samples
-from .tracking import DeadZoneDrift, dead_zone_drift
+from .tracking import BAND_SAMPLES, DeadZoneDrift, dead_zone_drift
 
 __all__ = ["Feed", "RowFeed", "SampleFeed"]
 
@@ -127,6 +127,7 @@ class RowFeed(Feed):
     def __init__(self, window: int, bins: int) -> None:
         super().__init__(window)
         self.memory = RowMemory(window, bins)
+        self.recent = SampleRing(BAND_SAMPLES)  # the bands' free run (online.tracking)
         self.rows = 0  # rows taken
         self.last: tuple[float, float] | None = None  # the latest sample
 
@@ -140,6 +141,7 @@ class RowFeed(Feed):
     def push(self, u: float, y: float, follows: bool) -> None:
         """Take one validated sample (``follows``: it follows the previous one taken)."""
         self.ring.push(u, y, not follows)
+        self.recent.push(u, y, not follows)
         last = self.last
         if last is not None and follows and u != last[0]:
             self.memory.add_one(last[0], u, last[1], y)  # a row of eq. (24)
@@ -171,6 +173,7 @@ class RowFeed(Feed):
             stop = u.size if hit >= counts.size - start else start + hit + 1
             part = slice(start, stop)
             self.ring.extend(u[part], y[part], b[part])  # the refinement's recent series
+            self.recent.extend(u[part], y[part], b[part])
             taken = row[part]
             if taken.any():
                 m = self.memory
@@ -227,10 +230,13 @@ class RowFeed(Feed):
     def drift(self, structure: Structure, reported: FloatArray) -> DeadZoneDrift | None:
         """The memory's rows, each aged by the rows taken since, fitted with dead zones
         that drift (:mod:`genbacklash_core.online.tracking`); on the rows' own clock, so
-        chunking does not matter."""
+        chunking does not matter. The free run of the model term over the latest
+        ``BAND_SAMPLES`` readings."""
         order, _ = self.memory.stamps()
         age = self.memory.taken - order
-        return dead_zone_drift(structure, reported, self.memory.rows(), age)
+        u, y = self.recent.window()
+        recent = (u, y, self.recent.breaks())
+        return dead_zone_drift(structure, reported, self.memory.rows(), age, recent)
 
 
 class SampleFeed(Feed):

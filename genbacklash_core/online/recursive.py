@@ -628,7 +628,10 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         rows, stamps = self._memory.rows()
         p = np.array(natural_from_theta(structure, self._current.theta.tolist()))
         cols = (rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3])
-        self._drift = dead_zone_drift(structure, p, cols, float(self._samples) - stamps)
+        band = self._stream.band  # the latest readings, for the model term's free run
+        u, y = band.window()
+        recent = (u, y, band.breaks())
+        self._drift = dead_zone_drift(structure, p, cols, float(self._samples) - stamps, recent)
 
     # ------------------------------------------------------------------ the estimate
 

@@ -50,6 +50,7 @@ from genbacklash_core.structure import Structure
 
 from .inputs import deadband
 from .rows import CascadeLags, SampleRing, cascade_memory_rows, row_width, settling_samples
+from .tracking import BAND_SAMPLES
 
 __all__ = ["RowStream", "window_cascade_rows"]
 
@@ -67,6 +68,7 @@ class RowStream:
 
     def __init__(self, structure: Structure, buffer: int) -> None:
         self.recent = SampleRing(buffer)
+        self.band = SampleRing(BAND_SAMPLES)  # the bands' free run (online.tracking)
         self.low, self.high = math.inf, -math.inf  # the input range seen
         self.run = 0  # consecutive samples ending at the latest one
         self.u1 = self.y1 = 0.0  # the latest sample (backlash)
@@ -87,6 +89,7 @@ class RowStream:
         formed (the cascade) at ``theta`` (eqs. 23/33); ``fraction``: ``input_deadband``;
         ``settling``: the cascade's settling horizon."""
         self.recent.extend(u, y, b)
+        self.band.extend(u, y, b)
         low = np.minimum(np.minimum.accumulate(u), self.low)
         high = np.maximum(np.maximum.accumulate(u), self.high)
         self.low, self.high = float(low[-1]), float(high[-1])

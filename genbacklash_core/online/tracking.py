@@ -49,8 +49,21 @@ significant`), so the play operator with white noise keeps its statistical bands
 bands: the identifiers' state, confidence and drift detection read their own statistical
 covariance.
 
-The cost is one more solve of a ``(P + 2..4)``-column Gram matrix per fit of the bands, and
-the model-error term's pseudo-inverse of a ``P x P`` Gram matrix.
+The one-step rows hide a misfit that keeps the load off the model's flank for a whole move
+(gravity holding it on one flank: the rows fit a shifted dead zone and show little misfit),
+and the recursive identifier's remembered rows are rarely consecutive readings, so their
+lag-1 covariance misses a misfit that follows the motion. So the fit is also given the latest
+``BAND_SAMPLES`` readings the identifier took, and the estimate is run over them freely (the
+play operator carrying its own state, as the batch identify's output-error residual does):
+the same model-error covariance on that residual and the free run's sensitivities,
+:attr:`DeadZoneDrift.free_run_covariance` (:func:`free_run_model`; the readings' rounding
+taken out). The bands add both model terms (:meth:`DeadZoneDrift.model_term`); again only the
+bands.
+
+The cost is one more solve of a ``(P + 2..4)``-column Gram matrix per fit of the bands, the
+model-error term's pseudo-inverse of a ``P x P`` Gram matrix, and one free run with its
+sensitivities over ``BAND_SAMPLES`` readings (2-8 ms on a busy machine; the recursive
+identifier fits the bands once per 250 samples at most).
 
 A backlash alone only: the cascade's bands are the statistical ones.
 
@@ -70,23 +83,29 @@ Examples
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from genbacklash_core._typing import ArrayLike, FloatArray
+from genbacklash_core._typing import ArrayLike, BoolArray, FloatArray
 from genbacklash_core.model_error import Misfit, correlated_misfit, model_error_covariance
 from genbacklash_core.structure import Structure
+from genbacklash_core.uncertainty import free_run_residual
 
 __all__ = [
+    "BAND_SAMPLES",
     "DRIFT_Z",
     "DeadZoneDrift",
     "dead_zone_drift",
+    "free_run_model",
     "one_step_sensitivity",
+    "resolution",
     "with_tracking",
 ]
 
 DRIFT_Z = 3.0  # a dead zone drifts when its rate is this many standard deviations from 0
+BAND_SAMPLES = 10_000  # the recent readings the free run of the bands' model term covers
 
 
 @dataclass(frozen=True)
@@ -126,6 +145,13 @@ class DeadZoneDrift:
         measured).
     model_covariance : ndarray, shape (P, P), or None
         The model error's covariance from ``misfit`` (zeros when it is not significant).
+    free_run : Misfit or None
+        The correlated part of the free-run residual of ``estimate`` over the recent
+        readings, the rounding taken out (None: not measured: no readings given, too few,
+        or a branch not engaged in them).
+    free_run_covariance : ndarray, shape (P, P), or None
+        The model error's covariance from ``free_run`` on the free run's sensitivities
+        (zeros when it is not significant).
     """
 
     estimate: FloatArray
@@ -141,6 +167,27 @@ class DeadZoneDrift:
     rest_covariance: FloatArray | None = None
     misfit: Misfit | None = None
     model_covariance: FloatArray | None = None
+    free_run: Misfit | None = None
+    free_run_covariance: FloatArray | None = None
+
+    def model_term(self) -> FloatArray:
+        """The model-error covariance the bands add: :attr:`model_covariance` (the one-step
+        rows') plus :attr:`free_run_covariance` (the free run's); zeros when neither is
+        measured.
+
+        Each bounds the bias that the misfit its own residual shows can cause
+        (:mod:`genbacklash_core.model_error`). The one-step rows restart from each measured
+        reading and hide a misfit that keeps the load off the model's flank for a whole
+        move (gravity, a servo's lag), which the free run accumulates; the one-step
+        residual is what is left after the drift and the lag are fitted. Their sum: the
+        band is never narrower than either alone (where one dominates, as on the MuJoCo
+        drivetrains, the sum is close to it)."""
+        size = self.correction.size
+        total = np.zeros((size, size))
+        for term in (self.model_covariance, self.free_run_covariance):
+            if term is not None:
+                total = total + term
+        return np.asarray(total, dtype=np.float64)
 
     @property
     def lagging(self) -> bool:
@@ -177,11 +224,11 @@ class DeadZoneDrift:
         2-sigma band then reaches at least ``2 |b|`` from the estimate, room for an error in
         ``b`` as large as ``b`` itself.
 
-        In every case plus :attr:`model_covariance`, the misfit neither explains (zeros when
-        it is white)."""
+        In every case plus :meth:`model_term`, the misfit neither explains (zeros when it is
+        white)."""
         size = self.correction.size
         drifting = self.drifting
-        model = np.zeros((size, size)) if self.model_covariance is None else self.model_covariance
+        model = self.model_term()
         extra = np.zeros((size, size))
         if self.lagging and self.rest is not None and self.rest_covariance is not None:
             offset, extra = self.rest, self.rest_covariance
@@ -283,6 +330,7 @@ def dead_zone_drift(
     p: FloatArray,
     rows: tuple[FloatArray, FloatArray, FloatArray, FloatArray],
     age: ArrayLike,
+    recent: tuple[FloatArray, FloatArray, BoolArray] | None = None,
 ) -> DeadZoneDrift | None:
     """Fit the remembered rows with the dead zones drifting linearly in time, then with a lag.
 
@@ -303,7 +351,9 @@ def dead_zone_drift(
     zero and ``rest`` as None.
 
     Last the misfit neither explains: the correlated part of the last fit's residuals
-    (:attr:`DeadZoneDrift.misfit`) and its model-error covariance on the rows' sensitivities.
+    (:attr:`DeadZoneDrift.misfit`) and its model-error covariance on the rows' sensitivities;
+    and, given the ``recent`` readings ``(u, y, breaks)`` in time order, the same of the
+    free-run residual of ``p`` over them (:func:`free_run_model`).
     """
     if structure.cascade:
         return None
@@ -341,6 +391,7 @@ def dead_zone_drift(
         lag_std = np.sqrt(np.maximum(np.diag(lag_cov)[-2:], 0.0))
         rest, rest_cov = lag_coef[:size], lag_cov[:size, :size]
     misfit = _adjacent_misfit(left, np.asarray(age, dtype=np.float64)[engaged])
+    free = None if recent is None else free_run_model(structure, p, *recent)
     return DeadZoneDrift(
         np.array(p, dtype=np.float64),
         np.asarray(correction, dtype=np.float64),
@@ -355,7 +406,75 @@ def dead_zone_drift(
         None if rest_cov is None else np.asarray(rest_cov, dtype=np.float64),
         misfit,
         model_error_covariance(sens[engaged], misfit),
+        None if free is None else free[0],
+        None if free is None else free[1],
     )
+
+
+def free_run_model(
+    structure: Structure, p: FloatArray, u: FloatArray, y: FloatArray, breaks: BoolArray
+) -> tuple[Misfit, FloatArray] | None:
+    """The free-run misfit of ``p`` over the readings ``(u, y)`` (in time order) and its
+    model-error covariance ``C_model = (N e^2 / 3) (J^T J)^-1`` on the free run's
+    sensitivities ``J``: what the batch identify reads
+    (:func:`~genbacklash_core.uncertainty.free_run_residual`: the play operator of eqs.
+    20-21 run from the first reading, restarted at the sample rule's ``breaks``), with the
+    readings' rounding taken out of the misfit.
+
+    The one-step rows restart from every measured reading, so a misfit that keeps the load
+    off the model's flank for a whole move (gravity pressing it on one flank, a load that
+    trails the gear) leaves each row a small error, which the fit of the rows partly
+    absorbs in shifted dead zones; and the recursive identifier's remembered rows are
+    rarely consecutive readings (on the MuJoCo near_ideal drivetrain at a 100 Hz servo 1-2
+    % of adjacent rows are one tick apart), so their lag-1 covariance misses a misfit that
+    follows the motion. The free run carries the state from reading to reading: it shows
+    the misfit where the rows hide it.
+
+    The online estimate comes from the rows, not from these readings: its free-run
+    residual also holds what a change of the parameters explains (the estimate's own
+    statistical error, repeated at every reading of a hold as one offset, would look like
+    a misfit that never averages out). So the residual is first taken at the free run's
+    linearised optimum, ``r - J (J^T J)^+ J^T r``: the misfit no parameters explain, the
+    one the batch identify's residual shows at its own optimum.
+
+    The rounding of a quantised encoder on a load that moves less than a step per reading
+    is not white either, but it follows the position, not the branch the load is on, and
+    does not bias the dead zones the way a misfit of that size in the direction of ``J``
+    could: ``q^2 / 12``, ``q`` the readings' step (:func:`resolution`; 0 for readings that
+    are not quantised), is taken out of the lag-1 covariance first. The price: a real misfit
+    of about one step is taken out with it (a 60 Hz servo's on the MuJoCo near_ideal
+    drivetrain, which the lag term, :attr:`DeadZoneDrift.rest`, does not always cover:
+    BENCHMARKS.md, issue 22). The batch identify keeps the rounding in its misfit.
+
+    None when the readings cannot tell: a cascade, too few readings, or a parameter no
+    reading informs (a branch not engaged in the window: its variance would be infinite).
+    """
+    if structure.cascade or u.size <= 4 * structure.n_parameters:
+        return None
+    residual, jac = free_run_residual(structure, p, u, y, breaks)
+    informed = np.any(jac != 0.0, axis=0)
+    sub = jac[:, informed]
+    # the misfit no parameters explain: the residual at the free run's linearised optimum
+    # (eq. 23's least squares on the free run's sensitivities), as identify's residual is
+    left = residual - sub @ (np.linalg.pinv(sub.T @ sub) @ (sub.T @ residual))
+    found = correlated_misfit(left, breaks)
+    rounding = resolution(y) ** 2 / 12.0  # a uniform rounding error's variance
+    misfit = dataclasses.replace(found, lag_one=found.lag_one - rounding)
+    cov = model_error_covariance(jac, misfit)
+    if not np.all(np.isfinite(cov)):
+        return None
+    return misfit, cov
+
+
+def resolution(y: FloatArray) -> float:
+    """The readings' step: the smallest nonzero change between two of them (0 when none).
+
+    >>> resolution(np.array([0.0, 0.25, 0.25, 1.0, 0.5]))
+    0.25
+    """
+    steps = np.abs(np.diff(y))
+    steps = steps[steps > 0.0]
+    return float(np.min(steps)) if steps.size else 0.0
 
 
 def with_tracking(

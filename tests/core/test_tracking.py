@@ -11,15 +11,19 @@ from hypothesis import strategies as st
 
 from genbacklash_core import RecursiveIdentifier, WindowedIdentifier
 from genbacklash_core.backlash import GeneralBacklash
+from genbacklash_core.model_error import correlated_misfit
 from genbacklash_core.online.memory import RowMemory
-from genbacklash_core.online.tracking import dead_zone_drift
+from genbacklash_core.online.tracking import dead_zone_drift, free_run_model
+from genbacklash_core.play import play_operator
 from genbacklash_core.scenarios import (
     HiddenEffects,
     OperationRecord,
     OperationSettings,
     operation_record,
 )
+from genbacklash_core.simulate import play_bounds
 from genbacklash_core.structure import Structure
+from genbacklash_core.uncertainty import free_run_residual
 
 CURVED = GeneralBacklash([1.0, 0.03, -0.015], 0.045, [1.0, 0.025, -0.012], 0.05)
 
@@ -255,9 +259,10 @@ def test_the_model_term_moves_the_band_and_nothing_the_compensation_reads(
     make: type, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """The operation scenario with a periodic error on the load (a misfit that follows the
-    motion): with and without the model-error term, every estimate's parameters, state and
-    confidence are the same bits (what the compensator and the guard read); only the
-    published covariance differs, and it is never the smaller."""
+    motion): with and without the model-error terms (the one-step rows' and the free run's),
+    every estimate's parameters, state and confidence are the same bits (what the
+    compensator and the guard read); only the published covariance differs, and it is never
+    the smaller."""
     import dataclasses
 
     from genbacklash_core.online import feeds, recursive
@@ -278,7 +283,9 @@ def test_the_model_term_moves_the_band_and_nothing_the_compensation_reads(
 
     def without(*args: object) -> object:
         fit = dead_zone_drift(*args)  # type: ignore[arg-type]
-        return None if fit is None else dataclasses.replace(fit, model_covariance=None)
+        if fit is None:
+            return None
+        return dataclasses.replace(fit, model_covariance=None, free_run_covariance=None)
 
     for module in (feeds, recursive):  # the windowed identifier's drift is its feed's
         monkeypatch.setattr(module, "dead_zone_drift", without)
@@ -293,3 +300,101 @@ def test_the_model_term_moves_the_band_and_nothing_the_compensation_reads(
             assert np.all(np.diag(cov) >= np.diag(cov0))
             wider += bool(np.any(np.diag(cov) > np.diag(cov0)))
     assert wider > 0  # the misfit was seen: the band did change
+
+
+ENCODER_STEP = 2.0 * np.pi / 4096  # a 4096-count encoder
+
+
+def _moves(seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Readings at 1 kHz of ``STRAIGHT`` driven through 60 moves of random length and speed
+    (0.2-1 mrad a reading, slower than the encoder's step), the play's output rounded to
+    the encoder's step: the model is exact, the rounding is not white."""
+    rng = np.random.default_rng([seed, 60])
+    ends = np.cumsum(rng.uniform(-0.4, 0.4, 60))
+    u = np.concatenate(
+        [
+            np.linspace(a, b, int(abs(b - a) / rng.uniform(2e-4, 1e-3)) + 2)
+            for a, b in itertools.pairwise(ends)
+        ]
+    )
+    left, right = Structure(1).branches(STRAIGHT.parameters(), u)
+    x = play_operator(*play_bounds(left, right), 0.0)  # eqs. (20)-(21)
+    breaks = np.zeros(u.size, dtype=bool)
+    breaks[0] = True
+    return u, x, breaks
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_free_run_term_leaves_an_exact_model_alone_and_sees_a_load_that_trails(
+    seed: int,
+) -> None:
+    """The free run of the true parameters over quantised readings of an exact play: the
+    rounding alone is correlated (it stands out on some seeds), but taken out it is no
+    model error, so no term. The same readings through a load that trails the gear (a
+    first-order lag after the backlash, the rows' and the play operator's blind spot): a
+    significant misfit, a finite term of the size the lag shifts the output by."""
+    s, p = Structure(1), STRAIGHT.parameters()
+    u, x, breaks = _moves(seed)
+    y = ENCODER_STEP * np.round(x / ENCODER_STEP)
+    exact = free_run_model(s, p, u, y, breaks)
+    assert exact is not None
+    assert not exact[0].significant and not np.any(exact[1])
+    residual, _ = free_run_residual(s, p, u, y, breaks)
+    assert correlated_misfit(residual, breaks).lag_one > 0.0  # the rounding is not white
+    trailing = np.empty_like(x)
+    load = x[0]
+    for k, value in enumerate(x):  # z(t) = 0.8 z(t-1) + 0.2 x(t): a 4.5 ms load lag
+        load = 0.8 * load + 0.2 * value
+        trailing[k] = load
+    lagged = free_run_model(s, p, u, ENCODER_STEP * np.round(trailing / ENCODER_STEP), breaks)
+    assert lagged is not None
+    misfit, cov = lagged
+    assert misfit.significant
+    assert np.all(np.isfinite(cov))
+    play_std = float(np.sqrt(cov[1, 1] + cov[3, 3] + 2 * cov[1, 3]))
+    shift = float(np.sqrt(np.mean((trailing - x) ** 2)))  # what the lag does to the output
+    assert 0.2 * shift < play_std < 10.0 * shift, (play_std, shift)
+
+
+def test_a_branch_the_readings_do_not_engage_gives_no_free_run_term() -> None:
+    """Readings that only ever move up engage one branch: the other's parameters are not
+    informed, so there is no term (not an infinite band)."""
+    u = np.linspace(0.0, 1.0, 2000)
+    y = np.sin(u) - 0.05  # not the model: a misfit there would be significant
+    breaks = np.zeros(u.size, dtype=bool)
+    breaks[0] = True
+    assert free_run_model(Structure(1), STRAIGHT.parameters(), u, y, breaks) is None
+
+
+def test_the_rows_hide_what_the_free_run_shows_and_only_the_band_takes_it() -> None:
+    """Readings of a load that trails the gear (a 4.5 ms first-order lag after the play):
+    the rows of those readings (consecutive readings whose input moved) leave a misfit the
+    drift and lag fits absorb, so the one-step model term is small; the free run over the
+    same readings shows the misfit, and the band takes its term. Without the readings the
+    fit is the one-step fit alone (no free-run term), and the estimate the fit reports
+    does not depend on them."""
+    s, p = Structure(1), STRAIGHT.parameters()
+    u, x, breaks = _moves(0)
+    trailing = np.empty_like(x)
+    load = x[0]
+    for k, value in enumerate(x):
+        load = 0.8 * load + 0.2 * value
+        trailing[k] = load
+    y = ENCODER_STEP * np.round(trailing / ENCODER_STEP)
+    moved = np.flatnonzero(np.diff(u) != 0.0) + 1
+    rows = (u[moved - 1], u[moved], y[moved - 1], y[moved])
+    age = (moved[-1] - moved).astype(np.float64)
+    alone = dead_zone_drift(s, p, rows, age)
+    fit = dead_zone_drift(s, p, rows, age, (u, y, breaks))
+    assert alone is not None and fit is not None
+    assert alone.free_run is None and alone.free_run_covariance is None
+    np.testing.assert_array_equal(alone.correction, fit.correction)
+    assert fit.free_run is not None and fit.free_run.significant
+    assert fit.free_run_covariance is not None and fit.model_covariance is not None
+
+    def play_var(cov: np.ndarray) -> float:
+        return float(cov[1, 1] + cov[3, 3] + 2 * cov[1, 3])
+
+    assert play_var(fit.free_run_covariance) > 4.0 * play_var(fit.model_covariance)
+    band = fit.tracking_covariance() - alone.tracking_covariance()
+    np.testing.assert_allclose(band, fit.free_run_covariance, rtol=1e-12, atol=1e-18)
