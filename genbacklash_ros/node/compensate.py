@@ -137,7 +137,9 @@ class CompensateStage:
             )
         if guard.state != "judging" and (guard.trust < 1.0 or state == "on"):
             parts.append(guard.reason)
-        if measured is not None and measured.state in ("faded", "off", "probing"):
+        if measured is not None and (
+            measured.state in ("faded", "off", "probing") or measured.trust <= 0.0
+        ):
             parts.append(measured.reason)
         return CompensationStatus(weight, state, "; ".join(parts) or f"compensation {state}")
 
