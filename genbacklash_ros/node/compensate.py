@@ -80,7 +80,7 @@ class CompensateStage:
         # estimate's confidence: compensation fades out where it does not help
         self.trust = 1.0
         # the measured tracking's share in [0, 1] (genbacklash_core.measured), a factor on
-        # the weight itself: a trial at half weight, off where compensating tracked worse
+        # the weight itself: a trial at up to half weight, off where compensating tracked worse
         self.share = 1.0
         self.last_sent: float | None = None
         self.last_weight = 0.0  # the share of the inverse in the last command sent
