@@ -14,6 +14,13 @@ jogs; 100 Hz held commands; a 1 kHz load encoder at 4096 counts/rev with stamp j
   motor_encoder): the rotor read at each encoder instant, quantised alike, 2 % lost on its
   own draw, fed just before the load's reading of the same stamp.
 
+With ``--seeded-start OFFSET`` the node starts as a user would start it from an offline
+result: seed ``seed + OFFSET`` of the same drivetrain is written as a bag without
+compensation (the same motion's kind, another draw), ``genbacklash identify BAG --checkpoint
+FILE`` (with ``--motor-encoder /motor_encoder`` when the node's input is one) writes the
+node's start, and the pipeline in the loop takes it (its ``checkpoint_file``). The table
+adds the start's play against the geometric one.
+
 The numbers: the RMS load tracking error ``load - desired`` (the true load at every encoder
 instant) and each compensator's cut against ``none`` in percent, over the whole record and
 over its second half (the node learns in the first); the node's final play ``c_L + c_R``
@@ -21,20 +28,26 @@ against the geometric play; the guard's final trust and error ratio.
 
 Run: ``python bench/physics_loop.py [--seeds 0 1 2] [--bandwidths 20 60 100]
 [--variants ...] [--duration 40] [--guard on|off] [--delay-ms 0]
-[--param NAME=VALUE ...] [--motor-encoder]``
+[--param NAME=VALUE ...] [--motor-encoder] [--seeded-start OFFSET]``
 """
 
 from __future__ import annotations
 
 import argparse
+import shutil
+import tempfile
 import time
 from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
-from _common import parse_physics_arguments, printed_section
+from _common import PHYSICS_TOPICS, cli_json, json_play, parse_physics_arguments, printed_section
 
 from genbacklash_core import compensate
 from genbacklash_core.scenarios import OperationSettings
+from genbacklash_ros.node.checkpoint import warm_start
+from genbacklash_ros.node.parameters import NodeParameters
+from genbacklash_ros.physics.bag import write_physics_bag
 from genbacklash_ros.physics.loop import Clocks, node_loop, open_loop
 from genbacklash_ros.physics.truth import quasi_static
 from genbacklash_ros.physics.variants import VARIANTS, variant
@@ -75,8 +88,43 @@ def _arguments(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser.add_argument(
         "--motor-encoder", action="store_true", help="the node's input: a motor encoder"
     )
+    parser.add_argument(
+        "--seeded-start",
+        type=int,
+        default=None,
+        metavar="OFFSET",
+        help="start the node from `genbacklash identify --checkpoint` on seed + OFFSET's "
+        "record of the same drivetrain (no compensation in it)",
+    )
     args = parse_physics_arguments(parser, argv)
     return args
+
+
+def _seeded_start(
+    args: argparse.Namespace, name: str, bw: float, seed: int, folder: Path
+) -> tuple[Path, float]:
+    """Identify seed ``seed + args.seeded_start`` of the drivetrain offline with the CLI and
+    write the node's start; the file and the start's play (rad). The node must take it."""
+    params = variant(name, bandwidth=bw)
+    offline = seed + args.seeded_start
+    bag = folder / f"{name}-{bw:g}-{offline}"
+    write_physics_bag(
+        bag,
+        params,
+        OperationSettings(duration=args.duration),
+        offline,
+        motor_encoder=args.motor_encoder,
+    )
+    start = folder / f"{name}-{bw:g}-{offline}.json"
+    motor = ["--motor-encoder", "/motor_encoder"] if args.motor_encoder else []
+    result = cli_json(
+        ["identify", str(bag), *PHYSICS_TOPICS, "--json", "--checkpoint", str(start), *motor]
+    )
+    shutil.rmtree(bag)
+    taken = warm_start(NodeParameters.from_mapping({"checkpoint_file": str(start)}))
+    if taken.prior is None or taken.problem:
+        raise SystemExit(f"the node did not take the start {start}: {taken.note}")
+    return start, json_play(result)
 
 
 def main(argv: Sequence[str] | None = None) -> None:
@@ -85,17 +133,19 @@ def main(argv: Sequence[str] | None = None) -> None:
         "physics_loop",
         "### Compensation in closed loop, driven by the node's own compensated command",
     ):
-        _tables(args)
+        with tempfile.TemporaryDirectory() as tmp:
+            _tables(args, Path(tmp))
 
 
-def _tables(args: argparse.Namespace) -> None:
+def _tables(args: argparse.Namespace, folder: Path) -> None:
     extra = {k: _value(v) for k, _, v in (p.partition("=") for p in args.param)}
+    seeded = args.seeded_start is not None
     print(
         "| variant | bandwidth (Hz) | seed | rms none (mrad) | cut true (%) | cut node (%) "
         "| 2nd half: cut true / node (%) | node play / geometric | guard (trust, ratio) "
-        "| measured (state, ratio) | s |"
+        "| measured (state, ratio) |" + (" start play / geometric |" if seeded else "") + " s |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|" + ("---|" if seeded else ""))
     for name in args.variants:
         for bw in args.bandwidths:
             params = variant(name, bandwidth=bw)
@@ -103,6 +153,14 @@ def _tables(args: argparse.Namespace) -> None:
             geometric = params.c_left + params.c_right
             for seed in args.seeds:
                 start = time.perf_counter()
+                run_extra = dict(extra)
+                start_play = ""
+                if seeded:
+                    file, offline_play = _seeded_start(args, name, bw, seed, folder)
+                    run = folder / "start.json"  # the node checkpoints over its start
+                    shutil.copyfile(file, run)
+                    run_extra["checkpoint_file"] = str(run)
+                    start_play = f" {offline_play / geometric:.3f} |"
                 clocks = Clocks(seed, args.duration)
                 half = clocks.t >= clocks.t[-1] // 2
                 delay = round(args.delay_ms * 1e6)
@@ -116,7 +174,7 @@ def _tables(args: argparse.Namespace) -> None:
                     clocks,
                     guard=args.guard == "on",
                     delay_ns=delay,
-                    extra=extra,
+                    extra=run_extra,
                     motor=args.motor_encoder,
                 )
                 errors["node"] = loads - clocks.desired
@@ -133,8 +191,8 @@ def _tables(args: argparse.Namespace) -> None:
                     f"| {whole['true']:.1f} | {whole['node']:.1f} "
                     f"| {late['true']:.1f} / {late['node']:.1f} | {play:.3f} "
                     f"| {verdict.trust:.2f}, {verdict.ratio:.2f} "
-                    f"| {measured.state}, {measured.ratio:.2f} "
-                    f"| {time.perf_counter() - start:.1f} |",
+                    f"| {measured.state}, {measured.ratio:.2f} |{start_play}"
+                    f" {time.perf_counter() - start:.1f} |",
                     flush=True,
                 )
 

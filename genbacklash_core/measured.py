@@ -22,14 +22,18 @@ Their root-mean-square ratio ``q = rms(e_on) / rms(e_off)`` (each exponentially 
 is what compensating keeps of the tracking error, measured, including every effect no model
 has. ``q`` below ``ratio_full``: trust 1; above ``ratio_off`` (compensation tracks worse than
 nothing): trust 0; linear between. Each needs ``min_time`` seconds of its own readings first
-(before that the judge says ``"judging"``; compensation's first ``min_time`` seconds are a
-trial at ``trial`` of its weight). Where compensating clearly helps (``q`` under
-``CLEAR_HELP`` times ``ratio_full``) a sixth of that baseline does; where it clearly harms
-(``q`` above ``STRONG_HARM`` times ``ratio_off``) a third of the compensated time does.
+(before that the judge says ``"judging"``). Harm is judged against the baseline, so no
+compensation runs before ``min_time`` seconds of it are measured (a fresh start's first
+estimate, or a checkpoint's model from the first command, waits with trust 0): a
+compensation that could not be judged harmful is never applied. Compensation's first
+``min_time`` seconds are then a trial at ``trial`` of its weight, and the trial's weight
+grows with the evidence on it: from :data:`RAMP_START` of it to all of it over the
+:data:`HARM_SHARE` of ``min_time`` after which clear harm (``q`` above :data:`STRONG_HARM`
+times ``ratio_off``) is judged: a compensated jump that rings a compliant load costs little
+before a verdict can switch it off (the harm of a jump grows with its size).
 
-Where no uncompensated baseline exists (compensation on from the first command, say from a
-checkpoint), or once every ``probe_every`` seconds of compensating, the judge asks for a
-*probe*: ``min_time`` seconds with compensation off, to measure the baseline. After a verdict
+Once every ``probe_every`` seconds of compensating the judge asks for a *probe*:
+``min_time`` seconds with compensation off, to measure the baseline again. After a verdict
 of harm compensation stays off until a new model is adopted or ``retry`` seconds have passed;
 then it is tried (and measured) again.
 
@@ -62,9 +66,9 @@ from .errors import GenBacklashError
 from .samples import stamp_steps
 
 __all__ = [
-    "CLEAR_HELP",
+    "HARM_SHARE",
+    "RAMP_START",
     "RETRY_CHANGE",
-    "SHORT_BASELINE",
     "STRONG_HARM",
     "TrackingJudge",
     "TrackingJudgeSettings",
@@ -75,17 +79,16 @@ RETRY_CHANGE = 0.1
 """A new model whose play differs from the one judged harmful by more than this share is
 tried again at once."""
 
-SHORT_BASELINE = 1.0 / 6.0
-"""The share of ``min_time`` of uncompensated readings that does as a baseline where
-compensating clearly helps (a ratio under :data:`CLEAR_HELP` times ``ratio_full``)."""
-
-CLEAR_HELP = 0.7
-"""A ratio under this times ``ratio_full`` clearly helps (at the trial's half weight a
-compensator that removes most of the error measures about 0.5)."""
-
 STRONG_HARM = 1.3
-"""A ratio above this times ``ratio_off`` is judged harmful after a third of ``min_time`` of
-compensating."""
+"""A ratio above this times ``ratio_off`` is judged harmful after :data:`HARM_SHARE` of
+``min_time`` of compensating."""
+
+HARM_SHARE = 1.0 / 3.0
+"""The share of ``min_time`` of compensated readings on which clear harm is judged."""
+
+RAMP_START = 0.1
+"""The share of the trial weight a trial starts at; it grows linearly to all of it over
+:data:`HARM_SHARE` of ``min_time``, while nothing could judge the harm it may do."""
 
 _MAX_STEP_S = 0.1  # a gap in one kind's readings counts at most this much of its time
 
@@ -162,8 +165,8 @@ class TrackingVerdict:
     Attributes
     ----------
     trust : float
-        In ``[0, 1]``: the factor on the compensation's weight (0 during a probe, ``trial``
-        during compensation's first ``min_time`` seconds).
+        In ``[0, 1]``: the factor on the compensation's weight (0 before a full baseline and
+        during a probe; up to ``trial`` during compensation's first ``min_time`` seconds).
     state : str
         ``"judging"`` (not enough of both kinds yet), ``"on"``, ``"faded"``, ``"off"``
         (judged harmful), ``"probing"`` (compensation held off to measure the baseline), or
@@ -357,32 +360,38 @@ class TrackingJudge:
             self._harm_at = None
             self._measure_afresh(trial=True)
             return self._judge()
-        full_base = off.time >= s.min_time
-        some_base = off.time >= SHORT_BASELINE * s.min_time
-        # clear harm (the ratio above STRONG_HARM times ratio_off) is judged on a third of
-        # the compensated time against a full baseline: each second of it costs tracking
-        if on.time >= s.min_time / 3.0 and full_base and ratio >= STRONG_HARM * s.ratio_off:
+        if off.time < s.min_time:
+            # no compensation it could not judge: harm is measured against the baseline, so
+            # a trial waits for a full one (a fresh start or a checkpoint's alike)
+            return self._verdict(
+                0.0,
+                "judging",
+                f"compensation held off until the tracking without it is measured "
+                f"({off.time:.1f} of {s.min_time:g} s)",
+            )
+        harm_judged = s.min_time * HARM_SHARE  # compensated seconds before clear harm counts
+        # clear harm (the ratio above STRONG_HARM times ratio_off) is judged early: each
+        # second of it costs tracking
+        if on.time >= harm_judged and ratio >= STRONG_HARM * s.ratio_off:
             return self._harm()
         if on.time < s.min_time:
             if self._trial_done:
                 return self._verdict(1.0, "judging", "measuring compensation at full weight")
+            # the trial's weight grows with the evidence on it: from RAMP_START of the trial
+            # weight to all of it once clear harm can be judged
+            grown = RAMP_START + (1.0 - RAMP_START) * min(on.time / harm_judged, 1.0)
             return self._verdict(
-                s.trial,
+                s.trial * grown,
                 "judging",
-                f"compensation on trial at {100 * s.trial:.0f} % while its tracking is measured",
+                f"compensation on trial at {100 * s.trial * grown:.0f} % while its tracking "
+                "is measured",
             )
         if not self._trial_done:
-            if full_base and ratio >= s.ratio_off:
+            if ratio >= s.ratio_off:
                 return self._harm()
-            # a short baseline will do where compensating helps even at trial weight; a
-            # verdict of harm, or one near the thresholds, waits for a full one
-            if not some_base or (not full_base and ratio >= s.ratio_full):
-                return self._probe()
             self._trial_done = True
             self._measure_afresh(trial=False)  # now judge it at full weight
             return self._judge()
-        if not full_base and ratio >= CLEAR_HELP * s.ratio_full:
-            return self._probe()
         if self._on_before + on.time >= self._next_probe:
             return self._probe()
         fit = min(max((s.ratio_off - ratio) / (s.ratio_off - s.ratio_full), 0.0), 1.0)

@@ -80,7 +80,7 @@ class CompensateStage:
         # estimate's confidence: compensation fades out where it does not help
         self.trust = 1.0
         # the measured tracking's share in [0, 1] (genbacklash_core.measured), a factor on
-        # the weight itself: a trial at half weight, off where compensating tracked worse
+        # the weight itself: a trial at up to half weight, off where compensating tracked worse
         self.share = 1.0
         self.last_sent: float | None = None
         self.last_weight = 0.0  # the share of the inverse in the last command sent
@@ -137,7 +137,9 @@ class CompensateStage:
             )
         if guard.state != "judging" and (guard.trust < 1.0 or state == "on"):
             parts.append(guard.reason)
-        if measured is not None and measured.state in ("faded", "off", "probing"):
+        if measured is not None and (
+            measured.state in ("faded", "off", "probing") or measured.trust <= 0.0
+        ):
             parts.append(measured.reason)
         return CompensationStatus(weight, state, "; ".join(parts) or f"compensation {state}")
 

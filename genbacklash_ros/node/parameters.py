@@ -302,7 +302,8 @@ PARAMETER_SPECS: tuple[ParameterSpec, ...] = (
         "Judge from the data whether compensation helps and fade it out where it does not: "
         "the model's error on the commands against the error with no model, and, with "
         "compensation_in_loop, the tracking error measured with compensation against without "
-        "it (a trial at half weight first); false: only report the judgements.",
+        "it (after a baseline without it, a trial at up to half weight); false: only report "
+        "the judgements.",
     ),
     ParameterSpec(
         "u_min", "double", -math.inf, "Lower limit of the compensated command.", unit="command"

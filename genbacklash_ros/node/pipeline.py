@@ -490,6 +490,7 @@ class BacklashPipeline:
         self._comp = CompensateStage(params.compensator_options(), compensate=params.compensate)
         self._guard = CompensationGuard(params.guard_settings())
         self._tracking = TrackingStage(params.judge_settings())
+        self._set_trust()  # a checkpoint's model is judged from its first command
         self._feed_at_count = self._batch
         self._clock.restart()
 
