@@ -36,6 +36,7 @@ from .play import play_operator
 from .refine import (
     RefinementResult,
     branch_support,
+    falsified_holds,
     refine_parameters,
     simulate_parameters,
 )
@@ -518,10 +519,13 @@ def _candidate(
             starts += outcome.history[1:2] + outcome.history[:1]
         u_range = (float(u.min()), float(u.max()))
         best: tuple[FloatArray, int, bool, float, float, str] | None = None
+        # the samples the play operator describes: one rule, at the iteration's estimate,
+        # for every start (their costs stay comparable)
+        simulated, pinned = _described(structure, p_final, u, y, x0, breaks)
         for start_p in starts:
             if structure.problem(start_p, u_range) is not None:
                 continue
-            trial = refine_parameters(structure, start_p, u, y, x0, breaks=breaks)
+            trial = refine_parameters(structure, start_p, u, y, x0, breaks=simulated)
             if best is None or trial[4] < best[4]:
                 best = trial
         if best is None:
@@ -537,6 +541,11 @@ def _candidate(
             )
             if len(starts) > 1:
                 reason += f", best of {len(starts)} starts"
+            if pinned:
+                reason += (
+                    f"; restarted at {pinned} held readings the play operator does not "
+                    "describe (the load moved inside the play)"
+                )
             converged = ok
             if not outcome.converged and ok:
                 # The failure may come from a structure that does not fit (a missing delay,
@@ -550,10 +559,10 @@ def _candidate(
                     else "; restarted from the refined estimate, the iteration still did not "
                     f"settle ({check.reason}): the structure may not fit"
                 )
-    if refinement is not None:  # its final cost is the simulation error of p_final
+    if refinement is not None and not pinned:  # its final cost: the free-run error of p_final
         spread = float(np.sum((y - np.mean(y)) ** 2))
         fit = float(np.sqrt(refinement.cost_end / spread)) if spread > 0 else float("inf")
-    else:
+    else:  # the free run restarts at lost readings only, not at falsified holds
         anchors = restart_points(breaks)
         fit = nrmse(y, simulate_parameters(structure, p_final, u, x0, anchors, y)[1])
     if converged and (
@@ -571,6 +580,39 @@ def _candidate(
             "no better than a constant): the structure does not fit the data (a dead time?)"
         )
     return _Candidate(outcome, history, p_final, fit, refinement, converged, reason)
+
+
+def _described(
+    structure: Structure,
+    p: FloatArray,
+    u: FloatArray,
+    y: FloatArray,
+    x0: float,
+    breaks: BoolArray | None,
+) -> tuple[BoolArray | None, int]:
+    """The output-error refinement's restarts for a backlash alone: the sample rule's breaks
+    and the held samples whose reading falsifies the hold
+    (:func:`~genbacklash_core.refine.falsified_holds`), and how many of the latter there are.
+
+    The output noise's standard deviation is taken from the rows of eq. (24) at ``p`` (the
+    rows the iteration fitted: a branch engaged by the measured load), robustly (1.4826 times
+    the median absolute residual), so that a misfit elsewhere does not raise it.
+    """
+    if structure.cascade:
+        return breaks, 0
+    phi, target = _backlash_regression(structure, p, u, y, breaks)
+    if target.size == 0:
+        return breaks, 0
+    residual = target - phi @ structure.theta(p)
+    scale = 1.4826 * float(np.median(np.abs(residual - np.median(residual))))
+    if not (math.isfinite(scale) and scale > 0.0):
+        return breaks, 0
+    held = falsified_holds(structure, p, u, y, x0, scale, restart_points(breaks))
+    count = int(np.count_nonzero(held))
+    if count == 0:
+        return breaks, 0
+    first = np.zeros(u.size, dtype=bool) if breaks is None else breaks
+    return first | held, count
 
 
 def _run(
