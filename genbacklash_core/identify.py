@@ -47,6 +47,7 @@ from .structure import Structure
 __all__ = [
     "IdentificationResult",
     "IterationHistory",
+    "described_breaks",
     "identify_backlash",
     "identify_cascade",
     "nrmse",
@@ -521,7 +522,7 @@ def _candidate(
         best: tuple[FloatArray, int, bool, float, float, str] | None = None
         # the samples the play operator describes: one rule, at the iteration's estimate,
         # for every start (their costs stay comparable)
-        simulated, pinned = _described(structure, p_final, u, y, x0, breaks)
+        simulated, pinned = described_breaks(structure, p_final, u, y, x0, breaks)
         for start_p in starts:
             if structure.problem(start_p, u_range) is not None:
                 continue
@@ -582,7 +583,7 @@ def _candidate(
     return _Candidate(outcome, history, p_final, fit, refinement, converged, reason)
 
 
-def _described(
+def described_breaks(
     structure: Structure,
     p: FloatArray,
     u: FloatArray,
@@ -593,6 +594,7 @@ def _described(
     """The output-error refinement's restarts for a backlash alone: the sample rule's breaks
     and the held samples whose reading falsifies the hold
     (:func:`~genbacklash_core.refine.falsified_holds`), and how many of the latter there are.
+    Batch identification and the windowed identifier's refinement both restart there.
 
     The output noise's standard deviation is taken from the rows of eq. (24) at ``p`` (the
     rows the iteration fitted: a branch engaged by the measured load), robustly (1.4826 times
