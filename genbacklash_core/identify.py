@@ -58,6 +58,7 @@ IterationCallback = Callable[[int, FloatArray], None]
 _CYCLE_LOOKBACK = 4  # how many earlier iterates a limit cycle may span
 _WARM_START_SAMPLES = 20_000  # prefix length for the warm start on long records
 _RESTART_DEAD_ZONES = (0.05, 0.2)  # restart dead zones, as fractions of the input span
+_HOLD_ROUNDS = 3  # refinements at most, each with the falsified holds of the estimate before it
 _USELESS_FIT = 0.95  # free-run NRMSE from which a model explains nothing (SNR 1 gives ~0.71)
 
 
@@ -518,17 +519,7 @@ def _candidate(
             starts += outcome.history[-outcome.period : -1]
         elif not outcome.converged:
             starts += outcome.history[1:2] + outcome.history[:1]
-        u_range = (float(u.min()), float(u.max()))
-        best: tuple[FloatArray, int, bool, float, float, str] | None = None
-        # the samples the play operator describes: one rule, at the iteration's estimate,
-        # for every start (their costs stay comparable)
-        simulated, pinned = described_breaks(structure, p_final, u, y, x0, breaks)
-        for start_p in starts:
-            if structure.problem(start_p, u_range) is not None:
-                continue
-            trial = refine_parameters(structure, start_p, u, y, x0, breaks=simulated)
-            if best is None or trial[4] < best[4]:
-                best = trial
+        best, pinned = _refine_described(structure, starts, p_final, u, y, x0, breaks)
         if best is None:
             converged = False
             reason += "; no start valid on the input range to refine from (branches cross)"
@@ -581,6 +572,53 @@ def _candidate(
             "no better than a constant): the structure does not fit the data (a dead time?)"
         )
     return _Candidate(outcome, history, p_final, fit, refinement, converged, reason)
+
+
+def _refine_described(
+    structure: Structure,
+    starts: list[FloatArray],
+    p: FloatArray,
+    u: FloatArray,
+    y: FloatArray,
+    x0: float,
+    breaks: BoolArray | None,
+) -> tuple[tuple[FloatArray, int, bool, float, float, str] | None, int]:
+    """The output-error refinement from each of ``starts`` (the lowest cost kept), restarted
+    where the play operator does not describe the samples (:func:`described_breaks`), and
+    how many held readings were restarted at.
+
+    Which holds a reading falsifies depends on the estimate the simulation runs with: they are
+    taken at ``p`` (the iteration's estimate), then again at each refined estimate, until
+    they repeat or :data:`_HOLD_ROUNDS` refinements have run. A hold that only a wrong start
+    seemed to break (the branches a little off) is simulated through again once the estimate
+    is right; the refinement then ends where it would without the rule. Within a round every
+    start is judged with the same restarts, so that their costs compare.
+    """
+    u_range = (float(u.min()), float(u.max()))
+    restarts, pinned = described_breaks(structure, p, u, y, x0, breaks)
+    best: tuple[FloatArray, int, bool, float, float, str] | None = None
+    for round_ in range(_HOLD_ROUNDS):
+        best = None
+        for start_p in starts:
+            if structure.problem(start_p, u_range) is not None:
+                continue
+            trial = refine_parameters(structure, start_p, u, y, x0, breaks=restarts)
+            if best is None or trial[4] < best[4]:
+                best = trial
+        if best is None or round_ == _HOLD_ROUNDS - 1:
+            break
+        again, count = described_breaks(structure, best[0], u, y, x0, breaks)
+        if _same(again, restarts):
+            break
+        restarts, pinned, starts = again, count, [best[0]]
+    return best, pinned
+
+
+def _same(a: BoolArray | None, b: BoolArray | None) -> bool:
+    """Whether two sets of breaks (None: none) are the same."""
+    if a is None or b is None:
+        return a is b
+    return bool(np.array_equal(a, b))
 
 
 def described_breaks(
