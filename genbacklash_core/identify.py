@@ -477,6 +477,7 @@ def _candidate(
     refine: bool,
     callback: IterationCallback | None,
     breaks: BoolArray | None = None,
+    restart_holds: bool = False,
 ) -> _Candidate:
     """Iterate from one start (warm-started on a prefix for long records), then refine."""
     history: list[FloatArray] = []
@@ -519,7 +520,9 @@ def _candidate(
             starts += outcome.history[-outcome.period : -1]
         elif not outcome.converged:
             starts += outcome.history[1:2] + outcome.history[:1]
-        best, pinned = _refine_described(structure, starts, p_final, u, y, x0, breaks)
+        best, pinned = _refine_described(
+            structure, starts, p_final, u, y, x0, breaks, judge=restart_holds
+        )
         if best is None:
             converged = False
             reason += "; no start valid on the input range to refine from (branches cross)"
@@ -582,6 +585,8 @@ def _refine_described(
     y: FloatArray,
     x0: float,
     breaks: BoolArray | None,
+    *,
+    judge: bool,
 ) -> tuple[tuple[FloatArray, int, bool, float, float, str] | None, int]:
     """The output-error refinement from each of ``starts`` (the lowest cost kept), restarted
     where the play operator does not describe the samples (:func:`described_breaks`), and
@@ -592,12 +597,13 @@ def _refine_described(
     they repeat or :data:`_HOLD_ROUNDS` refinements have run. A hold that only a wrong start
     seemed to break (the branches a little off) is simulated through again once the estimate
     is right; the refinement then ends where it would without the rule. Within a round every
-    start is judged with the same restarts, so that their costs compare.
+    start is judged with the same restarts, so that their costs compare. Without ``judge``
+    the refinement restarts at lost readings only (one round).
     """
     u_range = (float(u.min()), float(u.max()))
-    restarts, pinned = described_breaks(structure, p, u, y, x0, breaks)
+    restarts, pinned = described_breaks(structure, p, u, y, x0, breaks) if judge else (breaks, 0)
     best: tuple[FloatArray, int, bool, float, float, str] | None = None
-    for round_ in range(_HOLD_ROUNDS):
+    for round_ in range(_HOLD_ROUNDS if judge else 1):
         best = None
         for start_p in starts:
             if structure.problem(start_p, u_range) is not None:
@@ -605,7 +611,7 @@ def _refine_described(
             trial = refine_parameters(structure, start_p, u, y, x0, breaks=restarts)
             if best is None or trial[4] < best[4]:
                 best = trial
-        if best is None or round_ == _HOLD_ROUNDS - 1:
+        if best is None or not judge or round_ == _HOLD_ROUNDS - 1:
             break
         again, count = described_breaks(structure, best[0], u, y, x0, breaks)
         if _same(again, restarts):
@@ -666,6 +672,7 @@ def _run(
     refine: bool,
     callback: IterationCallback | None,
     breaks: BoolArray | None = None,
+    restart_holds: bool = False,
 ) -> IdentificationResult:
     p = structure.start() if start is None else np.asarray(start, dtype=np.float64).copy()
     if p.shape != (structure.n_parameters,):
@@ -702,6 +709,7 @@ def _run(
             refine=refine,
             callback=callback,
             breaks=breaks,
+            restart_holds=restart_holds,
         )
 
     best = attempt(p)
@@ -767,6 +775,7 @@ def identify_backlash(
     nonfinite: NonFinitePolicy = "raise",
     callback: IterationCallback | None = None,
     breaks: ArrayLike | None = None,
+    restart_holds: bool = False,
 ) -> IdentificationResult:
     """Identify a general backlash from input ``u`` and measured output ``x`` (eqs. 22-29).
 
@@ -792,6 +801,11 @@ def identify_backlash(
         The sample rule (:func:`~genbacklash_core.samples.sample_breaks`): True where a
         sample does not follow the one before on the encoder's clock (a lost reading, a
         gap). Rows of eq. (24) are never formed across a break. Default: all consecutive.
+    restart_holds : bool
+        The refinement restarts its simulation at held readings the play operator does not
+        describe (:func:`described_breaks`: a load that moves on inside the play), judged
+        again at each refined estimate. ``genbacklash identify`` sets it. Off by default:
+        on a smooth input lagged 5 samples (a servo the model lacks) it read the play worse.
 
     Returns
     -------
@@ -838,6 +852,7 @@ def identify_backlash(
         refine=refine,
         callback=callback,
         breaks=bb,
+        restart_holds=restart_holds,
     )
 
 

@@ -30,7 +30,7 @@ import numpy as np
 
 from genbacklash_core._typing import BoolArray, FloatArray
 from genbacklash_core.errors import GenBacklashError
-from genbacklash_core.identify import described_breaks, identify_backlash, identify_cascade
+from genbacklash_core.identify import identify_backlash, identify_cascade
 from genbacklash_core.refine import refine_parameters
 from genbacklash_core.simulate import play_bounds
 from genbacklash_core.structure import Structure
@@ -366,8 +366,6 @@ def refine_window(
         u_fit, y_fit, x0 = u, y, float(y[0])
     brk = None if structure.cascade else breaks
     try:
-        if not structure.cascade:  # restart where the reading falsifies a hold, as identify
-            brk = described_breaks(structure, p, u_fit, y_fit, x0, breaks)[0]
         q = refine_parameters(structure, p, u_fit, y_fit, x0, max_iterations=steps, breaks=brk)[0]
     except GenBacklashError:
         return None

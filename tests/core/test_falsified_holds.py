@@ -37,7 +37,7 @@ def _coasting_record(seed: int, coast: float) -> tuple[np.ndarray, np.ndarray, n
 @pytest.mark.parametrize("seed", [0, 1])
 def test_a_coasting_load_is_pinned_and_the_play_kept(seed: int) -> None:
     u, y, _ = _coasting_record(seed, 0.03)
-    found = identify_backlash(u, y, 3)
+    found = identify_backlash(u, y, 3, restart_holds=True)
     truth = TRUTH.c_left + TRUTH.c_right
     assert found.converged, found.reason
     play = (found.model.c_left + found.model.c_right) / truth
@@ -66,7 +66,7 @@ def test_paper_examples_keep_their_refinement() -> None:
     refined estimate is the maximum-likelihood one it was."""
     for number in (1, 2):
         data = paper_example(number).generate(0)
-        found = identify_backlash(data.u, data.y, 3)
+        found = identify_backlash(data.u, data.y, 3, restart_holds=True)
         assert "does not describe" not in found.reason, found.reason
         assert found.refinement is not None
 
@@ -80,7 +80,7 @@ def test_holds_a_start_only_seemed_to_break_are_simulated_again(seed: int, wear:
     settings = OperationSettings(duration=30.0, model=OPERATION_BACKLASH, wear=wear)
     rec = operation_record(settings, seed)
     u, y, breaks = rec.series()
-    found = identify_backlash(u, y, 3, breaks=breaks)
+    found = identify_backlash(u, y, 3, breaks=breaks, restart_holds=True)
     assert found.converged, found.reason
     assert "does not describe" not in found.reason, found.reason
     structure = Structure.of(found.model)
