@@ -36,6 +36,7 @@ from .play import play_operator
 from .refine import (
     RefinementResult,
     branch_support,
+    falsified_holds,
     refine_parameters,
     simulate_parameters,
 )
@@ -46,6 +47,7 @@ from .structure import Structure
 __all__ = [
     "IdentificationResult",
     "IterationHistory",
+    "described_breaks",
     "identify_backlash",
     "identify_cascade",
     "nrmse",
@@ -56,6 +58,7 @@ IterationCallback = Callable[[int, FloatArray], None]
 _CYCLE_LOOKBACK = 4  # how many earlier iterates a limit cycle may span
 _WARM_START_SAMPLES = 20_000  # prefix length for the warm start on long records
 _RESTART_DEAD_ZONES = (0.05, 0.2)  # restart dead zones, as fractions of the input span
+_HOLD_ROUNDS = 3  # refinements at most, each with the falsified holds of the estimate before it
 _USELESS_FIT = 0.95  # free-run NRMSE from which a model explains nothing (SNR 1 gives ~0.71)
 
 
@@ -474,6 +477,7 @@ def _candidate(
     refine: bool,
     callback: IterationCallback | None,
     breaks: BoolArray | None = None,
+    restart_holds: bool = False,
 ) -> _Candidate:
     """Iterate from one start (warm-started on a prefix for long records), then refine."""
     history: list[FloatArray] = []
@@ -516,14 +520,9 @@ def _candidate(
             starts += outcome.history[-outcome.period : -1]
         elif not outcome.converged:
             starts += outcome.history[1:2] + outcome.history[:1]
-        u_range = (float(u.min()), float(u.max()))
-        best: tuple[FloatArray, int, bool, float, float, str] | None = None
-        for start_p in starts:
-            if structure.problem(start_p, u_range) is not None:
-                continue
-            trial = refine_parameters(structure, start_p, u, y, x0, breaks=breaks)
-            if best is None or trial[4] < best[4]:
-                best = trial
+        best, pinned = _refine_described(
+            structure, starts, p_final, u, y, x0, breaks, judge=restart_holds
+        )
         if best is None:
             converged = False
             reason += "; no start valid on the input range to refine from (branches cross)"
@@ -537,6 +536,11 @@ def _candidate(
             )
             if len(starts) > 1:
                 reason += f", best of {len(starts)} starts"
+            if pinned:
+                reason += (
+                    f"; restarted at {pinned} held readings the play operator does not "
+                    "describe (the load moved inside the play)"
+                )
             converged = ok
             if not outcome.converged and ok:
                 # The failure may come from a structure that does not fit (a missing delay,
@@ -550,10 +554,10 @@ def _candidate(
                     else "; restarted from the refined estimate, the iteration still did not "
                     f"settle ({check.reason}): the structure may not fit"
                 )
-    if refinement is not None:  # its final cost is the simulation error of p_final
+    if refinement is not None and not pinned:  # its final cost: the free-run error of p_final
         spread = float(np.sum((y - np.mean(y)) ** 2))
         fit = float(np.sqrt(refinement.cost_end / spread)) if spread > 0 else float("inf")
-    else:
+    else:  # the free run restarts at lost readings only, not at falsified holds
         anchors = restart_points(breaks)
         fit = nrmse(y, simulate_parameters(structure, p_final, u, x0, anchors, y)[1])
     if converged and (
@@ -573,6 +577,90 @@ def _candidate(
     return _Candidate(outcome, history, p_final, fit, refinement, converged, reason)
 
 
+def _refine_described(
+    structure: Structure,
+    starts: list[FloatArray],
+    p: FloatArray,
+    u: FloatArray,
+    y: FloatArray,
+    x0: float,
+    breaks: BoolArray | None,
+    *,
+    judge: bool,
+) -> tuple[tuple[FloatArray, int, bool, float, float, str] | None, int]:
+    """The output-error refinement from each of ``starts`` (the lowest cost kept), restarted
+    where the play operator does not describe the samples (:func:`described_breaks`), and
+    how many held readings were restarted at.
+
+    Which holds a reading falsifies depends on the estimate the simulation runs with: they are
+    taken at ``p`` (the iteration's estimate), then again at each refined estimate, until
+    they repeat or :data:`_HOLD_ROUNDS` refinements have run. A hold that only a wrong start
+    seemed to break (the branches a little off) is simulated through again once the estimate
+    is right; the refinement then ends where it would without the rule. Within a round every
+    start is judged with the same restarts, so that their costs compare. Without ``judge``
+    the refinement restarts at lost readings only (one round).
+    """
+    u_range = (float(u.min()), float(u.max()))
+    restarts, pinned = described_breaks(structure, p, u, y, x0, breaks) if judge else (breaks, 0)
+    best: tuple[FloatArray, int, bool, float, float, str] | None = None
+    for round_ in range(_HOLD_ROUNDS if judge else 1):
+        best = None
+        for start_p in starts:
+            if structure.problem(start_p, u_range) is not None:
+                continue
+            trial = refine_parameters(structure, start_p, u, y, x0, breaks=restarts)
+            if best is None or trial[4] < best[4]:
+                best = trial
+        if best is None or not judge or round_ == _HOLD_ROUNDS - 1:
+            break
+        again, count = described_breaks(structure, best[0], u, y, x0, breaks)
+        if _same(again, restarts):
+            break
+        restarts, pinned, starts = again, count, [best[0]]
+    return best, pinned
+
+
+def _same(a: BoolArray | None, b: BoolArray | None) -> bool:
+    """Whether two sets of breaks (None: none) are the same."""
+    if a is None or b is None:
+        return a is b
+    return bool(np.array_equal(a, b))
+
+
+def described_breaks(
+    structure: Structure,
+    p: FloatArray,
+    u: FloatArray,
+    y: FloatArray,
+    x0: float,
+    breaks: BoolArray | None,
+) -> tuple[BoolArray | None, int]:
+    """The output-error refinement's restarts for a backlash alone: the sample rule's breaks
+    and the held samples whose reading falsifies the hold
+    (:func:`~genbacklash_core.refine.falsified_holds`), and how many of the latter there are.
+    Batch identification and the windowed identifier's refinement both restart there.
+
+    The output noise's standard deviation is taken from the rows of eq. (24) at ``p`` (the
+    rows the iteration fitted: a branch engaged by the measured load), robustly (1.4826 times
+    the median absolute residual), so that a misfit elsewhere does not raise it.
+    """
+    if structure.cascade:
+        return breaks, 0
+    phi, target = _backlash_regression(structure, p, u, y, breaks)
+    if target.size == 0:
+        return breaks, 0
+    residual = target - phi @ structure.theta(p)
+    scale = 1.4826 * float(np.median(np.abs(residual - np.median(residual))))
+    if not (math.isfinite(scale) and scale > 0.0):
+        return breaks, 0
+    held = falsified_holds(structure, p, u, y, x0, scale, restart_points(breaks))
+    count = int(np.count_nonzero(held))
+    if count == 0:
+        return breaks, 0
+    first = np.zeros(u.size, dtype=bool) if breaks is None else breaks
+    return first | held, count
+
+
 def _run(
     structure: Structure,
     u: FloatArray,
@@ -584,6 +672,7 @@ def _run(
     refine: bool,
     callback: IterationCallback | None,
     breaks: BoolArray | None = None,
+    restart_holds: bool = False,
 ) -> IdentificationResult:
     p = structure.start() if start is None else np.asarray(start, dtype=np.float64).copy()
     if p.shape != (structure.n_parameters,):
@@ -620,6 +709,7 @@ def _run(
             refine=refine,
             callback=callback,
             breaks=breaks,
+            restart_holds=restart_holds,
         )
 
     best = attempt(p)
@@ -685,6 +775,7 @@ def identify_backlash(
     nonfinite: NonFinitePolicy = "raise",
     callback: IterationCallback | None = None,
     breaks: ArrayLike | None = None,
+    restart_holds: bool = False,
 ) -> IdentificationResult:
     """Identify a general backlash from input ``u`` and measured output ``x`` (eqs. 22-29).
 
@@ -710,6 +801,11 @@ def identify_backlash(
         The sample rule (:func:`~genbacklash_core.samples.sample_breaks`): True where a
         sample does not follow the one before on the encoder's clock (a lost reading, a
         gap). Rows of eq. (24) are never formed across a break. Default: all consecutive.
+    restart_holds : bool
+        The refinement restarts its simulation at held readings the play operator does not
+        describe (:func:`described_breaks`: a load that moves on inside the play), judged
+        again at each refined estimate. ``genbacklash identify`` sets it. Off by default:
+        on a smooth input lagged 5 samples (a servo the model lacks) it read the play worse.
 
     Returns
     -------
@@ -756,6 +852,7 @@ def identify_backlash(
         refine=refine,
         callback=callback,
         breaks=bb,
+        restart_holds=restart_holds,
     )
 
 

@@ -104,6 +104,7 @@ def _identify(
             nonfinite=nonfinite,
             callback=step,
             breaks=series.breaks,
+            restart_holds=True,  # a load moving on inside the play: genbacklash_core.identify
         )
     finally:
         progress.close()
