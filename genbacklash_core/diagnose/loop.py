@@ -19,7 +19,8 @@
    lost readings in the estimation data those that lower the BIC by the margin are ranked by
    their validation gap instead (see ``_Run.anchored``): a model without a linear block
    restarts its simulation at the reading after each loss, a cascade cannot, so their
-   estimation errors are not alike.
+   estimation errors are not alike. An ``input_lag`` fit whose lag vanishes is named
+   ``time_delay``: what it adds is a dead time (whole samples and a fraction).
 5. The best is accepted only if it lowers the BIC by more than a margin *and* lowers the
    validation gap significantly (a one-sided Newey-West test on the squared errors, plus a
    minimum relative drop); otherwise the next nominee is checked.
@@ -38,7 +39,9 @@
    parameters: neither BIC is a yardstick for the other.)
 8. At the end, with two effects or more, each must earn its place: the final model is refitted
    without it, and an effect whose removal does not worsen the model (the same BIC margin
-   and significant validation-gap test as when it was added) is dropped, its step removed.
+   and significant validation-gap test as when it was added) is dropped, its step removed
+   -- except an ``input_lag`` step whose dead time stays in the refitted model: it is named
+   ``time_delay`` and judged in turn.
 9. Before each round the gap is compared with the floor quantisation and noise allow
    (:mod:`.floor`): within ``floor_margin`` of it there is nothing left to explain.
 
