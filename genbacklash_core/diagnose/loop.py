@@ -19,7 +19,8 @@
    lost readings in the estimation data those that lower the BIC by the margin are ranked by
    their validation gap instead (see ``_Run.anchored``): a model without a linear block
    restarts its simulation at the reading after each loss, a cascade cannot, so their
-   estimation errors are not alike.
+   estimation errors are not alike. An ``input_lag`` fit whose lag vanishes is named
+   ``time_delay``: what it adds is a dead time (whole samples and a fraction).
 5. The best is accepted only if it lowers the BIC by more than a margin *and* lowers the
    validation gap significantly (a one-sided Newey-West test on the squared errors, plus a
    minimum relative drop); otherwise the next nominee is checked.
@@ -38,7 +39,9 @@
    parameters: neither BIC is a yardstick for the other.)
 8. At the end, with two effects or more, each must earn its place: the final model is refitted
    without it, and an effect whose removal does not worsen the model (the same BIC margin
-   and significant validation-gap test as when it was added) is dropped, its step removed.
+   and significant validation-gap test as when it was added) is dropped, its step removed
+   -- except an ``input_lag`` step whose dead time stays in the refitted model: it is named
+   ``time_delay`` and judged in turn.
 9. Before each round the gap is compared with the floor quantisation and noise allow
    (:mod:`.floor`): within ``floor_margin`` of it there is nothing left to explain.
 
@@ -68,6 +71,7 @@ from genbacklash_core.structure import as_order
 
 from .context import Context, build_context
 from .effects import CATALOG, Detection, Effect
+from .effects.input_lag import vanished
 from .fit import ModelFit, fit_model
 from .floor import noise_floor
 from .gap import GapReport, Split, measure_gap, split_record
@@ -239,6 +243,27 @@ class _Candidate:
         return self.detection.effect
 
 
+def _dead_time_named(candidate: _Candidate) -> _Candidate:
+    """``candidate`` named ``time_delay`` when it is ``input_lag``'s fit with a lag that
+    vanishes (:func:`~.effects.input_lag.vanished`): what it adds is a dead time (of whole
+    samples and a fraction, the fraction carried by the servo's interpolation); else as is.
+
+    On an operation record with curved branches and a dead time of 3.8 ms, the servo's "lag"
+    (pole 3e-9) with 3.25 samples of dead time fitted closer than whole samples and was named
+    ``input_lag``, and no dead time was named.
+    """
+    model = candidate.fit.model
+    found = candidate.detection
+    if found.effect != "input_lag" or not vanished(model):
+        return candidate
+    evidence = (
+        f"{found.evidence}; the servo's lag fitted to nothing (pole {model.input_lag:.2g}): the "
+        f"fit adds a dead time of {model.delay + model.input_lag_fraction:g} samples"
+    )
+    named = replace(found, effect="time_delay", evidence=evidence)
+    return _Candidate(named, candidate.fit, candidate.bic_change)
+
+
 @dataclass(frozen=True, eq=False)
 class _Run:
     """The record and options one diagnosis works on (internal)."""
@@ -272,6 +297,8 @@ class _Run:
             candidates.append(_Candidate(found, augmented, augmented.bic - current.bic))
         candidates.sort(key=lambda c: c.bic_change)
         candidates, behind = self.beyond_servo(current.model, candidates)
+        # after beyond_servo, which judges the physics fitted behind a servo lag against it
+        candidates = [_dead_time_named(c) for c in candidates]
         return detections, candidates, failed + behind
 
     def beyond_servo(
@@ -522,6 +549,65 @@ class _Run:
             return None
         return refit, after, f"{effect} does not earn its place next to the others ({verdict})"
 
+    def prune(
+        self,
+        current: ModelFit,
+        report: GapReport,
+        steps: list[DiagnosisStep],
+        reports: list[GapReport],
+        start_delay: int = 0,
+    ) -> tuple[ModelFit, GapReport, list[DiagnosisStep], list[GapReport], list[str]]:
+        """Drop the steps whose effect does not earn its place next to the others (see the
+        module notes, step 8); the final fit, its gap, the steps, their gaps (the start's
+        first) and what was done, in words. ``start_delay``: the starting model's dead time.
+
+        ``input_lag`` carries the servo's dead time with its lag: when the lag goes and the
+        dead time its step added stays in the refitted model, the step is kept as what is
+        left of it, ``time_delay``, which must then earn its place in turn. (A dead time with
+        a runout: the servo's lag and dead time were named, then the lag dropped, and the
+        model kept a dead time no step named.)
+        """
+        notes: list[str] = []
+        effects = list(dict.fromkeys(step.effect for step in steps))
+        for effect in effects:
+            if len(steps) < 2:
+                break
+            pruned = self.earns_place(current, report, effect)
+            if pruned is None:
+                continue
+            current, report, note = pruned
+            named = {step.effect for step in steps}
+            added = current.model.delay > start_delay and "time_delay" not in named
+            if effect == "input_lag" and added:
+                # the dead time stays: the steps that added it are named for it
+                kept = f"{note}, so it was dropped; the dead time of its step stays (time_delay)"
+                steps = [
+                    replace(
+                        step, effect="time_delay", evidence=f"{step.evidence}; at the end {kept}"
+                    )
+                    if step.effect == effect
+                    else step
+                    for step in steps
+                ]
+                reports[-1] = report
+                steps[-1] = replace(steps[-1], gap_after=report.gap, model=current.model)
+                notes.append(kept)
+                effects.append("time_delay")
+                continue
+            keep = [i for i, step in enumerate(steps) if step.effect != effect]
+            steps = [steps[i] for i in keep]
+            reports = [reports[0], *(reports[i + 1] for i in keep)]
+            reports[-1] = report
+            if steps:
+                steps[-1] = replace(
+                    steps[-1],
+                    evidence=f"{steps[-1].evidence}; at the end {note}, so it was dropped",
+                    gap_after=report.gap,
+                    model=current.model,
+                )
+            notes.append(f"{note}, so it was dropped")
+        return current, report, steps, reports, notes
+
     def look_ahead(
         self, report: GapReport, candidates: list[_Candidate], alone: dict[str, str]
     ) -> tuple[list[tuple[_Candidate, GapReport, str]], Round | None]:
@@ -715,25 +801,10 @@ def diagnose(
             reports.append(report)
     if len(steps) >= 2:
         stage("checking that each effect earns its place")
-        for effect in dict.fromkeys(step.effect for step in steps):
-            pruned = run.earns_place(current, report, effect)
-            if pruned is None:
-                continue
-            current, report, note = pruned
-            keep = [i for i, step in enumerate(steps) if step.effect != effect]
-            steps = [steps[i] for i in keep]
-            reports = [reports[0], *(reports[i + 1] for i in keep)]
-            reports[-1] = report
-            if steps:
-                steps[-1] = replace(
-                    steps[-1],
-                    evidence=f"{steps[-1].evidence}; at the end {note}, so it was dropped",
-                    gap_after=report.gap,
-                    model=current.model,
-                )
-            reason += f"; {note}, so it was dropped"
-            if len(steps) < 2:
-                break
+        current, report, steps, reports, notes = run.prune(
+            current, report, steps, reports, initial.model.delay
+        )
+        reason += "".join(f"; {note}" for note in notes)
     return Diagnosis(
         steps=tuple(steps),
         gap_initial=reports[0].gap,

@@ -294,3 +294,57 @@ def test_a_near_tie_near_the_floor_goes_to_the_model_with_fewer_parameters() -> 
     assert "times the floor" in taken[2] and "5 free parameters" in taken[2]
     assert run(0.5 * apart / slack).simpler_in_tie(start, [rival], chosen, gaps) is None
     assert run(None).simpler_in_tie(start, [rival], chosen, gaps) is None
+
+
+def test_a_fractional_dead_time_is_named_time_delay_not_a_vanishing_servo_lag() -> None:
+    """Half a sample of dead time beyond three: ``input_lag`` fits it closer than whole
+    samples do (its interpolated dead time, with a lag that fits to nothing), and the step
+    must name what it adds, a dead time."""
+    from genbacklash_core.diagnose.synthetic import random_walk_input
+
+    n = 3000
+    u = random_walk_input(n, np.random.default_rng(0))
+    late = np.concatenate([np.full(3, u[0]), u[:-3]])
+    v = 0.5 * late + 0.5 * np.concatenate([np.full(1, late[0]), late[:-1]])  # 3.5 samples
+    y = AugmentedModel(GeneralBacklash.ideal(1.0, 0.2, 0.25)).simulate(v)
+    y = y + np.random.default_rng(10).normal(0.0, 0.01, n)
+    result = diagnose(u, y)
+    assert result.effects == ("time_delay",), result.summary()
+    model = result.model
+    assert model.delay + model.input_lag_fraction == pytest.approx(3.5, abs=0.3)
+    assert result.gap_final < 0.1 * result.gap_initial
+    assert "fitted to nothing" in result.steps[0].evidence
+
+
+def test_a_servo_lag_dropped_at_the_end_leaves_its_dead_time_named() -> None:
+    """``input_lag`` carries the servo's dead time with its lag: when the lag does not earn
+    its place next to the other effects but the dead time stays in the refitted model, the
+    step is named ``time_delay`` (it was removed, and no step named the model's dead time)."""
+    from dataclasses import replace
+
+    from genbacklash_core.diagnose import measure_gap, split_record
+    from genbacklash_core.diagnose.fit import fit_model
+    from genbacklash_core.diagnose.loop import _Run
+    from genbacklash_core.diagnose.result import DiagnosisStep
+
+    case = synthetic_case(["time_delay", "output_offset"], seed=21, n_samples=N)
+    assert case.truth.delay > 0 and case.truth.offset != 0.0
+    split = split_record(case.u.size, 0.3)
+    est = split.estimation
+    run = _Run(case.u, case.y, split, CATALOG, DiagnoseSettings())
+    start = fit_model(AugmentedModel(case.truth.base), case.u[est], case.y[est])
+    # the servo's step: the dead time with a lag the data do not need
+    lagged = fit_model(
+        replace(case.truth, offset=0.0, input_lag=0.05), case.u[est], case.y[est]
+    ).model
+    final = fit_model(replace(lagged, offset=case.truth.offset), case.u[est], case.y[est])
+    reports = [measure_gap(m, case.u, case.y, split) for m in (start.model, lagged, final.model)]
+    steps = [
+        DiagnosisStep("input_lag", "a test", reports[0].gap, reports[1].gap, -1.0, lagged),
+        DiagnosisStep("output_offset", "a test", reports[1].gap, reports[2].gap, -1.0, final.model),
+    ]
+    current, report, kept, gaps, notes = run.prune(final, reports[2], steps, reports)
+    assert [step.effect for step in kept] == ["time_delay", "output_offset"], notes
+    assert current.model.input_lag == 0.0 and current.model.delay == case.truth.delay
+    assert len(gaps) == 3 and gaps[-1] is report
+    assert "the dead time of its step stays" in kept[0].evidence

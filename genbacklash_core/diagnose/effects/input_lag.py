@@ -32,7 +32,8 @@ trial-direction test: the score test at ``a = 0`` sees only the first-order part
 u(t)``, which a held command makes spiky). The best trial's F-test, Bonferroni-corrected over
 the trials, must pass the screening thresholds.
 Augmentation: short refits from the best trial poles at each dead time searched, the best
-refitted fully; the BIC picks.
+refitted fully; the BIC picks. A fit whose lag vanishes (:func:`vanished`) is named
+``time_delay`` by the loop: what it adds is a dead time.
 """
 
 from __future__ import annotations
@@ -47,7 +48,7 @@ from genbacklash_core.diagnose.stats import NestedTest, nested_f_test
 
 from ._base import Detection, format_p, screen_starts
 
-__all__ = ["EFFECT", "InputLag"]
+__all__ = ["EFFECT", "InputLag", "vanished"]
 
 _POLES = (0.5, 0.7, 0.8, 0.9, 0.95, 0.98)  # trial poles (time constants 1.4 .. 50 samples)
 _SERVO_DELAYS = 3  # dead time searched with the lag, samples beyond the model's own
@@ -55,6 +56,7 @@ _ORDERS = (1, 2)  # a first-order lag; a critically damped servo's two equal pol
 _SCREEN_STEPS = 8  # Levenberg-Marquardt steps per start before the best are finished
 _FINALISTS = 2
 _FRACTIONS = (0.25, 0.5, 0.75)  # fractions of a sample of dead time tried after the fit
+_VANISHED = 1e-3  # a lag that leaves less of a step than this one sample on is no lag
 
 
 def _specs(context: Context) -> dict[tuple[int, int], ModelSpec]:
@@ -171,6 +173,21 @@ class InputLag:
             if not best.bic < simple.bic - context.settings.bic_margin:
                 best = simple
         return _fractional(context, best)
+
+
+def vanished(model: AugmentedModel) -> bool:
+    """True when ``model``'s servo lag is no lag: less than :data:`_VANISHED` of a step is
+    left one sample on (its pole fitted to zero), so what ``input_lag``'s fit adds is a dead
+    time and perhaps a fraction of a sample -- ``time_delay``'s to name.
+
+    >>> from genbacklash_core import GeneralBacklash
+    >>> play = GeneralBacklash.ideal(1.0, 0.1, 0.1)
+    >>> vanished(AugmentedModel(play, delay=3, input_lag=3e-9, input_lag_fraction=0.25))
+    True
+    >>> vanished(AugmentedModel(play, delay=1, input_lag=0.5, input_lag_order=2))
+    False
+    """
+    return 0.0 < model.input_lag**model.input_lag_order < _VANISHED
 
 
 def _fractional(context: Context, fit: ModelFit) -> ModelFit:
