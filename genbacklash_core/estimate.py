@@ -89,8 +89,10 @@ class Estimate:
         Natural parameters in ``structure.names()`` order; NaN while warming up.
     covariance : ndarray, shape (P, P)
         Covariance of ``parameters`` (least-squares ``sigma^2 (Phi^T Phi)^-1`` of the paper's
-        regression, eqs. 23/33, carried to the natural parameters by the delta method); NaN
-        when unknown.
+        regression, eqs. 23/33, carried to the natural parameters by the delta method); in a
+        published online estimate also the lag and model-error terms of
+        :mod:`genbacklash_core.online.tracking` (a band, not what the identifier's state and
+        confidence read); NaN when unknown.
     residual : float
         RMS one-step prediction error (the equation error of eqs. 29/37) on the recent
         informative samples; NaN when unknown.
