@@ -109,16 +109,12 @@ class MultiJointPipeline:
         self._kind = joints.base.command_type
         self._pipes: dict[str, BacklashPipeline] = {}
         try:
-            # the joints take turns (phase k / n): their feeds, estimates and reports fall on
-            # different encoder messages, not all six on one (the node's latency tail)
-            count = len(joints.per_joint)
-            for k, params in enumerate(joints.per_joint):
+            for params in joints.per_joint:
                 self._pipes[params.joint] = BacklashPipeline(
                     params,
                     checkpoint_writer=checkpoint_writer,
                     worker=worker,
                     status_name=joint_status_name(params.joint),
-                    phase=k / count,
                 )
         except BaseException:
             self.close()

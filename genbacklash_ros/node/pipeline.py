@@ -389,11 +389,6 @@ class BacklashPipeline:
     status_name : str
         Name of the ``/diagnostics`` status (several joints in one node: one per joint, the
         name ending in the joint's name).
-    phase : float
-        Share ``[0, 1)`` of each period by which the periodic schedule (feeds, estimates,
-        reports, checkpoints) is shifted: several joints in one node take turns instead of
-        all feeding their identifiers on the same encoder message (0, the default: a single
-        joint's, and the replay's, schedule).
 
     Notes
     -----
@@ -412,7 +407,6 @@ class BacklashPipeline:
         batch_ns: int = BATCH_NS,
         worker: WorkerFactory = SyncWorker,
         status_name: str = "backlash_identifier",
-        phase: float = 0.0,
     ) -> None:
         if not isinstance(params, NodeParameters):
             raise GenBacklashError(f"params must be NodeParameters, got {params!r}")
@@ -442,7 +436,6 @@ class BacklashPipeline:
             publish_ns=params.publish_period_ns,
             checkpoint_ns=self._checkpoint_period(),
             feed_ns=batch_ns,
-            phase=phase,
         )
         self._worker: IdentifierWorker | None = None
         # the time of a command answered by answer_value whose periodic step has not run

@@ -24,14 +24,13 @@ __all__ = ["DIAGNOSTICS_PERIOD_NS", "Due", "Schedule", "next_multiple"]
 DIAGNOSTICS_PERIOD_NS = 1_000_000_000  # /diagnostics at 1 Hz of data time
 
 
-def next_multiple(now: int, period: int, phase: float = 0.0) -> int:
-    """The first multiple of ``period`` after ``now``, shifted by ``phase`` of a period.
+def next_multiple(now: int, period: int) -> int:
+    """The first multiple of ``period`` after ``now``.
 
-    >>> next_multiple(10, 5), next_multiple(11, 5), next_multiple(11, 10, 0.5)
-    (15, 15, 15)
+    >>> next_multiple(10, 5), next_multiple(11, 5)
+    (15, 15)
     """
-    offset = int(period * phase)
-    return ((now - offset) // period + 1) * period + offset
+    return (now // period + 1) * period
 
 
 class Due(NamedTuple):
@@ -56,11 +55,6 @@ class Schedule:
         Data time between identifier feeds at most.
     diagnostics_ns : int
         Diagnostics period.
-    phase : float
-        Share ``[0, 1)`` of each period by which this schedule's grid is shifted (and the
-        first feed delayed): several joints in one node take turns, so that their feeds,
-        estimates and reports do not all land on the same encoder message (0: the grid on
-        multiples of the periods).
     """
 
     def __init__(
@@ -70,11 +64,7 @@ class Schedule:
         checkpoint_ns: int | None,
         feed_ns: int,
         diagnostics_ns: int = DIAGNOSTICS_PERIOD_NS,
-        phase: float = 0.0,
     ) -> None:
-        if not 0.0 <= phase < 1.0:
-            raise ValueError(f"phase must lie in [0, 1), got {phase!r}")
-        self._phase = phase
         self._publish_ns = publish_ns
         self._checkpoint_ns = checkpoint_ns
         self._feed_ns = feed_ns
@@ -98,12 +88,11 @@ class Schedule:
         self.now = None
 
     def _start(self, now: int) -> None:
-        phase = self._phase
-        self._next_estimate = next_multiple(now, self._publish_ns, phase)
-        self._next_diagnostics = next_multiple(now, self._diagnostics_ns, phase)
+        self._next_estimate = next_multiple(now, self._publish_ns)
+        self._next_diagnostics = next_multiple(now, self._diagnostics_ns)
         if self._checkpoint_ns is not None:
-            self._next_checkpoint = next_multiple(now, self._checkpoint_ns, phase)
-        self._next_feed = now + self._feed_ns + int(self._feed_ns * phase)
+            self._next_checkpoint = next_multiple(now, self._checkpoint_ns)
+        self._next_feed = now + self._feed_ns
         self.settle()
 
     def settle(self) -> None:
@@ -155,13 +144,13 @@ class Schedule:
 
     def estimate_done(self, now: int) -> None:
         """The estimate due at ``now`` was handled."""
-        self._next_estimate = next_multiple(now, self._publish_ns, self._phase)
+        self._next_estimate = next_multiple(now, self._publish_ns)
 
     def checkpoint_done(self, now: int) -> None:
         """The checkpoint due at ``now`` was handled."""
         if self._checkpoint_ns is not None:
-            self._next_checkpoint = next_multiple(now, self._checkpoint_ns, self._phase)
+            self._next_checkpoint = next_multiple(now, self._checkpoint_ns)
 
     def diagnostics_done(self, now: int) -> None:
         """The report due at ``now`` was handled."""
-        self._next_diagnostics = next_multiple(now, self._diagnostics_ns, self._phase)
+        self._next_diagnostics = next_multiple(now, self._diagnostics_ns)

@@ -188,13 +188,11 @@ def test_each_joint_is_exactly_a_single_joint_pipeline(
     arm: list[tuple[int, str, Float64MultiArray | JointState]],
 ) -> None:
     """The per-joint logic is the single-joint pipeline's: each joint's element of the
-    compensated array equals, to the bit, what a one-joint pipeline on the same stream sends
-    with the joint's turn in the schedule (phase k / n)."""
+    compensated array equals, to the bit, what a one-joint node on the same stream sends."""
     _, outputs = fed
     got = np.array([o.message.data for o in outputs if o.topic == "compensated_command"])  # type: ignore[union-attr]
-    for k, (name, index) in enumerate(zip(NAMES, INDICES, strict=True)):
-        params = NodeParameters(joint=name, command_index=index)
-        single = BacklashPipeline(params, phase=k / len(NAMES))
+    for name, index in zip(NAMES, INDICES, strict=True):
+        single = BacklashPipeline(NodeParameters(joint=name, command_index=index))
         alone = _feed(single, arm)
         own = np.array([o.message.data[index] for o in alone if o.topic == "compensated_command"])  # type: ignore[union-attr]
         assert np.array_equal(got[:, index], own), name
@@ -232,9 +230,7 @@ def test_the_answer_comes_before_any_joint_builds_its_periodic_outputs(
             outputs += pipe.on_encoder(msg, receive_ns)
         built.clear()
     outputs += pipe.finish()
-    # every joint's, at commands, each second (a joint whose turn falls late in the second
-    # may have its last report after the record's end)
-    assert reports_at_commands >= len(NAMES) * 9
+    assert reports_at_commands >= len(NAMES) * 10  # every joint's, at commands, each second
     assert [(o.topic, o.joint, o.message, o.stamp_ns) for o in outputs] == [
         (o.topic, o.joint, o.message, o.stamp_ns) for o in expected
     ]
@@ -313,34 +309,3 @@ def test_a_joint_state_command_is_compensated_joint_by_joint(
     for k in (0, 3):  # shoulder, wrist compensated once their models are in
         assert np.mean(got[:, k] != given[:, k]) > 0.3
     assert pipe.pipelines["wrist"].estimate.available
-
-
-def test_the_joints_take_turns_to_feed_their_identifiers(
-    arm: list[tuple[int, str, Float64MultiArray | JointState]],
-) -> None:
-    """Each joint feeds its identifier on other encoder messages than the others (the node's
-    latency tail was all joints' feeds landing on one message): over the record at most 1 %
-    of the feeds share their message with another joint's (a feed is also due when a batch
-    fills, which the turns do not move), and every joint is fed."""
-    js = JointSet.from_mapping({"joints": list(NAMES), "command_indices": list(INDICES)})
-    pipe = MultiJointPipeline(js)
-    fed_at: dict[str, list[int]] = {name: [] for name in NAMES}
-    message = 0
-    for name, joint_pipe in pipe.pipelines.items():
-        original = joint_pipe._feed
-
-        def spy(final: bool = False, *, _name: str = name, _orig=original) -> None:  # type: ignore[no-untyped-def]
-            fed_at[_name].append(message)
-            _orig(final)
-
-        joint_pipe._feed = spy  # type: ignore[method-assign]
-    for receive_ns, topic, msg in arm:
-        if topic == COMMAND_TOPIC:
-            pipe.on_command(msg, receive_ns)  # type: ignore[arg-type]
-        else:
-            pipe.on_encoder(msg, receive_ns)
-        message += 1
-    counts = [len(fed_at[name]) for name in NAMES]
-    assert min(counts) >= 10, counts
-    every = [m for name in NAMES for m in fed_at[name]]
-    assert len(set(every)) >= 0.99 * len(every)  # all joints on every feed's message before
