@@ -308,7 +308,7 @@ def pipeline_cost(u: np.ndarray, y: np.ndarray) -> float:
     pipe.finish(refit=False)
     cpu = time.process_time() - cpu0
     pipe.close()
-    return cpu / (n * TICK_NS / 1e9)
+    return float(cpu / (n * TICK_NS / 1e9))
 
 
 def _thread_cpu() -> dict[str, float]:
