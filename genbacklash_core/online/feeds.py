@@ -56,9 +56,9 @@ class Feed(ABC):
 
     by_rows: bool  # a memory of rows (RowFeed) rather than a window of samples
 
-    def __init__(self, window: int) -> None:
+    def __init__(self, window: int, held: int = 0) -> None:
         self.window = window
-        self.ring = SampleRing(window)  # the latest samples
+        self.ring = SampleRing(max(window, held))  # the latest samples (``held`` at least)
         self.idle = 0  # samples since the latest one that informed the fits
 
     @property
@@ -125,9 +125,10 @@ class RowFeed(Feed):
     by_rows = True
 
     def __init__(self, window: int, bins: int) -> None:
-        super().__init__(window)
+        # the ring holds the refinement's `window` samples and the bands' free run's
+        # `BAND_SAMPLES` (online.tracking): one ring, read at either length
+        super().__init__(window, BAND_SAMPLES)
         self.memory = RowMemory(window, bins)
-        self.recent = SampleRing(BAND_SAMPLES)  # the bands' free run (online.tracking)
         self.rows = 0  # rows taken
         self.last: tuple[float, float] | None = None  # the latest sample
 
@@ -141,7 +142,6 @@ class RowFeed(Feed):
     def push(self, u: float, y: float, follows: bool) -> None:
         """Take one validated sample (``follows``: it follows the previous one taken)."""
         self.ring.push(u, y, not follows)
-        self.recent.push(u, y, not follows)
         last = self.last
         if last is not None and follows and u != last[0]:
             self.memory.add_one(last[0], u, last[1], y)  # a row of eq. (24)
@@ -173,7 +173,6 @@ class RowFeed(Feed):
             stop = u.size if hit >= counts.size - start else start + hit + 1
             part = slice(start, stop)
             self.ring.extend(u[part], y[part], b[part])  # the refinement's recent series
-            self.recent.extend(u[part], y[part], b[part])
             taken = row[part]
             if taken.any():
                 m = self.memory
@@ -214,10 +213,11 @@ class RowFeed(Feed):
     ) -> FloatArray | None:
         """On the recent series: the free-run simulation error needs samples in order, not
         rows filed by region."""
-        ru, ry = self.ring.window()
+        ru, ry = self.ring.window(self.window)
         if ru.size <= 4 * structure.n_parameters:
             return None
-        return refine_window(structure, start, ru, ry, fit, iterations, self.ring.breaks())
+        breaks = self.ring.breaks(self.window)
+        return refine_window(structure, start, ru, ry, fit, iterations, breaks)
 
     def purge(self, structure: Structure, p: FloatArray, residual: float) -> bool:
         """Forget the rows the accepted model cannot have produced: one-step prediction
@@ -234,8 +234,8 @@ class RowFeed(Feed):
         ``BAND_SAMPLES`` readings."""
         order, _ = self.memory.stamps()
         age = self.memory.taken - order
-        u, y = self.recent.window()
-        recent = (u, y, self.recent.breaks())
+        u, y = self.ring.window(BAND_SAMPLES)
+        recent = (u, y, self.ring.breaks(BAND_SAMPLES))
         return dead_zone_drift(structure, reported, self.memory.rows(), age, recent)
 
 

@@ -88,7 +88,7 @@ from .seed import SeedPrior, prior_weights
 from .settings import RecursiveSettings
 from .state import confidence_moved, held, settled_state
 from .stream import RowStream
-from .tracking import dead_zone_drift, with_tracking
+from .tracking import BAND_SAMPLES, dead_zone_drift, with_tracking
 
 __all__ = ["RecursiveIdentifier", "RecursiveSettings"]
 
@@ -537,7 +537,7 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         span = (self._stream.low, self._stream.high)
         if structure.cascade:
             latest = self._ever_started and attempt > 0  # a retried restart: the latest only
-            last = s.initial_samples if latest else None
+            last = s.initial_samples if latest else s.buffer
             u, y = (a.copy() for a in self._stream.recent.window(last))
             window = (u, y, self._stream.recent.breaks(last))
             first = self._samples - self._queued - u.size  # the window ends at the last seen
@@ -628,9 +628,9 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         rows, stamps = self._memory.rows()
         p = np.array(natural_from_theta(structure, self._current.theta.tolist()))
         cols = (rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3])
-        band = self._stream.band  # the latest readings, for the model term's free run
-        u, y = band.window()
-        recent = (u, y, band.breaks())
+        ring = self._stream.recent  # the latest readings, for the model term's free run
+        u, y = ring.window(BAND_SAMPLES)
+        recent = (u, y, ring.breaks(BAND_SAMPLES))
         self._drift = dead_zone_drift(structure, p, cols, float(self._samples) - stamps, recent)
 
     # ------------------------------------------------------------------ the estimate

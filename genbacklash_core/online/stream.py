@@ -67,8 +67,9 @@ class RowStream:
     """
 
     def __init__(self, structure: Structure, buffer: int) -> None:
-        self.recent = SampleRing(buffer)
-        self.band = SampleRing(BAND_SAMPLES)  # the bands' free run (online.tracking)
+        # the recent samples: the cascade's `buffer` and the bands' free run's
+        # `BAND_SAMPLES` (online.tracking), one ring read at either length
+        self.recent = SampleRing(max(buffer, BAND_SAMPLES))
         self.low, self.high = math.inf, -math.inf  # the input range seen
         self.run = 0  # consecutive samples ending at the latest one
         self.u1 = self.y1 = 0.0  # the latest sample (backlash)
@@ -89,7 +90,6 @@ class RowStream:
         formed (the cascade) at ``theta`` (eqs. 23/33); ``fraction``: ``input_deadband``;
         ``settling``: the cascade's settling horizon."""
         self.recent.extend(u, y, b)
-        self.band.extend(u, y, b)
         low = np.minimum(np.minimum.accumulate(u), self.low)
         high = np.maximum(np.maximum.accumulate(u), self.high)
         self.low, self.high = float(low[-1]), float(high[-1])

@@ -274,7 +274,7 @@ def test_a_cascade_at_rest_keeps_its_window(seed: int) -> None:
     np.testing.assert_array_equal(during.parameters, before.parameters)
     assert 0.0 < during.confidence < before.confidence
     assert during.samples == 23_000
-    window, _ = ident._feed.ring.window()
+    window, _ = ident._feed.ring.window(ident._feed.window)
     moves = int(np.count_nonzero(np.diff(window)))
     assert moves > 0.9 * window.size  # the dwell took a few dozen samples of the window
     after = ident.update_many(u[23_000:], y[23_000:])
