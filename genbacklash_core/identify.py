@@ -638,7 +638,8 @@ def described_breaks(
     """The output-error refinement's restarts for a backlash alone: the sample rule's breaks
     and the held samples whose reading falsifies the hold
     (:func:`~genbacklash_core.refine.falsified_holds`), and how many of the latter there are.
-    Batch identification and the windowed identifier's refinement both restart there.
+    Batch identification restarts there with ``restart_holds`` (``genbacklash identify``);
+    the online identifiers' refinement does not.
 
     The output noise's standard deviation is taken from the rows of eq. (24) at ``p`` (the
     rows the iteration fitted: a branch engaged by the measured load), robustly (1.4826 times
