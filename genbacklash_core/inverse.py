@@ -609,7 +609,8 @@ class _InverseTable:
             u, g, slope = u[rising], g[rising], slope[rising]  # none usable: an empty table
         self.u = u
         self.g = g
-        with np.errstate(divide="ignore"):
+        # a subnormal slope overflows to inf, as a zero one gives: no step through it
+        with np.errstate(divide="ignore", over="ignore"):
             self.du = np.where(slope > 0.0, 1.0 / slope, np.inf)  # du/dg = 1 / g'(u)
         self.u_list: list[float] = u.tolist()
         self.g_list: list[float] = g.tolist()

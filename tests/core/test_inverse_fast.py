@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -219,3 +220,19 @@ def test_a_branch_with_no_usable_node_gives_an_empty_table() -> None:
     assert table.g.size == 0
     assert math.isnan(table.guess(0.1))
     assert np.isnan(table.guesses(np.array([0.1]))).all()
+
+
+def test_a_subnormal_slope_builds_the_table_without_an_overflow_warning() -> None:
+    """The fuzz test's example (tests/core/test_fuzz.py::test_compensate_step): a branch whose
+    slope is subnormal made 1 / slope overflow while the inverse's table was built (a
+    RuntimeWarning, an error under the suite's filter); its step through there is infinite,
+    as a zero slope's."""
+    from genbacklash_core import GeneralBacklash, compensate_step
+    from genbacklash_core.inverse import CompensatorState
+
+    model = GeneralBacklash(m_left=(1.0, 0.0), c_left=1.0, m_right=(5e-324, 1e300), c_right=1.0)
+    state = CompensatorState(0.0, 0.0, 1e300, 0, 0.0, 0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        u, after = compensate_step(model, state, 0.0, None, 0.0)
+    assert math.isfinite(u) and math.isfinite(after.x)
