@@ -60,6 +60,32 @@ the same model-error covariance on that residual and the free run's sensitivitie
 taken out). The bands add both model terms (:meth:`DeadZoneDrift.model_term`); again only the
 bands.
 
+The free run asks one more question: do the rows and the readings agree on the parameters?
+Where the play operator describes the drivetrain, the estimate fitted on the rows and the one
+the free run over the readings would give both sit at the truth, and the step between them,
+``(J^T J)^+ J^T r`` (one Gauss-Newton step of eq. 23 on the free run's sensitivities ``J`` and
+residual ``r``), is noise. A servo between the command and the gear is not noise: each row
+pairs a reading with a command the motor has not reached yet, so the rows see a wider play,
+while the free run, which carries the load's state through each move, is pulled by the
+readings the servo leaves on the flank. On the MuJoCo near_ideal drivetrain at a 60 Hz servo
+the rows' play is 2.1-3.5 mrad wide of the quasi-static play, the step takes it back to
+within 0.1-1.7 mrad, and the free-run misfit left after the step is no larger than the
+readings' rounding (``e`` 0: no model term). When the step's play stands out of its noise
+(:attr:`DeadZoneDrift.free_run_offset`; ``STEP_Z`` standard deviations, its variance a
+sandwich by batch means over ``STEP_BLOCKS`` blocks of the readings, plus the estimate's
+own), the bands add ``b b^T`` with ``b`` the distance from the estimate to that point: the
+two disagree, and the truth may be either. Gated like the lag: where the model holds, the
+step is noise and the band keeps its width. And only where the free run at the step's end
+describes the readings to within one reading's step (its correlated misfit, the rounding taken
+out, at most the readings' step ``q``): where a larger misfit is left (a spring that rings, a
+load that coasts) the free run's optimum is the output error's best compromise, not the
+drivetrain, and the model-error term bounds the bias instead (on the compliant MuJoCo
+drivetrain, with the step counted there too, the play's 2-sigma band was 88-160 mrad for
+errors of 0.4-2.5 mrad; without, 88-102). The batch means matter: on quantised readings
+of an exact play (the operation scenario, no servo) the step's play reached 0.4 mrad, far
+outside a white ``s^2 (J^T J)^+`` (the rounding stays the same through a dwell) and 2.5 of
+the sandwich's standard deviations. Only the band.
+
 The cost is one more solve of a ``(P + 2..4)``-column Gram matrix per fit of the bands, the
 model-error term's pseudo-inverse of a ``P x P`` Gram matrix, and one free run with its
 sensitivities over ``BAND_SAMPLES`` readings (2-8 ms on a busy machine; the recursive
@@ -97,6 +123,7 @@ __all__ = [
     "BAND_SAMPLES",
     "DRIFT_Z",
     "DeadZoneDrift",
+    "FreeRunModel",
     "dead_zone_drift",
     "free_run_model",
     "one_step_sensitivity",
@@ -106,6 +133,34 @@ __all__ = [
 
 DRIFT_Z = 3.0  # a dead zone drifts when its rate is this many standard deviations from 0
 BAND_SAMPLES = 10_000  # the recent readings the free run of the bands' model term covers
+STEP_BLOCKS = 20  # blocks of the free run's readings whose spread gives its step's noise
+STEP_Z = 3.0  # the free run's step counts when its play stands this many std. dev. from 0
+
+
+@dataclass(frozen=True)
+class FreeRunModel:
+    """What the free run of an estimate over recent readings says of its model error
+    (:func:`free_run_model`).
+
+    Attributes
+    ----------
+    misfit : Misfit
+        The correlated part of the free-run residual the parameters do not explain, the
+        readings' rounding taken out.
+    covariance : ndarray, shape (P, P)
+        The model-error covariance ``(N e^2 / 3) (J^T J)^+`` of ``misfit`` (zeros when it is
+        not significant).
+    offset : ndarray, shape (P,)
+        The step from the estimate to the free run's linearised optimum,
+        ``(J^T J)^+ J^T r``, when its play stands ``STEP_Z`` standard deviations from zero
+        (``_stands_out``) and ``misfit`` is at most one reading's step; zeros when not (the
+        rows and the readings agree within noise, or the free run does not describe the
+        readings).
+    """
+
+    misfit: Misfit
+    covariance: FloatArray
+    offset: FloatArray
 
 
 @dataclass(frozen=True)
@@ -152,6 +207,10 @@ class DeadZoneDrift:
     free_run_covariance : ndarray, shape (P, P), or None
         The model error's covariance from ``free_run`` on the free run's sensitivities
         (zeros when it is not significant).
+    free_run_offset : ndarray, shape (P,), or None
+        The step from ``estimate`` to the free run's linearised optimum over the recent
+        readings when it stands out of its noise, else zeros (None: not measured); see
+        :class:`FreeRunModel`.
     """
 
     estimate: FloatArray
@@ -169,6 +228,7 @@ class DeadZoneDrift:
     model_covariance: FloatArray | None = None
     free_run: Misfit | None = None
     free_run_covariance: FloatArray | None = None
+    free_run_offset: FloatArray | None = None
 
     def model_term(self) -> FloatArray:
         """The model-error covariance the bands add: :attr:`model_covariance` (the one-step
@@ -225,17 +285,26 @@ class DeadZoneDrift:
         ``b`` as large as ``b`` itself.
 
         In every case plus :meth:`model_term`, the misfit neither explains (zeros when it is
-        white)."""
+        white), and ``d d^T`` with ``d = estimate + free_run_offset - current``, the distance
+        to where the free run over the recent readings puts the parameters, when the rows
+        and the readings disagree beyond noise (zeros when they agree)."""
         size = self.correction.size
         drifting = self.drifting
         model = self.model_term()
+        if self.free_run_offset is not None and np.any(self.free_run_offset):
+            d = (
+                self.free_run_offset
+                if current is None
+                else self.estimate + self.free_run_offset - current
+            )
+            model = model + np.outer(d, d)
         extra = np.zeros((size, size))
         if self.lagging and self.rest is not None and self.rest_covariance is not None:
             offset, extra = self.rest, self.rest_covariance
         elif drifting:
             offset = self.correction
         else:
-            return model.copy()
+            return np.asarray(model, dtype=np.float64)
         b = offset if current is None else self.estimate + offset - current
         if ticks and drifting:
             b = b.copy()
@@ -391,7 +460,7 @@ def dead_zone_drift(
         lag_std = np.sqrt(np.maximum(np.diag(lag_cov)[-2:], 0.0))
         rest, rest_cov = lag_coef[:size], lag_cov[:size, :size]
     misfit = _adjacent_misfit(left, np.asarray(age, dtype=np.float64)[engaged])
-    free = None if recent is None else free_run_model(structure, p, *recent)
+    free = None if recent is None else free_run_model(structure, p, *recent, correction_cov)
     return DeadZoneDrift(
         np.array(p, dtype=np.float64),
         np.asarray(correction, dtype=np.float64),
@@ -406,17 +475,24 @@ def dead_zone_drift(
         None if rest_cov is None else np.asarray(rest_cov, dtype=np.float64),
         misfit,
         model_error_covariance(sens[engaged], misfit),
-        None if free is None else free[0],
-        None if free is None else free[1],
+        None if free is None else free.misfit,
+        None if free is None else free.covariance,
+        None if free is None else free.offset,
     )
 
 
 def free_run_model(
-    structure: Structure, p: FloatArray, u: FloatArray, y: FloatArray, breaks: BoolArray
-) -> tuple[Misfit, FloatArray] | None:
-    """The free-run misfit of ``p`` over the readings ``(u, y)`` (in time order) and its
+    structure: Structure,
+    p: FloatArray,
+    u: FloatArray,
+    y: FloatArray,
+    breaks: BoolArray,
+    noise: FloatArray | None = None,
+) -> FreeRunModel | None:
+    """The free-run misfit of ``p`` over the readings ``(u, y)`` (in time order), its
     model-error covariance ``C_model = (N e^2 / 3) (J^T J)^-1`` on the free run's
-    sensitivities ``J``: what the batch identify reads
+    sensitivities ``J``, and the step to the free run's linearised optimum when it stands out
+    of its noise (:class:`FreeRunModel`): what the batch identify reads
     (:func:`~genbacklash_core.uncertainty.free_run_residual`: the play operator of eqs.
     20-21 run from the first reading, restarted at the sample rule's ``breaks``), with the
     readings' rounding taken out of the misfit.
@@ -446,6 +522,12 @@ def free_run_model(
     drivetrain, which the lag term, :attr:`DeadZoneDrift.rest`, does not always cover:
     BENCHMARKS.md, issue 22). The batch identify keeps the rounding in its misfit.
 
+    The step itself, ``(J^T J)^+ J^T r``, is where the readings would move ``p``: kept as
+    :attr:`FreeRunModel.offset` when its play stands out of its noise (``noise``: the
+    statistical covariance of ``p`` itself, added to the step's) and the misfit left at its
+    end is at most one reading's step (see the module notes): a bias the one-step rows
+    cannot see (a 60 Hz servo's on the MuJoCo near_ideal drivetrain).
+
     None when the readings cannot tell: a cascade, too few readings, or a parameter no
     reading informs (a branch not engaged in the window: its variance would be infinite).
     """
@@ -454,16 +536,58 @@ def free_run_model(
     residual, jac = free_run_residual(structure, p, u, y, breaks)
     informed = np.any(jac != 0.0, axis=0)
     sub = jac[:, informed]
-    # the misfit no parameters explain: the residual at the free run's linearised optimum
-    # (eq. 23's least squares on the free run's sensitivities), as identify's residual is
-    left = residual - sub @ (np.linalg.pinv(sub.T @ sub) @ (sub.T @ residual))
+    gram_inv = np.linalg.pinv(sub.T @ sub)
+    step = gram_inv @ (sub.T @ residual)  # eq. 23's least squares on the free run's J
+    # the misfit no parameters explain: the residual at the free run's linearised optimum,
+    # as identify's residual is
+    left = residual - sub @ step
     found = correlated_misfit(left, breaks)
-    rounding = resolution(y) ** 2 / 12.0  # a uniform rounding error's variance
+    step_size = resolution(y)
+    rounding = step_size**2 / 12.0  # a uniform rounding error's variance
     misfit = dataclasses.replace(found, lag_one=found.lag_one - rounding)
     cov = model_error_covariance(jac, misfit)
     if not np.all(np.isfinite(cov)):
         return None
-    return misfit, cov
+    offset = np.zeros(p.size)
+    # the free run at the step's end describes the readings to within one reading's step:
+    # its optimum is an estimate of the drivetrain, not the output error's best guess
+    described = misfit.rms_model <= step_size
+    if described and _stands_out(structure, informed, sub, gram_inv, step, left, noise):
+        offset[informed] = step
+    return FreeRunModel(misfit, cov, offset)
+
+
+def _stands_out(
+    structure: Structure,
+    informed: BoolArray,
+    jac: FloatArray,
+    gram_inv: FloatArray,
+    step: FloatArray,
+    left: FloatArray,
+    noise: FloatArray | None,
+) -> bool:
+    """Whether the play's part of the free run's ``step`` (``a^T (J^T J)^+ J^T r``, ``a``
+    the play's direction, ``c_L + c_R``) stands ``STEP_Z`` standard deviations from zero.
+
+    Its variance by batch means, a sandwich of eq. 23's least squares: the step is a sum
+    over the readings of ``r_t J_t (J^T J)^+ a``; with the residual ``left`` at the step's
+    end (what the step does not explain) in place of ``r``, summed over ``STEP_BLOCKS``
+    consecutive blocks, the blocks' spread counts what a white ``s^2 (J^T J)^+`` misses (the
+    rounding of a quantised encoder on a slow load stays the same for many readings). Plus
+    the play's variance in ``noise``, the statistical covariance of ``p`` itself (the step
+    is between two estimates)."""
+    names = structure.names()
+    play = np.zeros(structure.n_parameters)
+    play[[names.index("c_left"), names.index("c_right")]] = 1.0
+    w = np.where(np.isfinite(left), left, 0.0) * (jac @ (gram_inv @ play[informed]))
+    size = w.size // STEP_BLOCKS
+    if size == 0:
+        return False
+    blocks = w[: size * STEP_BLOCKS].reshape(STEP_BLOCKS, size).sum(axis=1)
+    variance = STEP_BLOCKS * float(np.var(blocks, ddof=1)) * (w.size / (size * STEP_BLOCKS))
+    if noise is not None:
+        variance += float(play @ noise @ play)
+    return bool(float(play[informed] @ step) ** 2 > STEP_Z**2 * variance)
 
 
 def resolution(y: FloatArray) -> float:

@@ -285,7 +285,9 @@ def test_the_model_term_moves_the_band_and_nothing_the_compensation_reads(
         fit = dead_zone_drift(*args)  # type: ignore[arg-type]
         if fit is None:
             return None
-        return dataclasses.replace(fit, model_covariance=None, free_run_covariance=None)
+        return dataclasses.replace(
+            fit, model_covariance=None, free_run_covariance=None, free_run_offset=None
+        )
 
     for module in (feeds, recursive):  # the windowed identifier's drift is its feed's
         monkeypatch.setattr(module, "dead_zone_drift", without)
@@ -338,7 +340,8 @@ def test_the_free_run_term_leaves_an_exact_model_alone_and_sees_a_load_that_trai
     y = ENCODER_STEP * np.round(x / ENCODER_STEP)
     exact = free_run_model(s, p, u, y, breaks)
     assert exact is not None
-    assert not exact[0].significant and not np.any(exact[1])
+    assert not exact.misfit.significant and not np.any(exact.covariance)
+    assert not np.any(exact.offset)  # the true parameters: the step to the optimum is noise
     residual, _ = free_run_residual(s, p, u, y, breaks)
     assert correlated_misfit(residual, breaks).lag_one > 0.0  # the rounding is not white
     trailing = np.empty_like(x)
@@ -348,12 +351,48 @@ def test_the_free_run_term_leaves_an_exact_model_alone_and_sees_a_load_that_trai
         trailing[k] = load
     lagged = free_run_model(s, p, u, ENCODER_STEP * np.round(trailing / ENCODER_STEP), breaks)
     assert lagged is not None
-    misfit, cov = lagged
+    misfit, cov = lagged.misfit, lagged.covariance
     assert misfit.significant
     assert np.all(np.isfinite(cov))
     play_std = float(np.sqrt(cov[1, 1] + cov[3, 3] + 2 * cov[1, 3]))
     shift = float(np.sqrt(np.mean((trailing - x) ** 2)))  # what the lag does to the output
     assert 0.2 * shift < play_std < 10.0 * shift, (play_std, shift)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_an_estimate_the_readings_disagree_with_gets_the_distance_in_its_band(seed: int) -> None:
+    """An estimate 2 mrad of play wider than the drivetrain (what one-step rows read behind
+    a servo that lags the command), run over quantised readings of the exact play: the free
+    run's step takes its play back to the truth and stands out, so the band takes the
+    distance (``b b^T``); the true parameters get no step (the test above)."""
+    s = Structure(1)
+    u, x, breaks = _moves(seed)
+    y = ENCODER_STEP * np.round(x / ENCODER_STEP)
+    wide = STRAIGHT.parameters().copy()
+    wide[[1, 3]] += 1e-3  # c_left, c_right: 2 mrad of play too wide
+    found = free_run_model(s, wide, u, y, breaks)
+    assert found is not None
+    step_play = float(found.offset[1] + found.offset[3])
+    assert -2.5e-3 < step_play < -1.5e-3, step_play
+    assert not np.any(found.covariance)  # no misfit left after the step: no model term
+
+
+def test_a_free_run_that_misfits_the_readings_by_more_than_a_step_gives_no_offset() -> None:
+    """A disturbance of 5 mrad that follows the motion (a ringing coupling), three encoder
+    steps, read by an estimate 2 mrad of play too wide: the free run's optimum is then the output error's best compromise, not the
+    drivetrain, so its step is no evidence of a bias (no offset), and the model-error term
+    bounds the bias instead (a nonzero covariance)."""
+    s = Structure(1)
+    u, x, breaks = _moves(0)
+    ring = x + 5e-3 * np.sin(np.arange(x.size) / 40.0)
+    y = ENCODER_STEP * np.round(ring / ENCODER_STEP)
+    wide = STRAIGHT.parameters().copy()
+    wide[[1, 3]] += 1e-3  # 2 mrad of play too wide: the step stands out of its noise
+    found = free_run_model(s, wide, u, y, breaks)
+    assert found is not None
+    assert found.misfit.rms_model > ENCODER_STEP
+    assert not np.any(found.offset)
+    assert np.all(np.diag(found.covariance) > 0.0)
 
 
 def test_a_branch_the_readings_do_not_engage_gives_no_free_run_term() -> None:
@@ -397,4 +436,6 @@ def test_the_rows_hide_what_the_free_run_shows_and_only_the_band_takes_it() -> N
 
     assert play_var(fit.free_run_covariance) > 4.0 * play_var(fit.model_covariance)
     band = fit.tracking_covariance() - alone.tracking_covariance()
-    np.testing.assert_allclose(band, fit.free_run_covariance, rtol=1e-12, atol=1e-18)
+    assert fit.free_run_offset is not None
+    offset = np.outer(fit.free_run_offset, fit.free_run_offset)  # rows and readings disagree
+    np.testing.assert_allclose(band, fit.free_run_covariance + offset, rtol=1e-12, atol=1e-18)
