@@ -808,10 +808,19 @@ def _custom_data_of(info: object) -> dict[str, str] | None:
     return _string_map(info.get("custom_data")) if isinstance(info, dict) else None
 
 
+def _safe_yaml(text: str) -> object:
+    """``yaml.safe_load(text)`` through libyaml's parser where PyYAML has it (the same
+    safe constructor, so the same objects and the same ``yaml.YAMLError`` s; a bag's
+    ``metadata.yaml`` parses in under a millisecond instead of ~18 ms)."""
+    import yaml
+
+    loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+    return yaml.load(text, Loader=loader)  # a safe loader
+
+
 def _embedded_metadata(path: Path) -> object:
     """The rosbag2 metadata an MCAP file holds (its ``rosbag2`` metadata record, found
     through the summary's metadata index), parsed from YAML; None when there is none."""
-    import yaml
 
     size = path.stat().st_size
     with path.open("rb") as stream:
@@ -851,7 +860,7 @@ def _embedded_metadata(path: Path) -> object:
                 key, at = _string(record, at)
                 value, at = _string(record, at)
                 if key == "serialized_metadata":
-                    return yaml.safe_load(value)
+                    return _safe_yaml(value)
             return None
     return None
 
@@ -867,7 +876,7 @@ def read_custom_data(path: str | Path) -> dict[str, str] | None:
     bag = Path(path)
     if bag.is_dir():
         try:
-            document = yaml.safe_load((bag / "metadata.yaml").read_text(encoding="utf-8"))
+            document = _safe_yaml((bag / "metadata.yaml").read_text(encoding="utf-8"))
         except (OSError, UnicodeDecodeError, yaml.YAMLError):
             document = None
         if isinstance(document, dict) and "rosbag2_bagfile_information" in document:
