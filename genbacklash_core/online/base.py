@@ -169,6 +169,68 @@ class OnlineIdentifier(ABC, Generic[_S]):
             self._break_next = False
         self._take(u, y, b)
 
+    def seed(self, estimate: Estimate) -> Estimate:
+        """Continue from a saved ``estimate`` (e.g. a checkpoint's) instead of a cold start.
+
+        Forgets all samples, then takes the estimate's parameters as the current estimate.
+        Its covariance and residual give the information of the data it was fitted on
+        (``cov_theta = sigma^2 (Phi^T Phi)^-1``, :func:`~.seed.seed_prior`), which joins the
+        next fits as a prior standing for the part of those data the new samples have not
+        replaced yet, so the estimate continues smoothly, with the uncertainty it had, while
+        the identifier refills. How the prior fades is each identifier's own
+        (``_continue_from``: the windowed identifier by the share of its window refilled,
+        the recursive one per branch, by the share of the branch's memory refilled).
+
+        The windowed identifier's state is ``converged`` when the estimate was settled
+        (converged, or frozen for lack of excitation) and its relative standard deviation is
+        within ``converged_std``; otherwise ``converging``. The confidence follows from it
+        as usual. Raises :class:`GenBacklashError` (the identifier unchanged) when the
+        estimate cannot seed it: another structure, another branch sense than the one
+        given, no valid model, or no finite covariance and residual.
+
+        Parameters
+        ----------
+        estimate : Estimate
+            The saved estimate; its ``samples`` (when > 0) tell how full its window was.
+
+        Returns
+        -------
+        Estimate
+            The new current estimate: the saved parameters and covariance. The sample
+            count goes on from the estimate's ``samples``.
+
+        Examples
+        --------
+        >>> from genbacklash_core import Estimate, Structure, paper_example
+        >>> from genbacklash_core.online import RecursiveIdentifier, WindowedIdentifier
+        >>> truth = paper_example(1).model
+        >>> saved = Estimate(Structure(3), truth.parameters(), np.eye(8) * 1e-6, 0.02, 0.6,
+        ...                  "converged", 0.9, 5000)
+        >>> data = paper_example(1).generate(seed=1, n_samples=600)
+        >>> for kind in (WindowedIdentifier, RecursiveIdentifier):
+        ...     ident = kind(degree=3)
+        ...     est = ident.seed(saved)
+        ...     seeded = ident.from_seed
+        ...     after = ident.update_many(data.u, data.y)
+        ...     error = np.max(np.abs(after.parameters - truth.parameters()))
+        ...     print(est.state.value, est.model == truth, seeded, after.state.value, error < 0.02)
+        converged True True converged True
+        converged True True converged True
+        """
+        prior = self._restart_from(estimate)
+        self._continue_from(prior, estimate)
+        return self.estimate
+
+    @property
+    @abstractmethod
+    def from_seed(self) -> bool:
+        """True while the estimate still leans on a seed (:meth:`seed`)."""
+
+    @abstractmethod
+    def _continue_from(self, prior: SeedPrior, estimate: Estimate) -> None:
+        """Continue from the seed's ``prior`` (``estimate``: the saved estimate) in the
+        identifier's own way, after :meth:`_restart_from`."""
+
     def _restart_from(self, estimate: Estimate) -> SeedPrior:
         """The seed's start (see the module notes): the saved estimate as prior information,
         all samples forgotten, the saved structure, sample count and excitation taken.

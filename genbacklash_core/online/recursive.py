@@ -243,48 +243,12 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         blocks = 3 if structure.cascade else 2
         self._last_row = [0] * blocks  # sample count at the newest row of left, right, linear
 
-    def seed(self, estimate: Estimate) -> Estimate:
-        """Continue from a saved ``estimate`` (e.g. a checkpoint's) instead of a batch fit.
-
-        Forgets all samples, then takes the estimate's parameters (eq. 34 inverted) as the
-        current estimate. Its covariance and residual give the information of the memory it
-        rested on (``cov_theta = sigma^2 R^-1``), which joins each iteration as a prior
-        weighted by the share of the memory the new rows have not refilled yet (per branch),
-        so the estimate continues with the uncertainty it had while the memory refills. A
-        cascade waits for the samples that determine its internal ``x`` (the play operator
-        started from any state agrees) before it takes rows.
-
-        Raises :class:`GenBacklashError` (the identifier unchanged) when the estimate cannot
-        seed it: another structure, another branch sense than the one given, no valid model,
-        or no finite covariance and residual.
-
-        Parameters
-        ----------
-        estimate : Estimate
-            The saved estimate.
-
-        Returns
-        -------
-        Estimate
-            The new current estimate: the saved parameters and covariance. The sample
-            count goes on from the estimate's ``samples``.
-
-        Examples
-        --------
-        >>> from genbacklash_core import Structure, paper_example
-        >>> truth = paper_example(1).model
-        >>> saved = Estimate(Structure(3), truth.parameters(), np.eye(8) * 1e-6, 0.02, 0.6,
-        ...                  "converged", 0.9, 5000)
-        >>> ident = RecursiveIdentifier(degree=3)
-        >>> est = ident.seed(saved)
-        >>> est.state.value, est.model == truth, ident.from_seed
-        ('converged', True, True)
-        >>> data = paper_example(1).generate(seed=1, n_samples=600)
-        >>> after = ident.update_many(data.u, data.y)
-        >>> after.state.value, bool(np.max(np.abs(after.parameters - truth.parameters())) < 0.02)
-        ('converged', True)
-        """
-        prior = self._restart_from(estimate)
+    def _continue_from(self, prior: SeedPrior, estimate: Estimate) -> None:
+        """Continue from a seed (:meth:`seed`): its parameters (eq. 34 inverted) as the
+        current estimate; its information joins each iteration as a prior weighted by the
+        share of the memory the new rows have not refilled yet (per branch). A cascade
+        waits for the samples that determine its internal ``x`` (the play operator started
+        from any state agrees) before it takes rows."""
         cov = scaled_inverse(prior.information)
         assert cov is not None  # (_check_seed)
         s = self.settings
@@ -297,7 +261,6 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         self._ever_started = True
         self._next_solve = self._samples + s.block
         self._reason = f"seeded from a saved estimate ({estimate.state.value})"
-        return self.estimate
 
     def _check_seed(self, prior: SeedPrior) -> None:
         if scaled_inverse(prior.information) is None:  # seed_prior checked that it is

@@ -161,52 +161,12 @@ class WindowedIdentifier(OnlineIdentifier[WindowedSettings]):
         self._p = p
         self._feed.settle(self._structure, p)
 
-    def seed(self, estimate: Estimate) -> Estimate:
-        """Continue from a saved ``estimate`` (e.g. a checkpoint's) instead of a cold start.
-
-        Forgets all samples, then takes the estimate's parameters as the current estimate
-        and as the start of the next warm-started iterations: no cold start runs. The
-        estimate's covariance and residual give the information of the window it was fitted
-        on, which joins the next fits as a prior (:func:`seed_prior`) standing for the part of
-        that window the new samples have not replaced yet: ``min(window, samples)`` samples
-        at first, fewer as the window fills, none once it is full. So the estimate continues
-        smoothly, with the uncertainty it had, while the window refills. Output-error
-        refinement (``refine``) resumes once the seed has left the window.
-
-        The state is ``converged`` when the estimate was settled (converged, or frozen for
-        lack of excitation) and its relative standard deviation is within
-        ``converged_std``; otherwise ``converging``. The confidence follows from it as
-        usual. Raises :class:`GenBacklashError` (the identifier unchanged) when the estimate
-        cannot seed it: another structure, another branch sense than the one given, no
-        valid model, or no finite covariance and residual.
-
-        Parameters
-        ----------
-        estimate : Estimate
-            The saved estimate; its ``samples`` (when > 0) tell how full its window was.
-
-        Returns
-        -------
-        Estimate
-            The new current estimate: the saved parameters and covariance. The sample
-            count goes on from the estimate's ``samples``.
-
-        Examples
-        --------
-        >>> from genbacklash_core import Structure, paper_example
-        >>> truth = paper_example(1).model
-        >>> saved = Estimate(Structure(3), truth.parameters(), np.eye(8) * 1e-6, 0.02, 0.6,
-        ...                  "converged", 0.9, 5000)
-        >>> ident = WindowedIdentifier(degree=3)
-        >>> est = ident.seed(saved)
-        >>> est.state.value, est.model == truth, ident.from_seed
-        ('converged', True, True)
-        >>> data = paper_example(1).generate(seed=1, n_samples=600)
-        >>> after = ident.update_many(data.u, data.y)
-        >>> after.state.value, bool(np.max(np.abs(after.parameters - truth.parameters())) < 0.02)
-        ('converged', True)
-        """
-        prior = self._restart_from(estimate)
+    def _continue_from(self, prior: SeedPrior, estimate: Estimate) -> None:
+        """Continue from a seed (:meth:`seed`): its parameters as the current estimate and
+        the start of the next warm-started iterations (no cold start runs), its information
+        a prior standing for ``min(window, samples)`` samples of the window at first, fewer
+        as the window fills, none once it is full. Output-error refinement (``refine``)
+        resumes once the seed has left the window."""
         s = self.settings
         self._seed = prior
         self._seed_samples = min(s.window, estimate.samples) if estimate.samples else s.window
@@ -226,7 +186,6 @@ class WindowedIdentifier(OnlineIdentifier[WindowedSettings]):
         self._fit_progress = self._seed_progress = self._feed.progress
         self._next_fit = self._feed.progress + self.min_samples
         self._rebuild()
-        return self.estimate
 
     @property
     def from_seed(self) -> bool:
