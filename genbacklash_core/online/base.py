@@ -42,7 +42,7 @@ from genbacklash_core.structure import Structure
 from .advice import AdviceCache
 from .inputs import InputLimits, accept_sample, checked_series
 from .seed import SeedPrior, seed_prior
-from .tracking import DeadZoneDrift
+from .status import IdentifierStatus
 
 __all__ = ["OnlineIdentifier"]
 
@@ -71,13 +71,8 @@ class OnlineIdentifier(ABC, Generic[_S]):
     _CHECK_FOLLOWS: ClassVar[bool] = False  # update() rejects a `follows` that is not a bool
 
     settings: _S
-    _structure: Structure
-    _sign_now: bool  # the branch sense is known (given, or detected by a fit)
-    _samples: int
-    _excitation: float
-    _reason: str
+    _status: IdentifierStatus  # what the estimate is published from, shared with the parts
     _advice: AdviceCache  # the warming-up reason's excitation advice
-    _drift: DeadZoneDrift | None  # the tracking term of the bands
     _break_next: bool  # a dropped sample ended the previous call
     _estimate: Estimate | None  # None: published again when asked for
 
@@ -96,12 +91,7 @@ class OnlineIdentifier(ABC, Generic[_S]):
     def _forget(self) -> None:
         """What :meth:`reset` forgets in both: the samples, the structure detected, the
         estimate and what it was published with."""
-        self._structure = self._template
-        self._sign_now = self._sign_known
-        self._samples = 0
-        self._excitation = 0.0
-        self._reason = "warming up"
-        self._drift = None
+        self._status = IdentifierStatus(self._template, self._sign_known)
         self._break_next = False
         self._advice = AdviceCache()
         self._estimate = None
@@ -117,7 +107,7 @@ class OnlineIdentifier(ABC, Generic[_S]):
     @property
     def structure(self) -> Structure:
         """The model structure (with the detected sense once known)."""
-        return self._structure
+        return self._status.structure
 
     @property
     def estimate(self) -> Estimate:
@@ -135,7 +125,8 @@ class OnlineIdentifier(ABC, Generic[_S]):
         uf, yf = as_sample(u, y)
         if self._CHECK_FOLLOWS and not isinstance(follows, (bool, np.bool_)):
             raise GenBacklashError(f"follows must be True or False, got {follows!r}")
-        if not accept_sample(uf, yf, self._limits, self.settings.nonfinite, self._samples):
+        samples = self._status.samples
+        if not accept_sample(uf, yf, self._limits, self.settings.nonfinite, samples):
             self._break_next = True  # dropped: the next sample does not follow the last
             return self.estimate
         self._take_one(uf, yf, follows)
@@ -239,11 +230,11 @@ class OnlineIdentifier(ABC, Generic[_S]):
         self._check_seed(prior)
         self.reset()
         saved = estimate.structure
-        self._structure = Structure(saved.degree, saved.na, saved.nb, saved.sign)
-        self._sign_now = True
-        self._samples = estimate.samples
-        self._excitation = estimate.excitation
-        self._drift = None  # the saved covariance carries the saved bands
+        self._status.structure = Structure(saved.degree, saved.na, saved.nb, saved.sign)
+        self._status.sign_now = True
+        self._status.samples = estimate.samples
+        self._status.excitation = estimate.excitation
+        self._status.drift = None  # the saved covariance carries the saved bands
         return prior
 
     def _check_seed(self, prior: SeedPrior) -> None:

@@ -189,7 +189,7 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         >>> ident.excitation_advice()
         'the left branch is not covered yet: move the joint down'
         """
-        if self._structure.cascade:
+        if self._status.structure.cascade:
             return ""
         need = 0 if self._ever_started else max(self._min_rows() - len(self._memory), 0)
         cover = self.coverage
@@ -204,7 +204,7 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         """True while the estimate still leans on a seed (:meth:`seed`): the memory has not
         refilled a branch since (and no re-initialisation replaced the seed)."""
         return self._current.prior is not None and bool(
-            np.any(prior_weights(self._structure, self._memory) > 0.0)
+            np.any(prior_weights(self._status.structure, self._memory) > 0.0)
         )
 
     def reset(self) -> None:
@@ -254,13 +254,13 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         s = self.settings
         self._current.seed(prior, cov, s.covariance_bound)
         self._errors.restart(prior.sigma2)
-        self._last_row = [self._samples] * len(self._last_row)
-        if self._structure.cascade:
-            self._settling = settling_samples(self._structure, prior.p)
+        self._last_row = [self._status.samples] * len(self._last_row)
+        if self._status.structure.cascade:
+            self._settling = settling_samples(self._status.structure, prior.p)
         self._mode = _RUNNING
         self._ever_started = True
-        self._next_solve = self._samples + s.block
-        self._reason = f"seeded from a saved estimate ({estimate.state.value})"
+        self._next_solve = self._status.samples + s.block
+        self._status.reason = f"seeded from a saved estimate ({estimate.state.value})"
 
     def _check_seed(self, prior: SeedPrior) -> None:
         if scaled_inverse(prior.information) is None:  # seed_prior checked that it is
@@ -277,7 +277,7 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
             self._next_solve = due
         elif self._mode in (_WARMING, _STOPPED):
             self._file(self._memory, *self._pending_rows())
-            if len(self._memory) >= self._min_rows() and not self._structure.cascade:
+            if len(self._memory) >= self._min_rows() and not self._status.structure.cascade:
                 self._initialise()
         self._estimate = None
         return self.estimate
@@ -299,19 +299,19 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         if u.size == 0:
             return
         if self._mode in (_RUNNING, _HELD):
-            why = theta_problem(self._structure, self._current.theta)
+            why = theta_problem(self._status.structure, self._current.theta)
             if why is not None:  # e.g. a corrupted state: never iterate from it
                 self._stop(why)
         start = 0
         while start < u.size:
             due = self._next_solve if self._mode in (_RUNNING, _HELD) else self._next_attempt
-            take = min(u.size - start, max(due - self._samples, 1))
+            take = min(u.size - start, max(due - self._status.samples, 1))
             part = slice(start, start + take)
             self._queue.append((u[part], y[part], b[part]))
             self._queued += take
-            self._samples += take
+            self._status.samples += take
             start += take
-            if self._samples >= due:
+            if self._status.samples >= due:
                 self._flush()
                 self._event()
 
@@ -325,7 +325,7 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
             u = np.concatenate([q[0] for q in self._queue])
             y = np.concatenate([q[1] for q in self._queue])
             b = np.concatenate([q[2] for q in self._queue])
-        first = self._samples - self._queued
+        first = self._status.samples - self._queued
         self._queue = []
         self._queued = 0
         self._events += 1
@@ -336,7 +336,7 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         s = self.settings
         running = self._mode in (_RUNNING, _HELD)  # else: warming up or stopped
         rows, at = self._stream.take(
-            self._structure,
+            self._status.structure,
             self._current.theta if running else None,
             u,
             y,
@@ -352,12 +352,14 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
             else:  # filed at the next batch-fit attempt
                 self._pending.append((rows, stamps))
                 informative[at] = 1.0
-        self._excitation = ewma(informative, 1.0 / s.excitation_memory, self._excitation)
+        self._status.excitation = ewma(
+            informative, 1.0 / s.excitation_memory, self._status.excitation
+        )
 
     def _judge(self, rows: FloatArray, stamps: IntArray, at: IntArray, n: int) -> FloatArray:
         """A priori one-step errors of new rows at the current estimate (eqs. 24/35), kept
         for the block's end; which samples informed which block."""
-        structure = self._structure
+        structure = self._status.structure
         used, left, right = self._errors.judge(
             structure,
             self._current.theta,
@@ -412,14 +414,14 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
     def _end_block(self) -> None:
         """File the block's rows and iterate over the memory (when it got new rows)."""
         s = self.settings
-        self._next_solve = self._samples + s.block
+        self._next_solve = self._status.samples + s.block
         rows, stamps = self._pending_rows()
         if self._blown():
             self._mode = _HELD
             self._scale_before = self._errors.long
             self._attempts = 0
-            self._next_attempt = self._samples + self._attempt_interval()
-            if not self._structure.cascade:
+            self._next_attempt = self._status.samples + self._attempt_interval()
+            if not self._status.structure.cascade:
                 self._held_back = self._new_memory(self._memory.width)
             self._fresh = 0
             self._need = self._min_rows()
@@ -430,26 +432,29 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
                 f"a running {math.sqrt(self._errors.long):.3g}); the estimate is held and new "
                 "rows are kept out of the memory"
             )
-            self._reason = ""
+            self._status.reason = ""
             return
         self._file(self._memory, rows, stamps)
         if rows.shape[0]:
             self._iterate()
-        if self._structure.cascade and self._samples - self._settled_at >= s.check_every:
-            self._settled_at = self._samples
+        if (
+            self._status.structure.cascade
+            and self._status.samples - self._settled_at >= s.check_every
+        ):
+            self._settled_at = self._status.samples
             self._settling = settling_samples(
-                self._structure, self._structure.from_theta(self._current.theta)
+                self._status.structure, self._status.structure.from_theta(self._current.theta)
             )
 
     def _end_held_block(self) -> None:
         """Resume when the errors are normal again; else hold the rows back and try a batch
         fit on them (backlash) or on the recent samples (cascade) when due."""
-        self._next_solve = self._samples + self.settings.block
+        self._next_solve = self._status.samples + self.settings.block
         rows, stamps = self._pending_rows()
         if not self._blown():
             self._mode = _RUNNING
             self._held_back = None
-            self._reason = ""
+            self._status.reason = ""
             self._file(self._memory, rows, stamps)
             if rows.shape[0]:
                 self._iterate()
@@ -464,14 +469,14 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         self._file(self._memory, *self._pending_rows())
         if self._attempt_due():
             self._initialise()
-        elif not self._structure.cascade:
-            self._next_attempt = self._samples + self.settings.block
+        elif not self._status.structure.cascade:
+            self._next_attempt = self._status.samples + self.settings.block
 
     def _attempt_due(self) -> bool:
         """A backlash fits its rows once they grew by a quarter since the last attempt; the
         cascade fits its recent samples at growing intervals."""
-        if self._structure.cascade:
-            return self._samples >= self._next_attempt
+        if self._status.structure.cascade:
+            return self._status.samples >= self._next_attempt
         source = self._held_back if self._mode == _HELD else self._memory
         if source is None:
             return False
@@ -491,10 +496,10 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         held back since); the cascade on its recent samples: the whole buffer at first, the
         latest ``initial_samples`` on retried restarts. Returns whether it started."""
         s = self.settings
-        structure = self._structure
+        structure = self._status.structure
         attempt = self._attempts
         self._attempts += 1
-        self._next_attempt = self._samples + (
+        self._next_attempt = self._status.samples + (
             self._attempt_interval() if structure.cascade else s.block
         )
         span = (self._stream.low, self._stream.high)
@@ -503,28 +508,31 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
             last = s.initial_samples if latest else s.buffer
             u, y = (a.copy() for a in self._stream.recent.window(last))
             window = (u, y, self._stream.recent.breaks(last))
-            first = self._samples - self._queued - u.size  # the window ends at the last seen
+            first = self._status.samples - self._queued - u.size  # the window ends at the last seen
             memory = self._new_memory(self._memory.width)
-            start = cascade_start(structure, self._sign_now, window, first, memory, s, span)
+            start = cascade_start(structure, self._status.sign_now, window, first, memory, s, span)
         else:
             source = self._held_back if self._mode == _HELD else self._memory
             assert source is not None  # (_attempt_due checked it)
             self._fresh = 0
             self._need = max(len(source) // 4, 1)
-            start = backlash_start(structure, self._sign_now, source, s, span)
+            start = backlash_start(structure, self._status.sign_now, source, s, span)
         if isinstance(start, str):
-            self._reason = f"batch fit failed: {start}"
+            self._status.reason = f"batch fit failed: {start}"
             return False
         sigma2 = start.solution.sigma2
         why = rejected(sigma2, self._scale_before, s.divergence_ratio, attempt)
         if why is not None:
-            self._reason = why
+            self._status.reason = why
             return False
         if self._ever_started:
             self._restarts += 1
-        self._drift, self._next_drift = None, 0  # a new memory: refit the bands' term at once
-        self._structure = structure = start.structure
-        self._sign_now = True
+        self._status.drift, self._next_drift = (
+            None,
+            0,
+        )  # a new memory: refit the bands' term at once
+        self._status.structure = structure = start.structure
+        self._status.sign_now = True
         self._memory = start.memory
         self._held_back = None
         if start.lags is not None:
@@ -536,14 +544,14 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         self._attempts = 0
         self._mode = _RUNNING
         self._ever_started = True
-        self._next_solve = self._samples + s.block
-        self._last_row = [self._samples] * len(self._last_row)
+        self._next_solve = self._status.samples + s.block
+        self._last_row = [self._status.samples] * len(self._last_row)
         if structure.cascade:
             theta = start.solution.theta
             self._settling = settling_samples(structure, structure.from_theta(theta))
-            self._settled_at = self._samples
+            self._settled_at = self._status.samples
         self._pending = []
-        self._reason = ""
+        self._status.reason = ""
         return True
 
     # ------------------------------------------------------------------ the iteration
@@ -552,7 +560,7 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         """One iteration over the memory; an invalid iterate is not taken (the estimate
         holds), and ``_MAX_INVALID`` of them in a row re-initialise from the memory."""
         span = (self._stream.low, self._stream.high)
-        why = self._current.step(self._structure, self._memory, span)
+        why = self._current.step(self._status.structure, self._memory, span)
         if why is None:
             self._committed()
         elif self._current.invalid >= _MAX_INVALID:
@@ -560,7 +568,7 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
 
     def _committed(self) -> None:
         """An iterate was taken: its sample, and the bands' tracking term when due."""
-        self._committed_at = self._samples
+        self._committed_at = self._status.samples
         self._track_drift()
 
     # ------------------------------------------------------------------ divergence
@@ -574,7 +582,7 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         self._scale_before = self._errors.long
         self._attempts = 0
         self._fresh = self._need = len(self._memory)  # (the memory is due now)
-        self._current.restore(self._structure)
+        self._current.restore(self._status.structure)
         self._why = why
         self._initialise()
 
@@ -583,18 +591,20 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         rows, aged from this iterate's sample, fitted with dead zones that drift. Once per
         :data:`_DRIFT_EVERY` samples at most (a fit over the memory costs ~1-2 ms), at the
         iterates' own samples, so chunking does not matter. Nothing for the cascade."""
-        structure = self._structure
-        if structure.cascade or self._samples < self._next_drift:
+        structure = self._status.structure
+        if structure.cascade or self._status.samples < self._next_drift:
             return
-        self._next_drift = self._samples + _DRIFT_EVERY
-        self._drift_at = self._samples
+        self._next_drift = self._status.samples + _DRIFT_EVERY
+        self._drift_at = self._status.samples
         rows, stamps = self._memory.rows()
         p = np.array(natural_from_theta(structure, self._current.theta.tolist()))
         cols = (rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3])
         ring = self._stream.recent  # the latest readings, for the model term's free run
         u, y = ring.window(BAND_SAMPLES)
         recent = (u, y, ring.breaks(BAND_SAMPLES))
-        self._drift = dead_zone_drift(structure, p, cols, float(self._samples) - stamps, recent)
+        self._status.drift = dead_zone_drift(
+            structure, p, cols, float(self._status.samples) - stamps, recent
+        )
 
     # ------------------------------------------------------------------ the estimate
 
@@ -604,23 +614,23 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         Between the schedule's events only the sample count and, slowly, the aged
         confidence change: the last estimate is then reused with the new count.
         """
-        structure = self._structure
+        structure = self._status.structure
         s = self.settings
-        excitation = min(max(self._excitation, 0.0), 1.0)
+        excitation = min(max(self._status.excitation, 0.0), 1.0)
         if not self._ever_started:
-            reason = self._reason
+            reason = self._status.reason
             if not structure.cascade:
                 rows = sum(r.shape[0] for r, _ in self._pending)
                 advice_key = (self._events, len(self._memory), rows)  # rows come at events
                 reason = self._advice.reason(reason, advice_key, self.excitation_advice)
             return Estimate.empty(
-                structure, self._samples, excitation, EstimatorState.WARMING_UP, reason
+                structure, self._status.samples, excitation, EstimatorState.WARMING_UP, reason
             )
         current = self._current
         sigma2 = current.sigma2 if math.isfinite(current.sigma2) else self._errors.long
         p_list, rel = current.summary(structure, sigma2)
-        idle = self._samples - max(self._last_row)  # since the newest informative row
-        age = self._samples - min(self._last_row)  # of the branch whose newest row is oldest
+        idle = self._status.samples - max(self._last_row)  # since the newest informative row
+        age = self._status.samples - min(self._last_row)  # of the branch whose newest row is oldest
         if self._mode in (_HELD, _STOPPED):
             state = EstimatorState.DIVERGED
         elif held(idle, s.idle_samples):
@@ -630,15 +640,22 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         confidence = aged_confidence(
             confidence_of(state, rel, s.converged_std), float(age), s.confidence_half_life
         )
-        key = (current.version, self._events, state, self._reason, current.note, self._restarts)
+        key = (
+            current.version,
+            self._events,
+            state,
+            self._status.reason,
+            current.note,
+            self._restarts,
+        )
         if self._published is not None and self._published[0] == key:
             last = self._published[1]
             if not confidence_moved(confidence, last.confidence, floor=0.0):
-                return last.with_samples(self._samples)
+                return last.with_samples(self._status.samples)
         if state is EstimatorState.DIVERGED:
             reason = f"diverged: {self._why}"
-            if self._reason:
-                reason += f"; re-initialisation pending ({self._reason})"
+            if self._status.reason:
+                reason += f"; re-initialisation pending ({self._status.reason})"
         elif state is EstimatorState.NO_EXCITATION:
             reason = (
                 f"estimate held: no new information for {s.idle_samples} samples or more "
@@ -648,7 +665,7 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         else:
             reason = f"{len(self._memory)} rows remembered; relative std {rel:.3g}"
             if self.from_seed:
-                reason = f"{self._reason}; {reason}"
+                reason = f"{self._status.reason}; {reason}"
             if self._restarts:
                 reason += f"; re-initialised {self._restarts} time(s)"
         if current.note and state is not EstimatorState.DIVERGED:
@@ -657,7 +674,7 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         residual = recent if math.isfinite(recent) else sigma2
         theta_copy = current.theta.copy()
         cov_theta = sigma2 * current.unit_cov  # sigma^2 (Phi^T Phi + R_0 + prior)^-1
-        drift = self._drift
+        drift = self._status.drift
         p_now = np.array(p_list)
         # the drift goes on between its fits (one per _DRIFT_EVERY samples): counted to the
         # last iterate's sample, not the publishing moment (chunking must not matter)
@@ -672,7 +689,7 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
             excitation,
             state,
             confidence,
-            self._samples,
+            self._status.samples,
             reason,
         )
         self._published = (key, est)

@@ -148,7 +148,7 @@ class WindowedIdentifier(OnlineIdentifier[WindowedSettings]):
         self._seed: SeedPrior | None = None  # a saved estimate the window still leans on
         self._seed_samples = 0  # samples of the window the seed stands for
         self._seed_progress = 0  # the feed's progress when the seed was planted
-        self._estimate = Estimate.empty(self._structure)
+        self._estimate = Estimate.empty(self._status.structure)
 
     @property
     def coverage(self) -> BranchCoverage | None:
@@ -159,7 +159,7 @@ class WindowedIdentifier(OnlineIdentifier[WindowedSettings]):
     def _set_p(self, p: FloatArray) -> None:
         """Take ``p`` as the equation-error estimate (and the cascade's settling horizon)."""
         self._p = p
-        self._feed.settle(self._structure, p)
+        self._feed.settle(self._status.structure, p)
 
     def _continue_from(self, prior: SeedPrior, estimate: Estimate) -> None:
         """Continue from a seed (:meth:`seed`): its parameters as the current estimate and
@@ -177,12 +177,12 @@ class WindowedIdentifier(OnlineIdentifier[WindowedSettings]):
         rel = relative_std(prior.p, self._covariance)
         settled = estimate.state in (EstimatorState.CONVERGED, EstimatorState.NO_EXCITATION)
         self._state = settled_state(settled, rel, s.converged_std)
-        self._reason = (
+        self._status.reason = (
             f"seeded from a saved estimate ({estimate.state.value}); relative std {rel:.3g}"
         )
         self._needs_cold = False
         self._restarted = False  # the next fit continues from the seed (steadiness test)
-        self._fit_samples = self._samples
+        self._fit_samples = self._status.samples
         self._fit_progress = self._seed_progress = self._feed.progress
         self._next_fit = self._feed.progress + self.min_samples
         self._rebuild()
@@ -208,7 +208,7 @@ class WindowedIdentifier(OnlineIdentifier[WindowedSettings]):
         # one sample, without arrays (the per-sample path of a hand-written loop)
         feed.push(u, y, follows and not self._break_next)
         self._break_next = False
-        self._samples += 1
+        self._status.samples += 1
         if feed.rows >= self._next_fit:
             self._fit()
         self._publish()
@@ -217,7 +217,7 @@ class WindowedIdentifier(OnlineIdentifier[WindowedSettings]):
         """Feed validated samples, fitting whenever the schedule says (see update_many)."""
         if uu.size:
             for count in self._feed.take(uu, yy, bb, lambda: self._next_fit):
-                self._samples += count
+                self._status.samples += count
                 if self._feed.progress >= self._next_fit:
                     self._fit()
         self._publish()
@@ -239,7 +239,7 @@ class WindowedIdentifier(OnlineIdentifier[WindowedSettings]):
         """State, reason and confidence as published: a fitted estimate that no new
         information has confirmed for ``idle_samples`` is held (``no_excitation``), its
         confidence fading with the age of its information."""
-        state, reason = self._state, self._reason
+        state, reason = self._state, self._status.reason
         if self._reported is None or self._covariance is None:
             return state, reason, 0.0
         s = self.settings
@@ -250,7 +250,7 @@ class WindowedIdentifier(OnlineIdentifier[WindowedSettings]):
             state = EstimatorState.NO_EXCITATION
             reason = (
                 f"estimate held: no information for {self._feed.idle} samples (the input rests "
-                f"or repeats); {self._reason}"
+                f"or repeats); {self._status.reason}"
             )
         return (
             state,
@@ -262,7 +262,7 @@ class WindowedIdentifier(OnlineIdentifier[WindowedSettings]):
         """What the data have not shown yet, and what motion would show it ("" when the
         memory covers both branches over the input range seen). A backlash alone only."""
         need = self.min_samples - len(self._feed) if self._p is None else 0
-        return self._feed.advice(self._samples, need)
+        return self._feed.advice(self._status.samples, need)
 
     def _quick_confidence(self) -> float:
         """The published confidence from the cached one of the last fit (cheap)."""
@@ -276,11 +276,19 @@ class WindowedIdentifier(OnlineIdentifier[WindowedSettings]):
         assert est is not None  # (reset made one)
         feed = self._feed
         if isinstance(feed, RowFeed) and self._reported is None:
-            key = (feed.rows, self._samples > 1, self._reason)  # the memory changes with rows
-            reason = self._advice.reason(self._reason, key, self.excitation_advice)
+            key = (
+                feed.rows,
+                self._status.samples > 1,
+                self._status.reason,
+            )  # the memory changes with rows
+            reason = self._advice.reason(self._status.reason, key, self.excitation_advice)
             if reason != est.reason:
                 self._estimate = est = Estimate.empty(
-                    self._structure, self._samples, self._excitation, self._state, reason
+                    self._status.structure,
+                    self._status.samples,
+                    self._status.excitation,
+                    self._state,
+                    reason,
                 )
         if self._reported is not None:  # held and aged by the samples without information
             is_held = held(self._feed.idle, self.settings.idle_samples)
@@ -292,8 +300,8 @@ class WindowedIdentifier(OnlineIdentifier[WindowedSettings]):
             if is_held != was_held or confidence_moved(confidence, est.confidence, floor=1e-12):
                 self._rebuild()
                 est = self.estimate
-        if est.samples != self._samples:
-            self._estimate = est = est.with_samples(self._samples)
+        if est.samples != self._status.samples:
+            self._estimate = est = est.with_samples(self._status.samples)
         return est
 
     def _schedule(self) -> None:
@@ -302,7 +310,7 @@ class WindowedIdentifier(OnlineIdentifier[WindowedSettings]):
         if self._needs_cold and self._cold_failures:  # back off while cold starts fail,
             # but retry at least every W/8 samples: slow references excite the system slowly
             k = min(s.refit_every * 2 ** min(self._cold_failures, 10), max(s.window // 8, 1))
-        self._fit_samples = self._samples
+        self._fit_samples = self._status.samples
         self._fit_progress = self._feed.progress
         self._next_fit = self._feed.progress + k
 
@@ -333,7 +341,7 @@ class WindowedIdentifier(OnlineIdentifier[WindowedSettings]):
     ) -> tuple[Structure, WindowFit] | str:
         """The batch iteration from the paper's start, then the warm iterations from its
         result: the structure and the fit, or why it failed."""
-        found = cold_fit(self._structure, self._sign_now, u, y, b)
+        found = cold_fit(self._status.structure, self._status.sign_now, u, y, b)
         if isinstance(found, str):
             return found
         structure, p = found
@@ -356,14 +364,14 @@ class WindowedIdentifier(OnlineIdentifier[WindowedSettings]):
         if isinstance(started, str):
             self._cold_failed(started)
             return
-        self._structure, outcome = started
-        self._sign_now = True
+        self._status.structure, outcome = started
+        self._status.sign_now = True
         self._restarted = True
         self._needs_cold = False
         self._cold_failures = 0
         self._failures = 0
         self._accept(outcome, u, y, b)
-        self._reason = "cold start: " + self._reason
+        self._status.reason = "cold start: " + self._status.reason
 
     def _retry_cold(self, u: FloatArray, y: FloatArray, b: BoolArray) -> bool:
         """A fresh batch start over the whole memory; True when it gave an estimate (the
@@ -371,19 +379,19 @@ class WindowedIdentifier(OnlineIdentifier[WindowedSettings]):
         started = self._start_fit(u, y, b)
         if isinstance(started, str):
             return False
-        self._structure, outcome = started
+        self._status.structure, outcome = started
         self._restarted = True
         self._failures = 0
         self._accept(outcome, u, y, b)
-        self._reason = "restarted from the memory: " + self._reason
+        self._status.reason = "restarted from the memory: " + self._status.reason
         return True
 
     def _cold_failed(self, why: str) -> None:
         self._cold_failures += 1
-        self._reason = f"cold start failed: {why}"
+        self._status.reason = f"cold start failed: {why}"
         if self._p is not None:  # a restart after divergence: keep the last valid estimate
             self._state = EstimatorState.DIVERGED
-            self._reason = f"diverged; {self._reason}"
+            self._status.reason = f"diverged; {self._status.reason}"
 
     def _warm_fit(self, u: FloatArray, y: FloatArray, b: BoolArray, recent: int) -> None:
         assert self._p is not None
@@ -396,7 +404,7 @@ class WindowedIdentifier(OnlineIdentifier[WindowedSettings]):
         if memory and recent <= 0:  # nothing new since the last fit: the estimate holds
             return
         outcome = fit_window(
-            self._structure,
+            self._status.structure,
             u,
             y,
             self._p,
@@ -410,24 +418,29 @@ class WindowedIdentifier(OnlineIdentifier[WindowedSettings]):
             breaks=b,
         )
         if memory:  # the share of the samples since the last fit that added a row
-            share = recent / max(self._samples - self._fit_samples, 1)
+            share = recent / max(self._status.samples - self._fit_samples, 1)
             outcome.excitation = min(share, 1.0)
         floor = conditioning_floor(
-            self._structure, self._conditioning_ref, s.min_conditioning, s.min_linear_conditioning
+            self._status.structure,
+            self._conditioning_ref,
+            s.min_conditioning,
+            s.min_linear_conditioning,
         )
         rows = outcome.rows
         conditioning = None
         if rows is not None and (isinstance(outcome, WindowFit) or not outcome.no_information):
             # a fit (or an invalid one) on data that excite a block too little: no information
-            conditioning = self._feed.conditioning(self._structure, rows, s.excitation_window)
-            poor = poorly_excited(self._structure, conditioning, floor)
+            conditioning = self._feed.conditioning(
+                self._status.structure, rows, s.excitation_window
+            )
+            poor = poorly_excited(self._status.structure, conditioning, floor)
             if poor is not None:
                 outcome = FitFailure(poor, outcome.excitation, True)
         if isinstance(outcome, WindowFit):
             self._failures = 0
             self._accept(outcome, u, y, b, conditioning)
             return
-        self._excitation = outcome.excitation
+        self._status.excitation = outcome.excitation
         if outcome.no_information and memory and self._retry_cold(u, y, b):
             # memory mode: the memory holds every region it has seen, so a regression that
             # is singular (or a block that looks unexcited) at the current estimate says the
@@ -435,15 +448,15 @@ class WindowedIdentifier(OnlineIdentifier[WindowedSettings]):
             return
         if outcome.no_information:
             self._state = EstimatorState.NO_EXCITATION
-            self._reason = f"estimate frozen: {outcome.reason}"
+            self._status.reason = f"estimate frozen: {outcome.reason}"
             return
         self._failures += 1
-        self._reason = f"fit rejected ({self._failures} in a row): {outcome.reason}"
+        self._status.reason = f"fit rejected ({self._failures} in a row): {outcome.reason}"
         if self._failures >= s.max_failures:
             # the data stay (in memory mode: what the data taught, by region); a fresh start
             # from the paper's start over all of them
             self._state = EstimatorState.DIVERGED
-            self._reason = f"diverged: {outcome.reason}; restarting from the paper's start"
+            self._status.reason = f"diverged: {outcome.reason}; restarting from the paper's start"
             self._needs_cold = True
             self._cold_start(u, y, b)
 
@@ -457,7 +470,9 @@ class WindowedIdentifier(OnlineIdentifier[WindowedSettings]):
     ) -> None:
         s = self.settings
         if conditioning is None:
-            conditioning = self._feed.conditioning(self._structure, fit.rows, s.excitation_window)
+            conditioning = self._feed.conditioning(
+                self._status.structure, fit.rows, s.excitation_window
+            )
         self._conditioning_ref = np.maximum(self._conditioning_ref, conditioning)
         self._span_ref = max(self._span_ref, float(np.ptp(u)))
         self._set_p(fit.p)
@@ -465,20 +480,22 @@ class WindowedIdentifier(OnlineIdentifier[WindowedSettings]):
         if s.refine and self._seed is None:
             previous = self._reported
             start = fit.p if self._restarted or previous is None else previous
-            if self._structure.problem(start, (float(u.min()), float(u.max()))) is not None:
+            if self._status.structure.problem(start, (float(u.min()), float(u.max()))) is not None:
                 start = fit.p
-            refined = self._feed.refine(self._structure, start, fit, s.refine_iterations)
+            refined = self._feed.refine(self._status.structure, start, fit, s.refine_iterations)
             if refined is not None:
                 reported = refined
-        if self._feed.purge(self._structure, fit.p, fit.residual):  # rows forgotten: refit soon
+        if self._feed.purge(
+            self._status.structure, fit.p, fit.residual
+        ):  # rows forgotten: refit soon
             self._next_fit = min(self._next_fit, self._feed.progress + s.refit_every)
         previous = None if self._restarted else self._reported
         self._restarted = False
         self._reported = reported
         self._covariance = fit.covariance
-        self._drift = self._feed.drift(self._structure, reported)
+        self._status.drift = self._feed.drift(self._status.structure, reported)
         self._residual = fit.residual
-        self._excitation = fit.excitation
+        self._status.excitation = fit.excitation
         rel = relative_std(reported, fit.covariance)
         # settled: the iteration settled on this window, or the published estimate moved by
         # less than one standard deviation since the last fit (new data move it by ~0.3-0.5);
@@ -488,12 +505,12 @@ class WindowedIdentifier(OnlineIdentifier[WindowedSettings]):
         steady = previous is not None and bool(np.all(np.abs(reported - previous) <= allowed * std))
         self._state = settled_state(fit.settled or steady, rel, s.converged_std)
         if self._state is EstimatorState.CONVERGED:
-            self._reason = f"settled; relative std {rel:.3g}"
+            self._status.reason = f"settled; relative std {rel:.3g}"
         else:
             why = "settled" if fit.settled or steady else "still moving"
-            self._reason = f"{why}; relative std {rel:.3g}"
+            self._status.reason = f"{why}; relative std {rel:.3g}"
             if fit.reason:
-                self._reason += f"; stopped early: {fit.reason}"
+                self._status.reason += f"; stopped early: {fit.reason}"
 
     def _rebuild(self) -> None:
         if self._reported is not None and self._covariance is not None:
@@ -501,7 +518,11 @@ class WindowedIdentifier(OnlineIdentifier[WindowedSettings]):
             self._base_confidence = confidence_of(self._state, rel, self.settings.converged_std)
         if self._reported is None or self._covariance is None:
             self._estimate = Estimate.empty(
-                self._structure, self._samples, self._excitation, self._state, self._reason
+                self._status.structure,
+                self._status.samples,
+                self._status.excitation,
+                self._state,
+                self._status.reason,
             )
             return
         state, reason, confidence = self._published_state()
@@ -510,16 +531,16 @@ class WindowedIdentifier(OnlineIdentifier[WindowedSettings]):
         # the bands: the fit's covariance plus how far a drifting drivetrain has moved past
         # the rows the fit remembers (genbacklash_core.online.tracking)
         # (the drift was fitted around this very estimate: its own correction is the distance)
-        cov = with_tracking(self._covariance, self._drift)
+        cov = with_tracking(self._covariance, self._status.drift)
         cov.flags.writeable = False
         self._estimate = Estimate(
-            self._structure,
+            self._status.structure,
             p,
             cov,
             self._residual,
-            min(max(self._excitation, 0.0), 1.0),
+            min(max(self._status.excitation, 0.0), 1.0),
             state,
             confidence,
-            self._samples,
+            self._status.samples,
             reason,
         )
