@@ -16,6 +16,12 @@ latest informative one; a fitted estimate that no new information confirmed for
 a drifting drivetrain has moved past the rows the fit remembers
 (:func:`~genbacklash_core.online.tracking.with_tracking`).
 
+:class:`MemoryPublication` publishes the recursive identifier's iterates: its state follows
+its mode (``diverged`` while held or stopped), the confidence is computed from the published
+state at each event and aged by the age of the branch whose newest row is oldest; the
+covariance, carried from the separated vector by the delta method of eq. (34), is only
+computed when read (:meth:`~genbacklash_core.estimate.Estimate.trusted`).
+
 Examples
 --------
 >>> from genbacklash_core.online.feeds import RowFeed
@@ -34,7 +40,10 @@ Examples
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
+
+import numpy as np
 
 from genbacklash_core.estimate import (
     Estimate,
@@ -45,14 +54,17 @@ from genbacklash_core.estimate import (
 )
 
 from .advice import AdviceCache
+from .blocks import HELD, STOPPED, BlockMachine
+from .covariance import natural_covariance
 from .feeds import Feed, RowFeed
 from .fitter import WindowFitter
-from .settings import WindowedSettings
-from .state import FITTED_STATES, confidence_moved, held
+from .queue import SampleQueue
+from .settings import RecursiveSettings, WindowedSettings
+from .state import FITTED_STATES, confidence_moved, held, settled_state
 from .status import IdentifierStatus
 from .tracking import with_tracking
 
-__all__ = ["WindowPublication"]
+__all__ = ["MemoryPublication", "WindowPublication"]
 
 
 class WindowPublication:
@@ -168,3 +180,139 @@ class WindowPublication:
                 f"or repeats); {self._status.reason}"
             )
         return state, reason, aged_confidence(confidence, float(idle), s.confidence_half_life)
+
+
+class MemoryPublication:
+    """The recursive identifier's estimate as published (see the module notes).
+
+    Parameters
+    ----------
+    status : IdentifierStatus
+    settings : RecursiveSettings
+    machine : BlockMachine
+        The blocks whose estimate is published.
+    queue : SampleQueue
+        Its events: the estimate's excitation and ages change there only.
+    """
+
+    def __init__(
+        self,
+        status: IdentifierStatus,
+        settings: RecursiveSettings,
+        machine: BlockMachine,
+        queue: SampleQueue,
+    ) -> None:
+        self._status = status
+        self._settings = settings
+        self._machine = machine
+        self._queue = queue
+        self._published: tuple[tuple[object, ...], Estimate] | None = None
+
+    def current(self, advice: AdviceCache, advise: Callable[[], str]) -> Estimate:
+        """The estimate, its state and confidence, from the current internals; before the
+        first estimate, the warming-up reason with the excitation advice (``advise``, cached
+        by ``advice``) of a backlash.
+
+        Between the schedule's events only the sample count and, slowly, the aged
+        confidence change: the last estimate is then reused with the new count.
+        """
+        status = self._status
+        machine = self._machine
+        structure = status.structure
+        s = self._settings
+        excitation = min(max(status.excitation, 0.0), 1.0)
+        if not machine.ever_started:
+            reason = status.reason
+            if not structure.cascade:
+                rows = sum(r.shape[0] for r, _ in machine.pending)
+                advice_key = (self._queue.events, len(machine.memory), rows)  # rows at events
+                reason = advice.reason(reason, advice_key, advise)
+            return Estimate.empty(
+                structure, status.samples, excitation, EstimatorState.WARMING_UP, reason
+            )
+        current = machine.current
+        sigma2 = current.sigma2 if math.isfinite(current.sigma2) else machine.errors.long
+        p_list, rel = current.summary(structure, sigma2)
+        idle = machine.ages.idle(status.samples)  # since the newest informative row
+        age = machine.ages.age(status.samples)  # of the branch whose newest row is oldest
+        if machine.mode in (HELD, STOPPED):
+            state = EstimatorState.DIVERGED
+        elif held(idle, s.idle_samples):
+            state = EstimatorState.NO_EXCITATION
+        else:  # one iteration per block: the estimate is as settled as its memory
+            state = settled_state(True, rel, s.converged_std)
+        confidence = aged_confidence(
+            confidence_of(state, rel, s.converged_std), float(age), s.confidence_half_life
+        )
+        key = (
+            current.version,
+            self._queue.events,
+            state,
+            status.reason,
+            current.note,
+            machine.restarts,
+        )
+        if self._published is not None and self._published[0] == key:
+            last = self._published[1]
+            if not confidence_moved(confidence, last.confidence, floor=0.0):
+                return last.with_samples(status.samples)
+        est = self._estimate(state, confidence, excitation, p_list, rel, sigma2)
+        self._published = (key, est)
+        return est
+
+    def _estimate(
+        self,
+        state: EstimatorState,
+        confidence: float,
+        excitation: float,
+        p_list: list[float],
+        rel: float,
+        sigma2: float,
+    ) -> Estimate:
+        """A new estimate: the current iterate in the natural parameters (eq. 34), its
+        reason, and its covariance (computed when read)."""
+        status = self._status
+        machine = self._machine
+        structure = status.structure
+        current = machine.current
+        remembered = len(machine.memory)
+        if state is EstimatorState.DIVERGED:
+            reason = f"diverged: {machine.why}"
+            if status.reason:
+                reason += f"; re-initialisation pending ({status.reason})"
+        elif state is EstimatorState.NO_EXCITATION:
+            reason = (
+                f"estimate held: no new information for {self._settings.idle_samples} "
+                f"samples or more (the input rests, repeats or moves too little); {remembered} "
+                "rows remembered"
+            )
+        else:
+            reason = f"{remembered} rows remembered; relative std {rel:.3g}"
+            if machine.from_seed:
+                reason = f"{status.reason}; {reason}"
+            if machine.restarts:
+                reason += f"; re-initialised {machine.restarts} time(s)"
+        if current.note and state is not EstimatorState.DIVERGED:
+            reason += f"; {current.note}"
+        recent = machine.errors.recent
+        residual = recent if math.isfinite(recent) else sigma2
+        theta_copy = current.theta.copy()
+        cov_theta = sigma2 * current.unit_cov  # sigma^2 (Phi^T Phi + R_0 + prior)^-1
+        drift = status.drift
+        p_now = np.array(p_list)
+        # the drift goes on between its fits (one per DRIFT_EVERY samples): counted to the
+        # last iterate's sample, not the publishing moment (chunking must not matter)
+        ticks = machine.bands.ticks
+        return Estimate.trusted(
+            structure,
+            p_now,
+            lambda: with_tracking(
+                natural_covariance(structure, theta_copy, cov_theta), drift, p_now, ticks
+            ),
+            math.sqrt(residual),
+            excitation,
+            state,
+            confidence,
+            status.samples,
+            reason,
+        )
