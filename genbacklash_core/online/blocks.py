@@ -23,11 +23,7 @@ the bands' tracking term is refitted (:class:`~genbacklash_core.online.bands.Ban
 
 Examples
 --------
->>> from genbacklash_core import paper_example
->>> from genbacklash_core.online.queue import SampleQueue
->>> from genbacklash_core.online.settings import RecursiveSettings
->>> from genbacklash_core.online.status import IdentifierStatus
->>> from genbacklash_core.structure import Structure
+>>> from genbacklash_core import Structure, paper_example
 >>> data = paper_example(1).generate(seed=0, n_samples=600)
 >>> status = IdentifierStatus(Structure(3), sign_now=False)
 >>> machine = BlockMachine(status, RecursiveSettings(), SampleQueue())
@@ -87,9 +83,7 @@ class BlockMachine:
         self, status: IdentifierStatus, settings: RecursiveSettings, queue: SampleQueue
     ) -> None:
         structure = status.structure
-        self._status = status
-        self._settings = settings
-        self._queue = queue
+        self._status, self._settings, self._queue = status, settings, queue
         self.mode = WARMING
         self.ever_started = False
         self.restarts = 0
@@ -108,6 +102,11 @@ class BlockMachine:
         self._settling = 0
         self._settled_at = 0  # sample count of the last settling-horizon update
         self._next_solve = 0
+
+    @property
+    def events(self) -> int:
+        """The queue's events so far (the estimate's excitation and ages change there)."""
+        return self._queue.events
 
     @property
     def running(self) -> bool:

@@ -30,9 +30,6 @@ Examples
 --------
 >>> from genbacklash_core import paper_example
 >>> from genbacklash_core.online.feeds import RowFeed
->>> from genbacklash_core.online.settings import WindowedSettings
->>> from genbacklash_core.online.status import IdentifierStatus
->>> from genbacklash_core.structure import Structure
 >>> data = paper_example(1).generate(seed=0, n_samples=400)
 >>> feed = RowFeed(window=1500, bins=16)
 >>> for _ in feed.take(data.u, data.y, np.zeros(400, dtype=bool), lambda: 10**9):

@@ -58,7 +58,6 @@ from .blocks import HELD, STOPPED, BlockMachine
 from .covariance import natural_covariance
 from .feeds import Feed, RowFeed
 from .fitter import WindowFitter
-from .queue import SampleQueue
 from .settings import RecursiveSettings, WindowedSettings
 from .state import FITTED_STATES, confidence_moved, held, settled_state
 from .status import IdentifierStatus
@@ -191,21 +190,12 @@ class MemoryPublication:
     settings : RecursiveSettings
     machine : BlockMachine
         The blocks whose estimate is published.
-    queue : SampleQueue
-        Its events: the estimate's excitation and ages change there only.
     """
 
     def __init__(
-        self,
-        status: IdentifierStatus,
-        settings: RecursiveSettings,
-        machine: BlockMachine,
-        queue: SampleQueue,
+        self, status: IdentifierStatus, settings: RecursiveSettings, machine: BlockMachine
     ) -> None:
-        self._status = status
-        self._settings = settings
-        self._machine = machine
-        self._queue = queue
+        self._status, self._settings, self._machine = status, settings, machine
         self._published: tuple[tuple[object, ...], Estimate] | None = None
 
     def current(self, advice: AdviceCache, advise: Callable[[], str]) -> Estimate:
@@ -225,7 +215,7 @@ class MemoryPublication:
             reason = status.reason
             if not structure.cascade:
                 rows = sum(r.shape[0] for r, _ in machine.pending)
-                advice_key = (self._queue.events, len(machine.memory), rows)  # rows at events
+                advice_key = (machine.events, len(machine.memory), rows)  # rows at events
                 reason = advice.reason(reason, advice_key, advise)
             return Estimate.empty(
                 structure, status.samples, excitation, EstimatorState.WARMING_UP, reason
@@ -246,7 +236,7 @@ class MemoryPublication:
         )
         key = (
             current.version,
-            self._queue.events,
+            machine.events,
             state,
             status.reason,
             current.note,

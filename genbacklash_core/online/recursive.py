@@ -195,9 +195,7 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         self._queue = SampleQueue()  # samples not seen yet
         self._machine = BlockMachine(self._status, self.settings, self._queue)
         self._current = self._machine.current  # theta, its information, its version
-        self._publication = MemoryPublication(
-            self._status, self.settings, self._machine, self._queue
-        )
+        self._publication = MemoryPublication(self._status, self.settings, self._machine)
 
     def _continue_from(self, prior: SeedPrior, estimate: Estimate) -> None:
         """Continue from a seed (:meth:`seed`): its parameters (eq. 34 inverted) as the
