@@ -49,8 +49,9 @@ def test_a_failed_cold_start_is_counted_and_leaves_no_estimate() -> None:
 
 def test_a_planted_seed_fades_as_the_window_refills() -> None:
     truth = paper_example(1).model
+    converged = EstimatorState.CONVERGED
     saved = Estimate(
-        Structure(3), truth.parameters(), np.eye(8) * 1e-6, 0.02, 0.6, "converged", 0.9, 5000
+        Structure(3), truth.parameters(), np.eye(8) * 1e-6, 0.02, 0.6, converged, 0.9, 5000
     )
     feed = RowFeed(window=100, bins=4)
     status = IdentifierStatus(Structure(3), sign_now=True)
