@@ -3,8 +3,8 @@
 :class:`OnlineIdentifier` is the base of
 :class:`~genbacklash_core.online.windowed.WindowedIdentifier` and
 :class:`~genbacklash_core.online.recursive.RecursiveIdentifier`. It holds the parts of the
-interface that are the same for both (``update(u, y) -> Estimate``, ``update_many``, the
-``structure`` and ``estimate`` properties; :mod:`genbacklash_core.estimate`):
+interface that are the same for both (``update(u, y) -> Estimate``, ``update_many``,
+``seed``, the ``structure`` and ``estimate`` properties; :mod:`genbacklash_core.estimate`):
 
 * **Construction.** The structure to start from and whether the branch sense is known
   (:func:`~.inputs.template`), the settings, and the input limits of the longest regression
@@ -13,10 +13,13 @@ interface that are the same for both (``update(u, y) -> Estimate``, ``update_man
   :func:`~.inputs.checked_series`); a dropped sample breaks the chain of the sample rule
   (:mod:`genbacklash_core.samples`): the next sample taken does not follow the one before
   it. What an identifier does with the samples is its own (``_take``).
-* **The seed's start.** A saved estimate becomes prior information
-  (:func:`~genbacklash_core.online.seed.seed_prior`), the identifier forgets all samples and
-  takes the saved structure, branch sense, sample count and excitation; each identifier then
-  continues from it in its own way (``seed``).
+* **The seed's start** (:meth:`~OnlineIdentifier.seed`). A saved estimate becomes prior
+  information (:func:`~genbacklash_core.online.seed.seed_prior`), the identifier forgets all
+  samples and takes the saved structure, branch sense, sample count and excitation; each
+  identifier then continues from it in its own way (``_continue_from``).
+* **The status.** What the estimate is published from (structure, samples, excitation,
+  reason, the bands' drift) stands in one :class:`~.status.IdentifierStatus`, made anew at
+  each ``reset`` and shared with the parts the identifier is composed of.
 
 Examples
 --------

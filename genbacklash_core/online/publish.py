@@ -145,7 +145,7 @@ class WindowPublication:
             p,
             cov,
             fitter.residual,
-            min(max(status.excitation, 0.0), 1.0),
+            status.published_excitation,
             state,
             confidence,
             status.samples,
@@ -210,7 +210,7 @@ class MemoryPublication:
         machine = self._machine
         structure = status.structure
         s = self._settings
-        excitation = min(max(status.excitation, 0.0), 1.0)
+        excitation = status.published_excitation
         if not machine.ever_started:
             reason = status.reason
             if not structure.cascade:

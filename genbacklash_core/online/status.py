@@ -14,6 +14,9 @@ Examples
 >>> status = IdentifierStatus(Structure(3), sign_now=False)
 >>> status.samples, status.reason, status.drift is None
 (0, 'warming up', True)
+>>> status.excitation = 1.2
+>>> status.published_excitation
+1.0
 """
 
 from __future__ import annotations
@@ -53,3 +56,8 @@ class IdentifierStatus:
     excitation: float = 0.0
     reason: str = "warming up"
     drift: DeadZoneDrift | None = None
+
+    @property
+    def published_excitation(self) -> float:
+        """The excitation as an estimate reports it: within [0, 1]."""
+        return min(max(self.excitation, 0.0), 1.0)
