@@ -13,6 +13,8 @@ The modules below them hold one concept each, and what the two share stands once
 ========================  ==============================================================
 ``base``                  the interface both share: construction, sample intake, the
                           seed's start (:class:`~.base.OnlineIdentifier`)
+``status``                what an estimate is published from, shared by an identifier's
+                          parts (:class:`~.status.IdentifierStatus`)
 ``settings``              the two frozen settings dataclasses
 ``inputs``                structure and settings arguments, non-finite samples, the input
                           deadband
@@ -20,18 +22,31 @@ The modules below them hold one concept each, and what the two share stands once
                           the recent-sample ring, the cascade's lags and settling horizon
 ``memory``                the row memories (``RowMemory``, ``BinnedRows``)
 ``advice``                branch coverage and excitation advice
-``seed``                  a saved estimate as prior information (``seed``)
+``seed``                  a saved estimate as prior information (``seed``) and how each
+                          identifier lets it fade
 ``fits``                  the windowed fits and the batch (re-)initialisation both use
+``covariance``            the delta method of eq. (34): natural parameters and covariance
+``state``                 converged / converging / no_excitation and the confidence
+``publish``               the estimate each identifier publishes, and when it rebuilds it
+``tracking``              the bands' tracking term for a drifting gap
 ``feeds``                 the windowed identifier's data: rows (a backlash) or samples
+``schedule``              when the windowed identifier fits
+``fitter``                the windowed identifier's fits as they follow one another:
+                          cold start, warm fits, restarts
+``queue``                 the recursive identifier's queue of samples between its events
+``blocks``                the recursive identifier's blocks: when it files rows, iterates,
+                          holds and re-initialises
+``attempts``              the recursive identifier's batch-fit attempts
+``ages``                  the age of the recursive identifier's information, per block
+``bands``                 when the recursive identifier refits the bands' tracking term
 ``stream``                the recursive identifier's rows as samples come
 ``restart``               the recursive identifier's batch start
 ``iteration``             the recursive identifier's iteration over its memory
 ``divergence``            the recursive identifier's divergence test (error scales)
-``covariance``            the delta method of eq. (34): natural parameters and covariance
-``state``                 converged / converging / no_excitation and the confidence
-``tracking``              the bands' tracking term for a drifting gap
-``windowed``              :class:`WindowedIdentifier`
-``recursive``             :class:`RecursiveIdentifier`
+``windowed``              :class:`WindowedIdentifier`: a feed, a schedule, a fitter, a
+                          publication
+``recursive``             :class:`RecursiveIdentifier`: a queue, a block machine, a
+                          publication
 ========================  ==============================================================
 
 ``genbacklash_core.windowed``, ``.recursive``, ``.memory`` and ``.tracking`` remain as

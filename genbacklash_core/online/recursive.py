@@ -49,53 +49,34 @@ samples and process them at the same fixed sample counts (every ``block`` sample
 fits' attempts), so they agree to rounding whatever the chunking; between two such events
 only the sample count (and the aged confidence) of the estimate changes.
 
-This module holds the identifier itself (the queue, the blocks, when to iterate, hold or
-re-initialise, what it publishes); the other parts stand in the sibling modules of
-:mod:`genbacklash_core.online` (see there), one concept each.
+This module holds the identifier itself, a composition of parts that stand in the sibling
+modules of :mod:`genbacklash_core.online` (see there), one concept each: the queue
+(:mod:`~.queue`), the blocks (when to file rows, iterate, hold or re-initialise;
+:mod:`~.blocks`, with :mod:`~.attempts`, :mod:`~.ages` and :mod:`~.bands`), what it
+publishes (:mod:`~.publish`), and the interface it shares with the windowed identifier
+(:mod:`~.base`; the seed's start, :mod:`~.seed`).
 """
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
-from genbacklash_core._typing import BoolArray, FloatArray, IntArray
+from genbacklash_core._typing import BoolArray, FloatArray
 from genbacklash_core.errors import GenBacklashError
-from genbacklash_core.estimate import (
-    Estimate,
-    EstimatorState,
-    aged_confidence,
-    confidence_of,
-)
+from genbacklash_core.estimate import Estimate
 
 from .advice import BranchCoverage, coverage_of, excitation_advice
 from .base import OnlineIdentifier
-from .covariance import natural_covariance, natural_from_theta, scaled_inverse
-from .divergence import ErrorScale
-from .inputs import (
-    settings_or_default,
-    template,
-)
-from .iteration import Iterate, ewma, theta_problem
+from .blocks import BlockMachine
+from .covariance import scaled_inverse
+from .inputs import settings_or_default, template
 from .memory import BinnedRows
-from .restart import backlash_start, cascade_start, rejected
-from .rows import (
-    row_width,
-    settling_samples,
-)
-from .seed import SeedPrior, prior_weights
+from .publish import MemoryPublication
+from .queue import SampleQueue
+from .seed import SeedPrior
 from .settings import RecursiveSettings
-from .state import confidence_moved, held, settled_state
-from .stream import RowStream
-from .tracking import BAND_SAMPLES, dead_zone_drift, with_tracking
 
 __all__ = ["RecursiveIdentifier", "RecursiveSettings"]
-
-_MAX_INVALID = 8  # consecutive invalid iterates before a re-initialisation
-_DRIFT_EVERY = 250  # samples between two fits of the bands' tracking term (~0.3 ms each)
-
-_WARMING, _RUNNING, _HELD, _STOPPED = "warming", "running", "held", "stopped"
 
 
 class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
@@ -163,21 +144,22 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
     @property
     def restarts(self) -> int:
         """How many times the identification was re-initialised after a divergence."""
-        return self._restarts
+        return self._machine.restarts
 
     @property
     def memory(self) -> BinnedRows:
         """The rows the estimate rests on (read only; see :class:`BinnedRows`)."""
-        return self._memory
+        return self._machine.memory
 
     @property
     def coverage(self) -> BranchCoverage:
         """How much of the input range each branch's rows cover (the memory and the rows of
         the current block), for diagnostics and reports."""
-        rows, _ = self._memory.rows()
-        if self._pending:
-            rows = np.concatenate([rows, *(r for r, _ in self._pending)])
-        return coverage_of(rows[:, 0], rows[:, 1], self.settings.bins, self._memory.per_direction)
+        memory = self._machine.memory
+        rows, _ = memory.rows()
+        if self._machine.pending:
+            rows = np.concatenate([rows, *(r for r, _ in self._machine.pending)])
+        return coverage_of(rows[:, 0], rows[:, 1], self.settings.bins, memory.per_direction)
 
     def excitation_advice(self) -> str:
         """What the data have not shown yet, and what motion would show it ("" when the rows
@@ -189,12 +171,14 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         >>> ident.excitation_advice()
         'the left branch is not covered yet: move the joint down'
         """
-        if self._structure.cascade:
+        if self._status.structure.cascade:
             return ""
-        need = 0 if self._ever_started else max(self._min_rows() - len(self._memory), 0)
+        machine = self._machine
+        rows = len(machine.memory)
+        need = 0 if machine.ever_started else max(machine.attempts.min_rows - rows, 0)
         cover = self.coverage
-        seen = bool(cover.up.sum() + cover.down.sum()) or self._stream.high > self._stream.low
-        queued = any(np.ptp(u) > 0.0 for u, _, _ in self._queue if u.size)
+        seen = bool(cover.up.sum() + cover.down.sum()) or machine.stream.high > machine.stream.low
+        queued = self._queue.moved()
         if not seen and queued:
             return ""  # the samples are not looked at before the first attempt
         return excitation_advice(cover, moved=seen or queued, rows_needed=need)
@@ -203,101 +187,26 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
     def from_seed(self) -> bool:
         """True while the estimate still leans on a seed (:meth:`seed`): the memory has not
         refilled a branch since (and no re-initialisation replaced the seed)."""
-        return self._current.prior is not None and bool(
-            np.any(prior_weights(self._structure, self._memory) > 0.0)
-        )
+        return self._machine.from_seed
 
     def reset(self) -> None:
         """Forget all samples and the estimate."""
         self._forget()
-        s = self.settings
-        structure = self._template
-        self._mode = _WARMING
-        self._ever_started = False
-        self._restarts = 0
-        self._why = ""  # why the identification diverged (held or stopped)
-        self._current = Iterate(structure.n_parameters)  # theta, its information, its version
-        # the memory, the rows held back while the errors are blown up, the recent samples
-        self._memory = self._new_memory(row_width(structure))
-        self._held_back: BinnedRows | None = None
-        self._stream = RowStream(structure, s.buffer)  # the recent samples; carried signals
-        self._pending: list[tuple[FloatArray, IntArray]] = []  # rows of the current block
-        self._queue: list[tuple[FloatArray, FloatArray, BoolArray]] = []  # samples not seen
-        self._queued = 0
-        self._events = 0  # queue flushes (the estimate's excitation and ages change there)
-        self._published: tuple[tuple[object, ...], Estimate] | None = None
-        self._next_drift = 0  # the sample from which the next iterate refits it
-        self._drift_at = 0  # the sample it was fitted at
-        self._committed_at = 0  # the sample of the last iterate taken
-        self._settling = 0
-        self._settled_at = 0  # sample count of the last settling-horizon update
-        # schedule
-        self._next_solve = 0
-        self._next_attempt = s.initial_samples
-        self._attempts = 0
-        self._fresh = 0  # rows filed since the last batch-fit attempt (backlash)
-        self._need = self._min_rows()  # fresh rows the next attempt waits for
-        # measures
-        self._errors = ErrorScale()  # the one-step errors' running means (divergence test)
-        self._scale_before = math.nan
-        blocks = 3 if structure.cascade else 2
-        self._last_row = [0] * blocks  # sample count at the newest row of left, right, linear
+        self._queue = SampleQueue()  # samples not seen yet
+        self._machine = BlockMachine(self._status, self.settings, self._queue)
+        self._current = self._machine.current  # theta, its information, its version
+        self._publication = MemoryPublication(self._status, self.settings, self._machine)
 
-    def seed(self, estimate: Estimate) -> Estimate:
-        """Continue from a saved ``estimate`` (e.g. a checkpoint's) instead of a batch fit.
-
-        Forgets all samples, then takes the estimate's parameters (eq. 34 inverted) as the
-        current estimate. Its covariance and residual give the information of the memory it
-        rested on (``cov_theta = sigma^2 R^-1``), which joins each iteration as a prior
-        weighted by the share of the memory the new rows have not refilled yet (per branch),
-        so the estimate continues with the uncertainty it had while the memory refills. A
-        cascade waits for the samples that determine its internal ``x`` (the play operator
-        started from any state agrees) before it takes rows.
-
-        Raises :class:`GenBacklashError` (the identifier unchanged) when the estimate cannot
-        seed it: another structure, another branch sense than the one given, no valid model,
-        or no finite covariance and residual.
-
-        Parameters
-        ----------
-        estimate : Estimate
-            The saved estimate.
-
-        Returns
-        -------
-        Estimate
-            The new current estimate: the saved parameters and covariance. The sample
-            count goes on from the estimate's ``samples``.
-
-        Examples
-        --------
-        >>> from genbacklash_core import Structure, paper_example
-        >>> truth = paper_example(1).model
-        >>> saved = Estimate(Structure(3), truth.parameters(), np.eye(8) * 1e-6, 0.02, 0.6,
-        ...                  "converged", 0.9, 5000)
-        >>> ident = RecursiveIdentifier(degree=3)
-        >>> est = ident.seed(saved)
-        >>> est.state.value, est.model == truth, ident.from_seed
-        ('converged', True, True)
-        >>> data = paper_example(1).generate(seed=1, n_samples=600)
-        >>> after = ident.update_many(data.u, data.y)
-        >>> after.state.value, bool(np.max(np.abs(after.parameters - truth.parameters())) < 0.02)
-        ('converged', True)
-        """
-        prior = self._restart_from(estimate)
+    def _continue_from(self, prior: SeedPrior, estimate: Estimate) -> None:
+        """Continue from a seed (:meth:`seed`): its parameters (eq. 34 inverted) as the
+        current estimate; its information joins each iteration as a prior weighted by the
+        share of the memory the new rows have not refilled yet (per branch). A cascade
+        waits for the samples that determine its internal ``x`` (the play operator started
+        from any state agrees) before it takes rows."""
         cov = scaled_inverse(prior.information)
         assert cov is not None  # (_check_seed)
-        s = self.settings
-        self._current.seed(prior, cov, s.covariance_bound)
-        self._errors.restart(prior.sigma2)
-        self._last_row = [self._samples] * len(self._last_row)
-        if self._structure.cascade:
-            self._settling = settling_samples(self._structure, prior.p)
-        self._mode = _RUNNING
-        self._ever_started = True
-        self._next_solve = self._samples + s.block
-        self._reason = f"seeded from a saved estimate ({estimate.state.value})"
-        return self.estimate
+        self._machine.seed(prior, cov)
+        self._status.reason = f"seeded from a saved estimate ({estimate.state.value})"
 
     def _check_seed(self, prior: SeedPrior) -> None:
         if scaled_inverse(prior.information) is None:  # seed_prior checked that it is
@@ -308,409 +217,28 @@ class RecursiveIdentifier(OnlineIdentifier[RecursiveSettings]):
         of at the next one (for a final estimate at the end of a record). The schedule is
         unchanged; :meth:`update` and :meth:`update_many` no longer agree exactly after it."""
         self._flush()
-        if self._mode in (_RUNNING, _HELD):
-            due = self._next_solve
-            self._event()
-            self._next_solve = due
-        elif self._mode in (_WARMING, _STOPPED):
-            self._file(self._memory, *self._pending_rows())
-            if len(self._memory) >= self._min_rows() and not self._structure.cascade:
-                self._initialise()
+        self._machine.refit()
         self._estimate = None
         return self.estimate
-
-    # ------------------------------------------------------------------ feeding samples
-
-    def _new_memory(self, width: int) -> BinnedRows:
-        """An empty memory as the settings ask."""
-        s = self.settings
-        return BinnedRows(width, s.bins, s.branch_memory, s.region_floor)
-
-    def _min_rows(self) -> int:
-        """Rows a batch fit on the memory needs at least."""
-        return max(3 * self._template.n_parameters, 20)
 
     def _take(self, u: FloatArray, y: FloatArray, b: BoolArray) -> None:
         """Queue validated samples; process the queue at each of the schedule's events."""
         self._estimate = None
         if u.size == 0:
             return
-        if self._mode in (_RUNNING, _HELD):
-            why = theta_problem(self._structure, self._current.theta)
-            if why is not None:  # e.g. a corrupted state: never iterate from it
-                self._stop(why)
-        start = 0
-        while start < u.size:
-            due = self._next_solve if self._mode in (_RUNNING, _HELD) else self._next_attempt
-            take = min(u.size - start, max(due - self._samples, 1))
-            part = slice(start, start + take)
-            self._queue.append((u[part], y[part], b[part]))
-            self._queued += take
-            self._samples += take
-            start += take
-            if self._samples >= due:
+        machine, status = self._machine, self._status
+        machine.check()
+        for count in self._queue.take(u, y, b, lambda: machine.due - status.samples):
+            status.samples += count
+            if status.samples >= machine.due:
                 self._flush()
-                self._event()
+                machine.event()
 
     def _flush(self) -> None:
         """Process the queued samples (rows, errors, excitation) in one piece."""
-        if not self._queued:
-            return
-        if len(self._queue) == 1:
-            u, y, b = self._queue[0]
-        else:
-            u = np.concatenate([q[0] for q in self._queue])
-            y = np.concatenate([q[1] for q in self._queue])
-            b = np.concatenate([q[2] for q in self._queue])
-        first = self._samples - self._queued
-        self._queue = []
-        self._queued = 0
-        self._events += 1
-        self._piece(u, y, b, first)
-
-    def _piece(self, u: FloatArray, y: FloatArray, b: BoolArray, first: int) -> None:
-        """Rows, errors and excitation of a stretch of samples within one block."""
-        s = self.settings
-        running = self._mode in (_RUNNING, _HELD)  # else: warming up or stopped
-        rows, at = self._stream.take(
-            self._structure,
-            self._current.theta if running else None,
-            u,
-            y,
-            b,
-            s.input_deadband,
-            self._settling,
-        )
-        informative = np.zeros(u.size)
-        if at.size:
-            stamps = np.asarray(first + at, dtype=np.intp)
-            if running:
-                informative = self._judge(rows, stamps, at, u.size)
-            else:  # filed at the next batch-fit attempt
-                self._pending.append((rows, stamps))
-                informative[at] = 1.0
-        self._excitation = ewma(informative, 1.0 / s.excitation_memory, self._excitation)
-
-    def _judge(self, rows: FloatArray, stamps: IntArray, at: IntArray, n: int) -> FloatArray:
-        """A priori one-step errors of new rows at the current estimate (eqs. 24/35), kept
-        for the block's end; which samples informed which block."""
-        structure = self._structure
-        used, left, right = self._errors.judge(
-            structure,
-            self._current.theta,
-            self._current.unit_cov,
-            rows,
-            ratio=self.settings.divergence_ratio,
-            running=self._mode == _RUNNING,  # while held, the scale holds
-        )
-        self._pending.append((rows, stamps))
-        informative = np.zeros(n)
-        informative[at[used]] = 1.0
-        newest = stamps[used] + 1
-        if newest.size:
-            if left.any():
-                self._last_row[0] = int(newest[left][-1])
-            if right.any():
-                self._last_row[1] = int(newest[right][-1])
-            if structure.cascade:
-                self._last_row[2] = int(newest[-1])
-        return informative
-
-    def _file(self, memory: BinnedRows, rows: FloatArray, stamps: IntArray) -> None:
-        """File rows into a memory, counting them for the batch-fit schedule."""
-        if rows.shape[0]:
-            memory.insert(rows, stamps)
-            self._fresh += rows.shape[0]
-
-    # ------------------------------------------------------------------ the schedule
-
-    def _event(self) -> None:
-        """The end of a block (running, held) or a batch-fit attempt (warming, stopped)."""
-        if self._mode == _RUNNING:
-            self._end_block()
-        elif self._mode == _HELD:
-            self._end_held_block()
-        else:
-            self._attempt()
-
-    def _pending_rows(self) -> tuple[FloatArray, IntArray]:
-        """The rows of the block, taken out of the queue."""
-        if not self._pending:
-            return np.empty((0, self._memory.width)), np.empty(0, dtype=np.intp)
-        rows = np.concatenate([r for r, _ in self._pending])
-        stamps = np.concatenate([t for _, t in self._pending])
-        self._pending = []
-        return rows, stamps
-
-    def _blown(self) -> bool:
-        """The short-term one-step error exceeds ``divergence_ratio`` times its scale."""
-        return self._errors.blown(self.settings.divergence_ratio)
-
-    def _end_block(self) -> None:
-        """File the block's rows and iterate over the memory (when it got new rows)."""
-        s = self.settings
-        self._next_solve = self._samples + s.block
-        rows, stamps = self._pending_rows()
-        if self._blown():
-            self._mode = _HELD
-            self._scale_before = self._errors.long
-            self._attempts = 0
-            self._next_attempt = self._samples + self._attempt_interval()
-            if not self._structure.cascade:
-                self._held_back = self._new_memory(self._memory.width)
-            self._fresh = 0
-            self._need = self._min_rows()
-            if self._held_back is not None:
-                self._file(self._held_back, rows, stamps)
-            self._why = (
-                f"the one-step error blew up (RMS {math.sqrt(self._errors.short):.3g} against "
-                f"a running {math.sqrt(self._errors.long):.3g}); the estimate is held and new "
-                "rows are kept out of the memory"
-            )
-            self._reason = ""
-            return
-        self._file(self._memory, rows, stamps)
-        if rows.shape[0]:
-            self._iterate()
-        if self._structure.cascade and self._samples - self._settled_at >= s.check_every:
-            self._settled_at = self._samples
-            self._settling = settling_samples(
-                self._structure, self._structure.from_theta(self._current.theta)
-            )
-
-    def _end_held_block(self) -> None:
-        """Resume when the errors are normal again; else hold the rows back and try a batch
-        fit on them (backlash) or on the recent samples (cascade) when due."""
-        self._next_solve = self._samples + self.settings.block
-        rows, stamps = self._pending_rows()
-        if not self._blown():
-            self._mode = _RUNNING
-            self._held_back = None
-            self._reason = ""
-            self._file(self._memory, rows, stamps)
-            if rows.shape[0]:
-                self._iterate()
-            return
-        if self._held_back is not None:
-            self._file(self._held_back, rows, stamps)
-        if self._attempt_due():
-            self._initialise()
-
-    def _attempt(self) -> None:
-        """File the rows since the last attempt point; a batch-fit attempt when due."""
-        self._file(self._memory, *self._pending_rows())
-        if self._attempt_due():
-            self._initialise()
-        elif not self._structure.cascade:
-            self._next_attempt = self._samples + self.settings.block
-
-    def _attempt_due(self) -> bool:
-        """A backlash fits its rows once they grew by a quarter since the last attempt; the
-        cascade fits its recent samples at growing intervals."""
-        if self._structure.cascade:
-            return self._samples >= self._next_attempt
-        source = self._held_back if self._mode == _HELD else self._memory
-        if source is None:
-            return False
-        return len(source) >= self._min_rows() and self._fresh >= self._need
-
-    def _attempt_interval(self) -> int:
-        """Samples to the next batch-fit attempt of the cascade (doubling, at most buffer)."""
-        s = self.settings
-        interval: int = max(s.initial_samples // 4, 1) * 2 ** min(self._attempts, 6)
-        return min(interval, s.buffer)
-
-    # ------------------------------------------------------------------ (re)initialisation
-
-    def _initialise(self) -> bool:
-        """Start (or restart) from a batch fit (:mod:`~genbacklash_core.online.restart`): a
-        backlash on every row of its memory (or, while the errors are blown up, the rows
-        held back since); the cascade on its recent samples: the whole buffer at first, the
-        latest ``initial_samples`` on retried restarts. Returns whether it started."""
-        s = self.settings
-        structure = self._structure
-        attempt = self._attempts
-        self._attempts += 1
-        self._next_attempt = self._samples + (
-            self._attempt_interval() if structure.cascade else s.block
-        )
-        span = (self._stream.low, self._stream.high)
-        if structure.cascade:
-            latest = self._ever_started and attempt > 0  # a retried restart: the latest only
-            last = s.initial_samples if latest else s.buffer
-            u, y = (a.copy() for a in self._stream.recent.window(last))
-            window = (u, y, self._stream.recent.breaks(last))
-            first = self._samples - self._queued - u.size  # the window ends at the last seen
-            memory = self._new_memory(self._memory.width)
-            start = cascade_start(structure, self._sign_now, window, first, memory, s, span)
-        else:
-            source = self._held_back if self._mode == _HELD else self._memory
-            assert source is not None  # (_attempt_due checked it)
-            self._fresh = 0
-            self._need = max(len(source) // 4, 1)
-            start = backlash_start(structure, self._sign_now, source, s, span)
-        if isinstance(start, str):
-            self._reason = f"batch fit failed: {start}"
-            return False
-        sigma2 = start.solution.sigma2
-        why = rejected(sigma2, self._scale_before, s.divergence_ratio, attempt)
-        if why is not None:
-            self._reason = why
-            return False
-        if self._ever_started:
-            self._restarts += 1
-        self._drift, self._next_drift = None, 0  # a new memory: refit the bands' term at once
-        self._structure = structure = start.structure
-        self._sign_now = True
-        self._memory = start.memory
-        self._held_back = None
-        if start.lags is not None:
-            self._stream.lags = start.lags
-        self._current.start(start.solution, start.pull)
-        self._committed()
-        self._errors.restart(max(sigma2, 1e-300))
-        self._scale_before = math.nan
-        self._attempts = 0
-        self._mode = _RUNNING
-        self._ever_started = True
-        self._next_solve = self._samples + s.block
-        self._last_row = [self._samples] * len(self._last_row)
-        if structure.cascade:
-            theta = start.solution.theta
-            self._settling = settling_samples(structure, structure.from_theta(theta))
-            self._settled_at = self._samples
-        self._pending = []
-        self._reason = ""
-        return True
-
-    # ------------------------------------------------------------------ the iteration
-
-    def _iterate(self) -> None:
-        """One iteration over the memory; an invalid iterate is not taken (the estimate
-        holds), and ``_MAX_INVALID`` of them in a row re-initialise from the memory."""
-        span = (self._stream.low, self._stream.high)
-        why = self._current.step(self._structure, self._memory, span)
-        if why is None:
-            self._committed()
-        elif self._current.invalid >= _MAX_INVALID:
-            self._stop(f"{self._current.invalid} iterations in a row left the valid set ({why})")
-
-    def _committed(self) -> None:
-        """An iterate was taken: its sample, and the bands' tracking term when due."""
-        self._committed_at = self._samples
-        self._track_drift()
-
-    # ------------------------------------------------------------------ divergence
-
-    def _stop(self, why: str) -> None:
-        """The estimate left the valid set: re-initialise at once from the memory (backlash)
-        or the recent samples (cascade); the last valid estimate stands meanwhile."""
-        self._mode = _STOPPED
-        self._held_back = None
-        self._file(self._memory, *self._pending_rows())  # the data are sound: keep them
-        self._scale_before = self._errors.long
-        self._attempts = 0
-        self._fresh = self._need = len(self._memory)  # (the memory is due now)
-        self._current.restore(self._structure)
-        self._why = why
-        self._initialise()
-
-    def _track_drift(self) -> None:
-        """The tracking term of the bands (:mod:`genbacklash_core.online.tracking`): the memory's
-        rows, aged from this iterate's sample, fitted with dead zones that drift. Once per
-        :data:`_DRIFT_EVERY` samples at most (a fit over the memory costs ~1-2 ms), at the
-        iterates' own samples, so chunking does not matter. Nothing for the cascade."""
-        structure = self._structure
-        if structure.cascade or self._samples < self._next_drift:
-            return
-        self._next_drift = self._samples + _DRIFT_EVERY
-        self._drift_at = self._samples
-        rows, stamps = self._memory.rows()
-        p = np.array(natural_from_theta(structure, self._current.theta.tolist()))
-        cols = (rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3])
-        ring = self._stream.recent  # the latest readings, for the model term's free run
-        u, y = ring.window(BAND_SAMPLES)
-        recent = (u, y, ring.breaks(BAND_SAMPLES))
-        self._drift = dead_zone_drift(structure, p, cols, float(self._samples) - stamps, recent)
-
-    # ------------------------------------------------------------------ the estimate
+        piece = self._queue.flush(self._status.samples)
+        if piece is not None:
+            self._machine.piece(*piece)
 
     def _publish(self) -> Estimate:
-        """The estimate, its state and confidence, from the current internals.
-
-        Between the schedule's events only the sample count and, slowly, the aged
-        confidence change: the last estimate is then reused with the new count.
-        """
-        structure = self._structure
-        s = self.settings
-        excitation = min(max(self._excitation, 0.0), 1.0)
-        if not self._ever_started:
-            reason = self._reason
-            if not structure.cascade:
-                rows = sum(r.shape[0] for r, _ in self._pending)
-                advice_key = (self._events, len(self._memory), rows)  # rows come at events
-                reason = self._advice.reason(reason, advice_key, self.excitation_advice)
-            return Estimate.empty(
-                structure, self._samples, excitation, EstimatorState.WARMING_UP, reason
-            )
-        current = self._current
-        sigma2 = current.sigma2 if math.isfinite(current.sigma2) else self._errors.long
-        p_list, rel = current.summary(structure, sigma2)
-        idle = self._samples - max(self._last_row)  # since the newest informative row
-        age = self._samples - min(self._last_row)  # of the branch whose newest row is oldest
-        if self._mode in (_HELD, _STOPPED):
-            state = EstimatorState.DIVERGED
-        elif held(idle, s.idle_samples):
-            state = EstimatorState.NO_EXCITATION
-        else:  # one iteration per block: the estimate is as settled as its memory
-            state = settled_state(True, rel, s.converged_std)
-        confidence = aged_confidence(
-            confidence_of(state, rel, s.converged_std), float(age), s.confidence_half_life
-        )
-        key = (current.version, self._events, state, self._reason, current.note, self._restarts)
-        if self._published is not None and self._published[0] == key:
-            last = self._published[1]
-            if not confidence_moved(confidence, last.confidence, floor=0.0):
-                return last.with_samples(self._samples)
-        if state is EstimatorState.DIVERGED:
-            reason = f"diverged: {self._why}"
-            if self._reason:
-                reason += f"; re-initialisation pending ({self._reason})"
-        elif state is EstimatorState.NO_EXCITATION:
-            reason = (
-                f"estimate held: no new information for {s.idle_samples} samples or more "
-                f"(the input rests, repeats or moves too little); {len(self._memory)} rows "
-                "remembered"
-            )
-        else:
-            reason = f"{len(self._memory)} rows remembered; relative std {rel:.3g}"
-            if self.from_seed:
-                reason = f"{self._reason}; {reason}"
-            if self._restarts:
-                reason += f"; re-initialised {self._restarts} time(s)"
-        if current.note and state is not EstimatorState.DIVERGED:
-            reason += f"; {current.note}"
-        recent = self._errors.recent
-        residual = recent if math.isfinite(recent) else sigma2
-        theta_copy = current.theta.copy()
-        cov_theta = sigma2 * current.unit_cov  # sigma^2 (Phi^T Phi + R_0 + prior)^-1
-        drift = self._drift
-        p_now = np.array(p_list)
-        # the drift goes on between its fits (one per _DRIFT_EVERY samples): counted to the
-        # last iterate's sample, not the publishing moment (chunking must not matter)
-        ticks = float(self._committed_at - self._drift_at)
-        est = Estimate.trusted(
-            structure,
-            p_now,
-            lambda: with_tracking(
-                natural_covariance(structure, theta_copy, cov_theta), drift, p_now, ticks
-            ),
-            math.sqrt(residual),
-            excitation,
-            state,
-            confidence,
-            self._samples,
-            reason,
-        )
-        self._published = (key, est)
-        return est
+        return self._publication.current(self._advice, self.excitation_advice)

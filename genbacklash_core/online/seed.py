@@ -8,8 +8,9 @@ natural parameters through eq. 34 by the delta method), ``Phi^T Phi`` is the inf
 of the regression rows behind it, in units of rows. :func:`seed_prior` checks the estimate
 and computes that information once, for both identifiers; each then lets it fade in its
 own way as new data replace it (the windowed identifier by the share of the window the new
-samples or rows filled, the recursive one per branch, by the share of the branch's memory
-refilled), since what "replaced" means depends on how each remembers.
+samples or rows filled, :class:`WindowSeed`; the recursive one per branch, by the share of
+the branch's memory refilled, :func:`prior_weights`), since what "replaced" means depends
+on how each remembers.
 
 Examples
 --------
@@ -39,7 +40,7 @@ from genbacklash_core.structure import Structure
 from .covariance import scaled_inverse, theta_jacobian
 from .memory import BinnedRows
 
-__all__ = ["SeedPrior", "prior_weights", "seed_prior"]
+__all__ = ["SeedPrior", "WindowSeed", "prior_weights", "seed_prior"]
 
 
 @dataclass(frozen=True)
@@ -63,6 +64,28 @@ class SeedPrior:
         return SeedPrior(
             self.p, self.theta, self.information * weight, self.sigma2, self.rows * weight
         )
+
+
+@dataclass(frozen=True)
+class WindowSeed:
+    """A seed the windowed identifier's window still leans on (internal): its ``prior``, the
+    ``samples`` of the window it stands for, and the feed's ``progress`` when it was planted.
+
+    >>> from genbacklash_core import Estimate, Structure, paper_example
+    >>> saved = Estimate(Structure(3), paper_example(1).model.parameters(), np.eye(8) * 1e-6,
+    ...                  0.02, 0.6, "converged", 0.9, 5000)
+    >>> seed = WindowSeed(seed_prior(Structure(3), False, saved), samples=1500, progress=0)
+    >>> seed.weight(kept=600), seed.weight(kept=-5)
+    (0.4, 0.0)
+    """
+
+    prior: SeedPrior
+    samples: int
+    progress: int
+
+    def weight(self, kept: int) -> float:
+        """Share of the seed's samples still counted, ``kept`` of them not replaced yet."""
+        return max(kept, 0) / self.samples
 
 
 def seed_prior(template: Structure, sign_known: bool, estimate: Estimate) -> SeedPrior:

@@ -265,7 +265,7 @@ def test_the_model_term_moves_the_band_and_nothing_the_compensation_reads(
     the smaller."""
     import dataclasses
 
-    from genbacklash_core.online import feeds, recursive
+    from genbacklash_core.online import bands, feeds
 
     cfg = OperationSettings(duration=20.0, phases=(("operation", 20.0),), wear=0.0)
     hidden = HiddenEffects(period=0.5, harmonics=((0.004, 0.0),))
@@ -289,7 +289,8 @@ def test_the_model_term_moves_the_band_and_nothing_the_compensation_reads(
             fit, model_covariance=None, free_run_covariance=None, free_run_offset=None
         )
 
-    for module in (feeds, recursive):  # the windowed identifier's drift is its feed's
+    for module in (feeds, bands):  # the windowed identifier's drift is its feed's, the
+        # recursive one's its band schedule's
         monkeypatch.setattr(module, "dead_zone_drift", without)
     without_term = run()
     wider = 0
