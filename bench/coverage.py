@@ -58,8 +58,8 @@ from _common import (
 )
 from tqdm import tqdm
 
+from genbacklash_core.online import bands as bands_module
 from genbacklash_core.online import feeds as feeds_module
-from genbacklash_core.online import recursive as recursive_module
 from genbacklash_core.online.tracking import DeadZoneDrift, dead_zone_drift
 from genbacklash_core.scenarios import OperationSettings
 from genbacklash_ros.bags.replay import replay
@@ -111,7 +111,8 @@ def model_term(on: bool) -> Iterator[None]:
     def without_model(*args: Any) -> DeadZoneDrift | None:
         return dead_zone_drift(*args[:4])
 
-    modules = (feeds_module, recursive_module)  # the windowed identifier's fit is its feed's
+    # the windowed identifier's fit is its feed's, the recursive identifier's its bands'
+    modules = (feeds_module, bands_module)
     for module in modules:
         module.dead_zone_drift = without_model  # type: ignore[attr-defined]
     try:
