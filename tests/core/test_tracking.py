@@ -380,9 +380,10 @@ def test_an_estimate_the_readings_disagree_with_gets_the_distance_in_its_band(se
 
 def test_a_free_run_that_misfits_the_readings_by_more_than_a_step_gives_no_offset() -> None:
     """A disturbance of 5 mrad that follows the motion (a ringing coupling), three encoder
-    steps, read by an estimate 2 mrad of play too wide: the free run's optimum is then the output error's best compromise, not the
-    drivetrain, so its step is no evidence of a bias (no offset), and the model-error term
-    bounds the bias instead (a nonzero covariance)."""
+    steps, read by an estimate 2 mrad of play too wide: the free run's optimum is then the
+    output error's best compromise, not the drivetrain, so its step is no evidence of a
+    bias (no offset), and the model-error term bounds the bias instead (a nonzero
+    covariance)."""
     s = Structure(1)
     u, x, breaks = _moves(0)
     ring = x + 5e-3 * np.sin(np.arange(x.size) / 40.0)
