@@ -465,24 +465,47 @@ class _Run:
         rival = rivals[0]
         bic_chosen, gap_chosen, next_chosen = self.follow_up(chosen)
         bic_rival, gap_rival, next_rival = self.follow_up(rival)
-        if self.anchored:  # see `anchored`: the validation gaps decide
-            better = f"its validation misfit {gap_rival:.4f} is lower than {gap_chosen:.4f}"
-            if not gap_rival < (1.0 - self.settings.min_gap_drop) * gap_chosen:
-                return None
-        else:
-            better = f"the model's BIC is {bic_chosen - bic_rival:.1f} lower"
-            if not bic_rival < bic_chosen - margin:
-                return None
-        after = measure_gap(rival.fit.model, self.u, self.y, self.split)
-        ok, verdict = self.judge(report, after, rival.bic_change)
-        if not ok:
+        wins, _, better = self.path_beats((bic_rival, gap_rival), (bic_chosen, gap_chosen))
+        accepted = self.rival_accepted(report, rival, gaps) if wins else None
+        if accepted is None:
             return None
+        after, verdict = accepted
         note = (
             f"{verdict}; preferred to {chosen.effect} (BIC {chosen.bic_change:+.1f} alone, a "
             f"near tie): followed by {next_rival} {better} than {chosen.effect} followed by "
             f"{next_chosen}"
         )
         return rival, after, note
+
+    def path_beats(
+        self, rival: tuple[float, float], chosen: tuple[float, float]
+    ) -> tuple[bool, float, str]:
+        """Does a path ending at ``rival`` (its BIC, its validation misfit) beat one ending at
+        ``chosen``? With lost readings by the validation misfit, ``min_gap_drop`` lower (see
+        :attr:`anchored`), else by the BIC, the margin lower. Also the yardstick's value for
+        ``rival`` and the comparison in words."""
+        (bic_rival, gap_rival), (bic_chosen, gap_chosen) = rival, chosen
+        if self.anchored:
+            return (
+                gap_rival < (1.0 - self.settings.min_gap_drop) * gap_chosen,
+                gap_rival,
+                f"its validation misfit {gap_rival:.4f} is lower than {gap_chosen:.4f}",
+            )
+        return (
+            bic_rival < bic_chosen - self.settings.bic_margin,
+            bic_rival,
+            f"the model's BIC is {bic_chosen - bic_rival:.1f} lower",
+        )
+
+    def rival_accepted(
+        self, report: GapReport, rival: _Candidate, gaps: dict[int, GapReport] | None
+    ) -> tuple[GapReport, str] | None:
+        """``rival``'s gap and the acceptance verdict, when it passes alone; else None."""
+        after = (gaps.get(id(rival)) if gaps is not None else None) or measure_gap(
+            rival.fit.model, self.u, self.y, self.split
+        )
+        ok, verdict = self.judge(report, after, rival.bic_change)
+        return (after, verdict) if ok else None
 
     def two_in_one(
         self,
@@ -519,25 +542,16 @@ class _Run:
         best: tuple[float, _Candidate, str, str] | None = None
         for rival in rivals:
             bic_rival, gap_rival, next_rival = self.follow_up(rival)
-            if self.anchored:  # see `anchored`: the validation gaps decide
-                score = gap_rival
-                better = f"its validation misfit {gap_rival:.4f} is lower than {gap_chosen:.4f}"
-                wins = gap_rival < (1.0 - self.settings.min_gap_drop) * gap_chosen
-            else:
-                score = bic_rival
-                better = f"the model's BIC is {chosen.fit.bic - bic_rival:.1f} lower"
-                wins = bic_rival < chosen.fit.bic - margin
+            wins, score, better = self.path_beats(
+                (bic_rival, gap_rival), (chosen.fit.bic, gap_chosen)
+            )
             if wins and (best is None or score < best[0]):
                 best = (score, rival, next_rival, better)
-        if best is None:
+        accepted = None if best is None else self.rival_accepted(report, best[1], gaps)
+        if best is None or accepted is None:
             return None
         _, rival, next_rival, better = best
-        after = (gaps.get(id(rival)) if gaps is not None else None) or measure_gap(
-            rival.fit.model, self.u, self.y, self.split
-        )
-        ok, verdict = self.judge(report, after, rival.bic_change)
-        if not ok:
-            return None
+        after, verdict = accepted
         note = (
             f"{verdict}; preferred to {chosen.effect} fitted behind a servo's lag (two effects "
             f"in one step, BIC {chosen.bic_change:+.1f}): followed by {next_rival} {better}"
