@@ -348,3 +348,73 @@ def test_a_servo_lag_dropped_at_the_end_leaves_its_dead_time_named() -> None:
     assert current.model.input_lag == 0.0 and current.model.delay == case.truth.delay
     assert len(gaps) == 3 and gaps[-1] is report
     assert "the dead time of its step stays" in kept[0].evidence
+
+
+def test_a_physical_effect_behind_a_servo_lag_is_weighed_against_two_effect_paths() -> None:
+    """A load torque fitted behind a servo's lag adds two effects in one step; on a record
+    with an output offset and a dead time (no physics at all) it won the first round on the
+    BIC against the offset alone, and was the only name. Given its follow-up, the offset's
+    path explains the record: both hidden effects are named, no physical name."""
+    case = synthetic_case(["time_delay", "output_offset"], seed=32, n_samples=N)
+    result = diagnose(case.u, case.y)
+    assert set(result.effects) == {"time_delay", "output_offset"}, result.summary()
+    assert result.model.delay == case.truth.delay
+    assert "fitted behind a servo's lag (two effects in one step" in result.steps[0].evidence
+
+
+def test_a_dead_time_beyond_the_servos_is_named_after_its_lag() -> None:
+    """A servo lag (pole 0.93) behind a dead time of five samples: the servo's step takes the
+    dead time it searches (a sample or two) and a second lag stage for the rest; the dead
+    time beyond it was never nominated (``time_delay`` was not applicable to a model with a
+    dead time). It is now searched with the lag in one stage, and named."""
+    from genbacklash_core.diagnose.synthetic import random_walk_input
+
+    n = 1500
+    u = random_walk_input(n, np.random.default_rng(2))
+    late = np.concatenate([np.full(5, u[0]), u[:-5]])
+    v = np.empty(n)
+    v[0] = late[0]
+    for t in range(1, n):
+        v[t] = 0.93 * v[t - 1] + 0.07 * late[t]
+    y = AugmentedModel(GeneralBacklash.ideal(1.0, 0.2, 0.25)).simulate(v)
+    y = y + np.random.default_rng(102).normal(0.0, 0.01, n)
+    result = diagnose(u, y)
+    assert result.effects[:2] == ("input_lag", "time_delay"), result.summary()
+    model = result.model
+    assert model.delay == 5 and model.input_lag_order == 1
+    assert model.input_lag == pytest.approx(0.93, abs=0.01)
+
+
+def test_a_redivision_of_what_the_model_carries_is_judged_without_the_floor_slack() -> None:
+    """A candidate naming an effect the model already carries, with no more free parameters
+    (a servo's dead time re-divided between samples and lag stages), skips the floor's
+    slack; a dead time added to a model without one does not."""
+    from dataclasses import replace
+
+    from genbacklash_core.diagnose import measure_gap, split_record
+    from genbacklash_core.diagnose.effects import Detection
+    from genbacklash_core.diagnose.fit import fit_model
+    from genbacklash_core.diagnose.loop import _Candidate, _judge, _redivides
+
+    case = synthetic_case(["time_delay"], seed=13, n_samples=N)
+    split = split_record(case.u.size, 0.3)
+    est = split.estimation
+    truth = case.truth
+    lagged = replace(truth, delay=1, input_lag=0.5, input_lag_order=2)
+    current = fit_model(lagged, case.u[est], case.y[est])
+    redivided = fit_model(
+        replace(truth, input_lag=0.5, input_lag_order=1), case.u[est], case.y[est]
+    )
+    found = Detection("time_delay", True, 1.0, 0.0, "a test", {})
+    assert _redivides(current, _Candidate(found, redivided, redivided.bic - current.bic))
+    plain = fit_model(replace(truth, delay=0), case.u[est], case.y[est])
+    assert not _redivides(plain, _Candidate(found, current, current.bic - plain.bic))
+    # a drop of half the slack (a floor above both misfits: the relative drop is judged)
+    before, after = (measure_gap(m, case.u, case.y, split) for m in (lagged, truth))
+    settings = DiagnoseSettings()
+    floor = (before.gap - after.gap) / (0.5 * (settings.floor_margin - 1.0))
+    y_val = case.y[split.validation]
+    ok, verdict = _judge(y_val, before, after, -100.0, settings, floor)
+    assert not ok and "times the floor" in verdict
+    ok, verdict = _judge(y_val, before, after, -100.0, settings, floor, slack=False)
+    assert ok, verdict

@@ -14,9 +14,13 @@ Augmentation: search ``d = 1..max_delay`` with short refits and refit the best f
 
 from __future__ import annotations
 
+import itertools
+from dataclasses import replace
+
 from genbacklash_core.diagnose.context import Context
 from genbacklash_core.diagnose.fit import ModelFit, best_fit, fit_model
 from genbacklash_core.diagnose.model import AugmentedModel
+from genbacklash_core.diagnose.spec import ModelSpec
 
 from ._base import Detection, format_p, fresh_start, late_input, screened_fir
 
@@ -26,14 +30,41 @@ _SCAN_STEPS = 6  # Levenberg-Marquardt steps per trial dead time in the search
 _FINALISTS = 2  # trial dead times refitted fully
 
 
+def _one_stage(model: AugmentedModel) -> list[AugmentedModel]:
+    """``model`` with its servo's lag in one stage of the same total time constant, when it
+    has two (``[]`` otherwise): searched with each dead time, because a second equal stage is
+    what stood in for the dead time beyond the servo's (two equal poles are close to one lag
+    a sample or more late).
+
+    >>> from genbacklash_core.backlash import GeneralBacklash
+    >>> bl = GeneralBacklash.ideal(1.0, 0.1, 0.1)
+    >>> [m.input_lag for m in _one_stage(AugmentedModel(bl, input_lag=0.81, input_lag_order=2))]
+    [0.9]
+    >>> _one_stage(AugmentedModel(bl, input_lag=0.9))
+    []
+    """
+    if model.input_lag == 0.0 or model.input_lag_order == 1:
+        return []
+    pole = float(model.input_lag ** (1.0 / model.input_lag_order))
+    return [replace(model, input_lag=round(pole, 15), input_lag_order=1)]
+
+
 class TimeDelay:
     """Detector and augmentation of a dead time."""
 
     name = "time_delay"
 
     def applicable(self, model: AugmentedModel) -> bool:
-        """Only while the model has no dead time."""
-        return model.delay == 0
+        """While the model has no dead time, or only the one a servo's lag carries.
+
+        :mod:`.input_lag` searches the servo's dead time with its lag, up to a few samples
+        beyond the model's own: a dead time beyond it (a transport delay, a bus) is then
+        mimicked by a second lag stage, and is still a dead time to look for. With the
+        servo's dead time counted as the model's, a dead time of 4.9 ms behind a servo lag of
+        14 ms was never nominated: the lag took two samples and a second stage, and the
+        record was named ``input_lag`` alone.
+        """
+        return model.delay == 0 or model.input_lag != 0.0
 
     def detect(self, context: Context) -> Detection:
         """Is the error step response significant, and is it a box?"""
@@ -72,9 +103,10 @@ class TimeDelay:
     def augment(self, context: Context, detection: Detection) -> ModelFit | None:
         """Search the dead time with short refits, then refit the best candidates fully."""
         trials: list[ModelFit] = []
-        for delay in range(1, context.settings.max_delay + 1):
-            spec = context.spec.extended(delay=delay)
-            starts = [(spec, spec.embed(context.fit.model))]
+        models = [context.fit.model, *_one_stage(context.fit.model)]
+        for delay, model in itertools.product(range(1, context.settings.max_delay + 1), models):
+            spec = ModelSpec.of(model).extended(delay=delay)
+            starts = [(spec, spec.embed(model))]
             fresh = fresh_start(context, spec) if context.degenerate else None
             if fresh is not None:
                 starts.append(fresh)
