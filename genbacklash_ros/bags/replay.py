@@ -22,12 +22,9 @@ properly (it stays readable) and returns the reason in :attr:`ReplayResult.error
 
 from __future__ import annotations
 
-import gc
 import itertools
-import threading
 import time
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -47,6 +44,7 @@ from genbacklash_ros.bags.bagio import (
 )
 from genbacklash_ros.bags.raw_values import RawValueReader, UndecodableMessage
 from genbacklash_ros.blas_threads import one_blas_thread
+from genbacklash_ros.gc_pauses import few_collections
 from genbacklash_ros.node.compensate import CompensationStatus
 from genbacklash_ros.node.messages import DiagnosticArray, Float64MultiArray, MessageError
 from genbacklash_ros.node.parameters import NodeParameters
@@ -63,40 +61,6 @@ OUTPUT_TOPICS: dict[str, str] = {
 
 _PROGRESS_EVERY = 2048
 _BLOCK = 8192  # input messages handed to the pipeline at once (BacklashPipeline.on_batch)
-_GC_YOUNG = 50_000  # allocations between young-generation collections during a replay
-
-
-_gc_lock = threading.Lock()
-_gc_users: list[tuple[int, int, int]] = []  # the thresholds to restore, one per replay running
-
-
-@contextmanager
-def _few_collections() -> Iterator[None]:
-    """Collect reference cycles less often while a replay runs.
-
-    A replay allocates a few tuples and byte strings per message and keeps almost none, so
-    the collector's default (a young collection every 700 allocations, a full one when the
-    survivors pile up) spends its time scanning what lives anyway: the imported modules and
-    the replay's history. Here what exists already is frozen out of the collections
-    (:func:`gc.freeze`) and the young generation is collected every ``_GC_YOUNG``
-    allocations; cycles are still collected. Both are undone when the last replay running
-    in the process (fleet threads run several) ends. Measured on the 5-minute operation
-    bag: about 0.2 s of 2.1 s (BENCHMARKS.md "Replay throughput").
-    """
-    with _gc_lock:
-        if not _gc_users:
-            gc.freeze()
-        _gc_users.append(gc.get_threshold())
-        gc.set_threshold(_GC_YOUNG, *_gc_users[0][1:])
-    try:
-        yield
-    finally:
-        with _gc_lock:
-            first = _gc_users[0]
-            _gc_users.pop()
-            if not _gc_users:
-                gc.set_threshold(*first)
-                gc.unfreeze()
 
 
 @dataclass
@@ -524,7 +488,7 @@ def replay(
     if command_topic == encoder_topic:
         raise BagError(f"the command and encoder topics must differ, both are {command_topic!r}")
     started = time.perf_counter()
-    with _few_collections(), one_blas_thread(), BagReader(bag) as reader:
+    with few_collections(), one_blas_thread(), BagReader(bag) as reader:
         cmd_info = reader.topic(command_topic, COMMAND_MSGTYPES)
         enc_info = reader.topic(encoder_topic, ENCODER_MSGTYPES)
         custom_data = reader.custom_data

@@ -20,6 +20,7 @@ from typing import Any
 
 from genbacklash_core import GenBacklashError
 from genbacklash_ros.blas_threads import one_blas_thread
+from genbacklash_ros.gc_pauses import few_collections
 from genbacklash_ros.node.joints import JointSet, load_joint_set
 from genbacklash_ros.node.parameters import NODE_NAME
 from genbacklash_ros.transports.stop_signals import StopSignals
@@ -145,7 +146,8 @@ def _run_dds(args: argparse.Namespace, params: JointSet, stop: StopSignals) -> i
         node.stop()
 
     stop.on_stop(on_stop)  # (at once when a signal came while the node started)
-    node.spin(args.duration)
+    with few_collections():  # the node built: its objects out of the collector's scans
+        node.spin(args.duration)
     return 0
 
 

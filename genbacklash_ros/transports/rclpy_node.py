@@ -101,6 +101,7 @@ from std_msgs.msg import MultiArrayDimension as RosMultiArrayDimension
 
 from genbacklash_core import GenBacklashError
 from genbacklash_ros.blas_threads import one_blas_thread
+from genbacklash_ros.gc_pauses import few_collections
 from genbacklash_ros.node.checkpoint_writer import BackgroundCheckpointWriter
 from genbacklash_ros.node.identify import live_worker
 from genbacklash_ros.node.joints import JointSet, is_joint_parameter, load_joint_set
@@ -838,8 +839,9 @@ def _run(argv: list[str], stop: StopSignals) -> int:
         executor.add_node(node)
         loop = WaitLoop(node, executor)
         try:
-            while not stop.requested:
-                loop.run_once(WAKE_S)
+            with few_collections():  # the node built: its objects out of the collector's scans
+                while not stop.requested:
+                    loop.run_once(WAKE_S)
         finally:
             loop.close()
     except ExternalShutdownException:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import gc
 import json
 from pathlib import Path
 
@@ -11,7 +10,7 @@ import pytest
 
 from genbacklash_core import paper_example
 from genbacklash_ros.bags.bagio import BagReader
-from genbacklash_ros.bags.replay import _GC_YOUNG, OUTPUT_TOPICS, _few_collections, replay
+from genbacklash_ros.bags.replay import OUTPUT_TOPICS, replay
 from genbacklash_ros.bags.simbags import (
     COMMAND_TOPIC,
     ENCODER_TOPIC,
@@ -224,20 +223,6 @@ def test_replay_gives_the_same_outputs_on_every_run(example_bag: Path, tmp_path:
     assert first == second
     estimates = {raw for topic, _, raw in first if topic == OUTPUT_TOPICS["estimate"]}
     assert len(estimates) > 5  # the estimate moved during the replay: adoption mattered
-
-
-def test_a_replay_leaves_the_collector_as_it_found_it() -> None:
-    """The collector's thresholds and freeze come back when the last replay running ends,
-    also when replays overlap (fleet threads) and when one raises."""
-    before = gc.get_threshold()
-    assert gc.get_freeze_count() == 0
-    with _few_collections():
-        assert gc.get_threshold()[0] == _GC_YOUNG and gc.get_freeze_count() > 0
-        with pytest.raises(RuntimeError), _few_collections():  # a second one, which fails
-            raise RuntimeError("damaged")
-        assert gc.get_threshold()[0] == _GC_YOUNG  # the first still runs
-    assert gc.get_threshold() == before
-    assert gc.get_freeze_count() == 0
 
 
 def test_a_block_interrupted_while_fed_is_not_fed_again(
