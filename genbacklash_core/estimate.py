@@ -236,10 +236,13 @@ class Estimate:
         """Parameter names in vector order (as published on ``~/estimate``)."""
         return self.structure.names()
 
-    @property
+    @cached_property
     def available(self) -> bool:
-        """True when the estimate holds parameters (always, except while warming up)."""
-        return bool(np.all(np.isfinite(self.parameters)))
+        """True when the estimate holds parameters (always, except while warming up).
+
+        Worked out once: the parameters are read-only (the node asks at every feed, stretch
+        and publication)."""
+        return bool(np.isfinite(self.parameters).all())
 
     def std(self) -> FloatArray:
         """Standard deviation of each parameter (square root of the covariance diagonal)."""

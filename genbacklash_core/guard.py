@@ -210,7 +210,7 @@ class CompensationGuard:
             self._pending.clear()
             self._waiting = 0
             return self.verdict
-        if model != self._model:
+        if model is not self._model and model != self._model:
             return self.adopt(model)  # the batch is in the history it is judged on
         self._pending.append((u, y, brk))
         self._waiting += u.size
@@ -235,7 +235,7 @@ class CompensationGuard:
     def adopt(self, model: GeneralBacklash | Cascade | None) -> GuardVerdict:
         """A new model is in use: judge it at once on the samples remembered (the last
         ``HISTORY`` windows), so that its verdict does not wait for new evidence."""
-        if model is None or model == self._model:
+        if model is None or model is self._model or model == self._model:
             self._model = model if model is not None else self._model
             return self.verdict
         self._model = model

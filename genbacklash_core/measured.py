@@ -206,7 +206,7 @@ class _Mean:
         """Readings of this kind in order (stamps in ns), each after the last one added."""
         steps_ns = stamp_steps(stamps, self.last)
         steps = np.minimum(np.maximum(steps_ns / 1e9, 0.0), _MAX_STEP_S)  # np.clip, no NaN here
-        ages = np.cumsum(steps)
+        ages = steps.cumsum()
         total = float(ages[-1])
         fade = np.exp((ages - total) / window)  # exp(-(age of the newest - age) / window)
         keep = math.exp(-total / window)

@@ -146,7 +146,7 @@ def settling_keep(
     previous = np.empty_like(u)
     previous[1:] = u[:-1]
     previous[0] = np.nan if before.last_u is None else before.last_u
-    where = np.flatnonzero(u != previous)
+    where = (u != previous).nonzero()[0]
     # runs: the carried run ends at the first change; each change starts a new one
     ends = np.concatenate((where, [n]))
     counts = stamp_steps(ends, 0)  # samples before the first change, then in each run
@@ -227,7 +227,7 @@ def carry_marks(marks: ArrayLike, keep: ArrayLike) -> BoolArray:
     """
     m = np.asarray(marks, dtype=bool)
     k = np.asarray(keep, dtype=bool)
-    count = np.cumsum(m)
+    count = m.cumsum()
     at = count[k]
     before = np.concatenate(([0], at[:-1]))
     out: BoolArray = at > before

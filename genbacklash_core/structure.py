@@ -156,7 +156,7 @@ class Structure:
         With ``u_range`` the branches must also stay apart on that input range (the paper's
         condition below eq. 21): where they cross the model is no backlash.
         """
-        if not np.all(np.isfinite(p)):
+        if not np.isfinite(p).all():
             return "a parameter became non-finite"
         m_left, c_left, m_right, c_right = self.split(p)
         if m_left[0] * self.sign <= 0 or m_right[0] * self.sign <= 0:

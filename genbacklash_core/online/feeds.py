@@ -164,12 +164,12 @@ class RowFeed(Feed):
         follows = ~b
         follows[0] = link
         row = follows & (u != u_prev)  # a held command or a dwell adds no row
-        counts = np.cumsum(row)  # rows up to each sample of the call
+        counts = row.cumsum()  # rows up to each sample of the call
         start = 0
         while start < u.size:
             need = due() - self.rows
             before = int(counts[start - 1]) if start else 0
-            hit = int(np.searchsorted(counts[start:], before + max(need, 1)))
+            hit = int(counts[start:].searchsorted(before + max(need, 1)))
             stop = u.size if hit >= counts.size - start else start + hit + 1
             part = slice(start, stop)
             self.ring.extend(u[part], y[part], b[part])  # the refinement's recent series
@@ -178,7 +178,7 @@ class RowFeed(Feed):
                 m = self.memory
                 m.add(u_prev[part][taken], u[part][taken], y_prev[part][taken], y[part][taken])
                 self.rows += int(np.count_nonzero(taken))
-                self.idle = stop - 1 - (start + int(np.flatnonzero(taken)[-1]))
+                self.idle = stop - 1 - (start + int(taken.nonzero()[0][-1]))
             else:
                 self.idle += stop - start
             start = stop

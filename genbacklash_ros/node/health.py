@@ -785,7 +785,7 @@ class StreamHealth:
                     highs,
                     None if resumed is None else resumed[part],
                 )
-                if np.any(errs > self._limit(trusted)):
+                if (errs > self._limit(trusted)).any():
                     break  # a spike: this step and those after it sample by sample
                 self._track_scale(errs, ys[part])
                 y_part = ys[part]
@@ -889,7 +889,7 @@ class StreamHealth:
         self._fed_band = (float(edges[0][-1]), float(edges[1][-1]))
         if resync is None and y_prev is not None and not fresh.any():
             errs, on_low, on_high = _one_step_errors(y_prev, band_prev, ys, low, high, resumed)
-            if not np.any(errs > limit):
+            if not (errs > limit).any():
                 self._track_scale(errs, ys)
                 self._track_shift(
                     ys[on_low] - edges[0][on_low], ys[on_high] - edges[1][on_high], model
@@ -1220,7 +1220,8 @@ class StreamHealth:
             with np.errstate(all="ignore"):
                 steps = np.abs(ys[1:] - ys[:-1])
                 # NaN and equal readings out (none left: inf, the count unchanged)
-                smallest = float(np.min(steps, where=steps > 0.0, initial=math.inf))
+                moved = steps[steps > 0.0]
+                smallest = float(moved.min()) if moved.size else math.inf
             self._quantum = min(self._quantum, smallest)
 
     def _track_scale(self, errors: np.ndarray, ys: np.ndarray) -> None:
@@ -1231,7 +1232,8 @@ class StreamHealth:
             return
         k = (errors.size - 1) * 3 // 4
         floor = 1e-3 * float(np.maximum.reduce(np.abs(ys)))  # np.max without its wrapper
-        batch = max(float(np.partition(errors, k)[k]) / 1.15, floor, 1e-300)
+        errors.partition(k)  # in place: ``errors`` is this step's own copy
+        batch = max(float(errors[k]) / 1.15, floor, 1e-300)
         if batch < math.inf:
             scale = self._scale
             self._scale = batch if scale is None else scale + _SCALE_SMOOTHING * (batch - scale)

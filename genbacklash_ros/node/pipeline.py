@@ -355,6 +355,14 @@ def _seen(
     return None
 
 
+def _first_at(times: np.ndarray, due: int, start: int, end: int) -> int:
+    """The first message of ``start .. end - 1`` whose time is ``due`` or later (``end``:
+    none); the times need not be in order. Two array methods, not ``np.flatnonzero``'s
+    wrappers: it runs at every stretch."""
+    late = times[start:end] >= due
+    return start + int(late.argmax()) if late.any() else end
+
+
 _STRETCH_MAX = 8192  # messages looked at for one stretch at most
 _NOT_JUDGED = object()
 
@@ -807,9 +815,9 @@ class BacklashPipeline:
             end = min(end, view.nonfinite[k])
         marks: list[int] = []  # commands at which an estimate (or nothing) comes due
         if end > i:
-            late = np.flatnonzero(view.times[i:end] >= due)  # a periodic step is due
-            if late.size:
-                end = natural = self._periodic_end(view, i + int(late[0]), end, marks)
+            late = _first_at(view.times, due, i, end)  # a periodic step is due
+            if late < end:
+                end = natural = self._periodic_end(view, late, end, marks)
         if end == i:
             return i, False
         c0, e0 = view.cmd_before[i], view.enc_before[i]
@@ -856,8 +864,7 @@ class BacklashPipeline:
             assert after is not None
             p += 1
             if after > now:  # else (a feed due) the next message has a step due
-                later = np.flatnonzero(times[p:end] >= after)
-                p = end if later.size == 0 else p + int(later[0])
+                p = _first_at(times, after, p, end)
             if p >= end:
                 return end
 

@@ -371,7 +371,8 @@ class EncoderPeriod:
 
     def add_many(self, steps_ns: list[int]) -> None:
         """Differences in order, as :meth:`add` for each."""
-        positive = [step for step in steps_ns if step > 0]
+        # a stretch's readings are in order: every difference positive, none to sift out
+        positive = steps_ns if steps_ns and min(steps_ns) > 0 else [s for s in steps_ns if s > 0]
         if positive:
             self._steps.extend(positive)
             self._cached = None

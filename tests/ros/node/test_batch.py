@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 from genbacklash_core.scenarios import OperationSettings, operation_record
 from genbacklash_ros.node.messages import MessageError, read_command, read_encoder
 from genbacklash_ros.node.parameters import NodeParameters
-from genbacklash_ros.node.pipeline import BacklashPipeline, Output
+from genbacklash_ros.node.pipeline import BacklashPipeline, Output, _first_at
 from genbacklash_ros.node.publish import Schedule
 from genbacklash_ros.node.sample_rule import EncoderPeriod
 from genbacklash_ros.node.silence import SilentStreams
@@ -187,6 +187,23 @@ def test_period_add_many_is_add_in_turn(steps: list[int]) -> None:
         one.add(step)
     two.add_many(steps)
     assert one.value == two.value
+
+
+@given(
+    times=st.lists(st.integers(0, 40), max_size=60),
+    due=st.integers(-5, 45),
+    start=st.integers(0, 70),
+    end=st.integers(0, 70),
+)
+def test_first_at_is_the_first_late_message(
+    times: list[int], due: int, start: int, end: int
+) -> None:
+    """The first message from ``start`` on (before ``end``) whose time is ``due`` or later,
+    the times in any order; ``end`` when none is."""
+    array = np.array(times, dtype=np.int64)
+    end = min(end, array.size)
+    late = np.flatnonzero(array[start:end] >= due)
+    assert _first_at(array, due, start, end) == (start + int(late[0]) if late.size else end)
 
 
 def _frozen_encoder_after_a_jump(seed: int, hold_ms: int = 150) -> tuple[list[Event], int]:
