@@ -901,6 +901,23 @@ def _advance(
     return u, (plan.clamp(x, u), u, v, direction, offset, ramp)
 
 
+def _same_float(a: float, b: float) -> bool:
+    """``a`` and ``b`` are the same number, a zero's sign included (``0.0 == -0.0`` alone
+    would let a step's output take the other zero's sign)."""
+    return a == b and (a != 0.0 or math.copysign(1.0, a) == math.copysign(1.0, b))
+
+
+def _same_memory(a: _Memory, b: _Memory) -> bool:
+    """Two states as tuples are the same bit for bit (zeros' signs included)."""
+    return (
+        a == b
+        and _same_float(a[0], b[0])
+        and _same_float(a[1], b[1])
+        and _same_float(a[2], b[2])
+        and _same_float(a[4], b[4])
+    )
+
+
 def _as_float(name: str, value: object) -> float:
     try:
         return float(value)  # type: ignore[arg-type]
@@ -1064,6 +1081,8 @@ class InverseBacklash:
         self._state = CompensatorState.initial(model, x0, u0, self._options)
         # a settled step of the last run: (its state, target, confidence, command)
         self._repeat: tuple[CompensatorState, float, float, float] | None = None
+        # the same for the last step() (bit for bit: its own, the run's compares by value)
+        self._held: tuple[CompensatorState, float, float, float] | None = None
 
     @property
     def model(self) -> GeneralBacklash | Cascade:
@@ -1093,21 +1112,34 @@ class InverseBacklash:
         """
         self._plan = _plan_for(model, self._options)
         self._model = model
-        self._repeat = None  # a step of the old plan
+        self._repeat = self._held = None  # a step of the old plan
 
     def reset(self, x0: float = 0.0, u0: float | None = None) -> None:
         """Restart at rest: load at ``x0``, command ``u0`` (as :meth:`CompensatorState.initial`)."""
         self._state = CompensatorState.initial(self._model, x0, u0, self._options)
 
     def step(self, x_d: float, confidence: float = 1.0) -> float:
-        """The command for one desired output sample; see :func:`compensate_step`."""
-        u, self._state = _step(
-            self._plan,
-            self._state,
-            _as_float("x_d", x_d),
-            self._options,
-            _as_float("confidence", confidence),
-        )
+        """The command for one desired output sample; see :func:`compensate_step`.
+
+        A step is a function of (state, target, confidence): a held target on a state the
+        last step left unchanged gives the same command and state again, so it is not
+        recomputed (as :meth:`steps` does; a node's held commands).
+        """
+        target = _as_float("x_d", x_d)
+        trust = _as_float("confidence", confidence)
+        state = self._state
+        held = self._held
+        if (
+            held is not None
+            and held[0] is state
+            and _same_float(target, held[1])
+            and _same_float(trust, held[2])
+        ):
+            return held[3]
+        memory = _memory_of(state)
+        u, after = _advance(self._plan, memory, target, self._options, trust)
+        self._state = state = CompensatorState(*after)
+        self._held = (state, target, trust, u) if _same_memory(after, memory) else None
         return u
 
     def run(self, x_d: ArrayLike, confidence: ArrayLike = 1.0) -> FloatArray:
