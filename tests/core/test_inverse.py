@@ -660,6 +660,29 @@ def test_held_targets_give_the_pure_steps_bit_for_bit() -> None:
     assert sent[-9:] == ["0x0.0p+0"] * 1 + ["-0x0.0p+0"] * 5 + ["0x0.0p+0"] * 3
 
 
+def test_steps_unread_then_the_state_and_a_run_continue_as_the_pure_form() -> None:
+    """The state a step leaves is built only when read: steps with no read, then the state,
+    a run and steps again are the pure function's, a held dwell included."""
+    options = CompensatorOptions(max_rate=0.3, smoothing=2)
+    x_d = np.repeat(_walk(8, 40, -0.8, 0.8), 4)
+    comp = InverseBacklash(EXAMPLE1, options)
+    state = CompensatorState.initial(EXAMPLE1, options=options)
+    expected, states = [], []
+    for target in x_d:
+        u, state = compensate_step(EXAMPLE1, state, target, options)
+        expected.append(u)
+        states.append(state)
+    got = [comp.step(target) for target in x_d[:100]]
+    assert comp.state == states[99]
+    np.testing.assert_array_equal(comp.run(x_d[100:130]), expected[100:130])
+    got += expected[100:130]
+    got += [comp.step(target) for target in x_d[130:]]
+    assert got == expected
+    assert comp.state == state
+    comp.state = comp.state  # the same snapshot back: nothing changes
+    assert comp.step(x_d[-1]) == compensate_step(EXAMPLE1, state, x_d[-1], options)[0]
+
+
 def test_stateful_reset_and_state_assignment() -> None:
     comp = InverseBacklash(IDEAL, x0=0.2, u0=0.0)
     assert comp.state == CompensatorState(x=0.2, u=0.0, u_inverse=0.0)
