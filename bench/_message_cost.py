@@ -35,21 +35,15 @@ TREE = sys.argv[1] if len(sys.argv) > 1 else "."
 sys.path.insert(0, TREE)
 
 import numpy as np  # noqa: E402
+from six_joint import FACTORS, JOINTS, arm_data  # noqa: E402
 
-from genbacklash_core.scenarios import (  # noqa: E402
-    OPERATION_BACKLASH,
-    OperationSettings,
-    arm_records,
-    worn,
-)
+from genbacklash_core.scenarios import OPERATION_BACKLASH, worn  # noqa: E402
 from genbacklash_ros.blas_threads import one_blas_thread  # noqa: E402
 from genbacklash_ros.node.identify import SyncWorker  # noqa: E402
 from genbacklash_ros.node.joints import JointSet  # noqa: E402
 from genbacklash_ros.node.messages import Float64MultiArray, Header, JointState, Time  # noqa: E402
 from genbacklash_ros.node.multijoint import MultiJointPipeline  # noqa: E402
 
-JOINTS = tuple(f"joint_{i + 1}" for i in range(6))
-FACTORS = (0.6, 0.8, 1.0, 1.2, 1.5, 2.0)
 TICK = 1_000_000
 T0 = 1_700_000_000 * 1_000_000_000
 Feed = list[tuple[str, Any, int]]
@@ -57,21 +51,10 @@ _IDENTIFY_NS = [0]
 
 
 def arm(seconds: float) -> tuple[list[list[float]], list[list[float]]]:
-    """Commands ``[u_1 .. u_6, k]`` and readings ``[y_1 .. y_6]`` per tick (as six_joint)."""
-    settings = OperationSettings(
-        duration=seconds,
-        command_rate=1000.0,
-        encoder_rate=1000.0,
-        command_jitter=0.0,
-        stamp_jitter=0.0,
-        loss=0.0,
-    )
-    records = arm_records([worn(OPERATION_BACKLASH, f) for f in FACTORS], settings, 1)
-    u = np.stack([r.command_u for r in records])
-    y = np.stack([r.y_all for r in records])
-    n = min(u.shape[1], y.shape[1])
-    rows = np.vstack([u[:, :n], np.arange(n, dtype=np.float64)]).T.tolist()
-    return rows, y[:, :n].T.tolist()
+    """Commands ``[u_1 .. u_6, k]`` and readings ``[y_1 .. y_6]`` per tick (six_joint's)."""
+    u, y = arm_data([worn(OPERATION_BACKLASH, f) for f in FACTORS], seconds, 1)
+    rows = np.vstack([u, np.arange(u.shape[1], dtype=np.float64)]).T.tolist()
+    return rows, y.T.tolist()
 
 
 def clean_feed(seconds: float) -> Feed:
