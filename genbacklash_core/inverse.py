@@ -227,30 +227,9 @@ class CompensatorState:
     ramp: int = 0
 
     def __post_init__(self) -> None:
-        x, u, v, offset, direction, ramp = (
-            self.x,
-            self.u,
-            self.u_inverse,
-            self.offset,
-            self.direction,
-            self.ramp,
-        )
-        if (  # fast path: finite Python floats and ints, as every step makes them
-            type(x) is float
-            and type(u) is float
-            and type(v) is float
-            and type(offset) is float
-            and type(direction) is int
-            and type(ramp) is int
-            and -_MAX <= x <= _MAX
-            and -_MAX <= u <= _MAX
-            and -_MAX <= v <= _MAX
-            and -_MAX <= offset <= _MAX
-            and -1 <= direction <= 1
-            and ramp >= 0
-        ):
-            return
-        self._validate()
+        # fast path: finite Python floats and ints, as every step makes them
+        if not _plain((self.x, self.u, self.u_inverse, self.direction, self.offset, self.ramp)):
+            self._validate()
 
     def _validate(self) -> None:
         for name in ("x", "u", "u_inverse", "offset"):
@@ -304,6 +283,27 @@ class CompensatorState:
 
 
 _DEFAULT_OPTIONS = CompensatorOptions()
+
+
+def _plain(memory: tuple[object, ...]) -> bool:
+    """A state's fields in :class:`CompensatorState` order are finite Python floats and ints
+    within range: a valid state as it stands (else :meth:`CompensatorState._validate`
+    converts them or says why not)."""
+    x, u, v, direction, offset, ramp = memory
+    return (
+        type(x) is float
+        and type(u) is float
+        and type(v) is float
+        and type(offset) is float
+        and type(direction) is int
+        and type(ramp) is int
+        and -_MAX <= x <= _MAX
+        and -_MAX <= u <= _MAX
+        and -_MAX <= v <= _MAX
+        and -_MAX <= offset <= _MAX
+        and -1 <= direction <= 1
+        and ramp >= 0
+    )
 
 
 def _as_options(options: object) -> CompensatorOptions:
@@ -901,6 +901,23 @@ def _advance(
     return u, (plan.clamp(x, u), u, v, direction, offset, ramp)
 
 
+def _same_float(a: float, b: float) -> bool:
+    """``a`` and ``b`` are the same number, a zero's sign included (``0.0 == -0.0`` alone
+    would let a step's output take the other zero's sign)."""
+    return a == b and (a != 0.0 or math.copysign(1.0, a) == math.copysign(1.0, b))
+
+
+def _same_memory(a: _Memory, b: _Memory) -> bool:
+    """Two states as tuples are the same bit for bit (zeros' signs included)."""
+    return (
+        a == b
+        and _same_float(a[0], b[0])
+        and _same_float(a[1], b[1])
+        and _same_float(a[2], b[2])
+        and _same_float(a[4], b[4])
+    )
+
+
 def _as_float(name: str, value: object) -> float:
     try:
         return float(value)  # type: ignore[arg-type]
@@ -1061,9 +1078,15 @@ class InverseBacklash:
         self._options = _DEFAULT_OPTIONS if options is None else _as_options(options)
         self._plan = _plan_for(model, self._options)
         self._model = model
-        self._state = CompensatorState.initial(model, x0, u0, self._options)
+        # the state as a tuple (what the steps take and give), and as a CompensatorState
+        # once asked for (None: not built yet; a step on a node's command does not build it)
+        state = CompensatorState.initial(model, x0, u0, self._options)
+        self._memory: _Memory = _memory_of(state)
+        self._snapshot: CompensatorState | None = state
         # a settled step of the last run: (its state, target, confidence, command)
-        self._repeat: tuple[CompensatorState, float, float, float] | None = None
+        self._repeat: tuple[_Memory, float, float, float] | None = None
+        # the same for the last step() (bit for bit: its own, the run's compares by value)
+        self._held: tuple[_Memory, float, float, float] | None = None
 
     @property
     def model(self) -> GeneralBacklash | Cascade:
@@ -1078,13 +1101,17 @@ class InverseBacklash:
     @property
     def state(self) -> CompensatorState:
         """The current state (a frozen snapshot; assign a state to continue from it)."""
-        return self._state
+        state = self._snapshot
+        if state is None:
+            self._snapshot = state = CompensatorState(*self._memory)
+        return state
 
     @state.setter
     def state(self, value: CompensatorState) -> None:
         if not isinstance(value, CompensatorState):
             raise GenBacklashError(f"state must be a CompensatorState, got {value!r}")
-        self._state = value
+        if value is not self._snapshot:
+            self._snapshot, self._memory = value, _memory_of(value)
 
     def set_model(self, model: GeneralBacklash | Cascade) -> None:
         """Replace the model while running; the state carries over.
@@ -1093,21 +1120,39 @@ class InverseBacklash:
         """
         self._plan = _plan_for(model, self._options)
         self._model = model
-        self._repeat = None  # a step of the old plan
+        self._repeat = self._held = None  # a step of the old plan
 
     def reset(self, x0: float = 0.0, u0: float | None = None) -> None:
         """Restart at rest: load at ``x0``, command ``u0`` (as :meth:`CompensatorState.initial`)."""
-        self._state = CompensatorState.initial(self._model, x0, u0, self._options)
+        state = CompensatorState.initial(self._model, x0, u0, self._options)
+        self._snapshot, self._memory = state, _memory_of(state)
 
     def step(self, x_d: float, confidence: float = 1.0) -> float:
-        """The command for one desired output sample; see :func:`compensate_step`."""
-        u, self._state = _step(
-            self._plan,
-            self._state,
-            _as_float("x_d", x_d),
-            self._options,
-            _as_float("confidence", confidence),
-        )
+        """The command for one desired output sample; see :func:`compensate_step`.
+
+        A step is a function of (state, target, confidence): a held target on a state the
+        last step left unchanged gives the same command and state again, so it is not
+        recomputed (as :meth:`steps` does; a node's held commands).
+        """
+        target = _as_float("x_d", x_d)
+        trust = _as_float("confidence", confidence)
+        memory = self._memory
+        held = self._held
+        if (
+            held is not None
+            and held[0] is memory
+            and _same_float(target, held[1])
+            and _same_float(trust, held[2])
+        ):
+            return held[3]
+        u, after = _advance(self._plan, memory, target, self._options, trust)
+        if _plain(after):  # a valid state as it is: built only when asked for
+            self._snapshot = None
+        else:  # what CompensatorState makes of it (converted, or why not raised)
+            state = CompensatorState(*after)
+            self._snapshot, after = state, _memory_of(state)
+        self._memory = after
+        self._held = (after, target, trust, u) if _same_memory(after, memory) else None
         return u
 
     def run(self, x_d: ArrayLike, confidence: ArrayLike = 1.0) -> FloatArray:
@@ -1130,8 +1175,7 @@ class InverseBacklash:
         return self._run(targets, [trust] * len(targets))
 
     def _run(self, targets: list[float], trusts: list[float]) -> list[float]:
-        state = self._state
-        memory = _memory_of(state)
+        memory = start = self._memory
         plan, options = self._plan, self._options
         out = []
         # A step is a function of (state, target, confidence): a held command on a state the
@@ -1139,7 +1183,7 @@ class InverseBacklash:
         # ``settled``: (target, confidence, command) of such a step, from the last run too
         # while its state is still the current one and the plan the same.
         repeat = self._repeat
-        settled = repeat[1:] if repeat is not None and repeat[0] is state else None
+        settled = repeat[1:] if repeat is not None and repeat[0] is start else None
         for target, trust in zip(targets, trusts, strict=True):
             if settled is not None and target == settled[0] and trust == settled[1]:
                 out.append(settled[2])
@@ -1148,6 +1192,7 @@ class InverseBacklash:
             settled = (target, trust, u) if after == memory else None
             memory = after
             out.append(u)
-        self._state = state = CompensatorState(*memory)
-        self._repeat = None if settled is None else (state, *settled)
+        state = CompensatorState(*memory)
+        self._snapshot, self._memory = state, _memory_of(state)
+        self._repeat = None if settled is None else (self._memory, *settled)
         return out

@@ -120,6 +120,13 @@ class MultiJointPipeline:
             self.close()
             raise
         self._command_class = Float64MultiArray if self._kind != "joint_state" else JointState
+        # per joint, in ``joints`` order: (name, pipeline, command index), fixed while the
+        # node runs (set_joint_set), so that a message's pass over the joints looks up nothing
+        self._slots = tuple(
+            (params.joint, self._pipes[params.joint], params.command_index)
+            for params in joints.per_joint
+        )
+        self._places = _Places(tuple(self._pipes))
 
     # ------------------------------------------------------------------ properties
 
@@ -204,17 +211,16 @@ class MultiJointPipeline:
         kind = self._kind
         array = _finite_data(msg) if kind == "float64_multi_array" else None
         data = None if array is None else list(array)
+        size = 0 if data is None else len(data)
         out_msg: CommandMessage = msg
         stamp: int | None = None
-        for pipe in self._pipes.values():
-            params = pipe.params
-            index = params.command_index
-            if data is not None and index < len(data):  # every element finite: read it
+        for joint, pipe, index in self._slots:
+            if data is not None and index < size:  # every element a finite float: read it
                 header_ns: int | None = None
-                value = float(data[index])
+                value = data[index]
             else:  # the adapter says why (or reads a JointState command)
                 try:
-                    header_ns, value = read_command(msg, kind, index=index, joint=params.joint)
+                    header_ns, value = read_command(msg, kind, index=index, joint=joint)
                 except MessageError as err:
                     pipe.reject("command", str(err))
                     continue
@@ -226,7 +232,7 @@ class MultiJointPipeline:
             if data is not None:
                 data[index] = float(sent)
             else:
-                out_msg = compensated_command(out_msg, sent, kind, index=index, joint=params.joint)
+                out_msg = compensated_command(out_msg, sent, kind, index=index, joint=joint)
         if stamp is None:
             return None
         if data is not None:
@@ -238,7 +244,7 @@ class MultiJointPipeline:
         """Every joint's :meth:`BacklashPipeline.periodic`, in joint order, each tagged with
         its joint."""
         outputs: list[Output] = []
-        for joint, pipe in self._pipes.items():
+        for joint, pipe, _ in self._slots:
             due = pipe.periodic()
             if due:
                 outputs.extend(_tagged(due, joint))
@@ -253,12 +259,22 @@ class MultiJointPipeline:
         """An encoder JointState: each joint's reading to its pipeline; the periodic outputs
         now due."""
         outputs: list[Output] = []
-        found = _positions(msg)
-        for joint, pipe in self._pipes.items():
-            if found is not None and joint in found[1]:  # a plain reading: the value itself
-                value = found[1][joint]
-                due = pipe.on_encoder_value(found[0], value, receive_ns)
-            else:  # the adapter reads it, or says why it cannot
+        places = self._places.of(msg)
+        if places is None:  # not a plain JointState: the adapter reads it, or says why not
+            for joint, pipe, _ in self._slots:
+                due = pipe.on_encoder(msg, receive_ns)
+                if due:
+                    outputs.extend(_tagged(due, joint))
+            return outputs
+        assert isinstance(msg, JointState)
+        stamp = msg.header.stamp.to_ns()
+        position = msg.position
+        isfinite = math.isfinite
+        for (joint, pipe, _), k in zip(self._slots, places, strict=True):
+            value = position[k] if k >= 0 else None
+            if type(value) is float and isfinite(value):  # a plain reading: the value itself
+                due = pipe.on_encoder_value(stamp, value, receive_ns)
+            else:  # the adapter says why it cannot read it
                 due = pipe.on_encoder(msg, receive_ns)
             if due:
                 outputs.extend(_tagged(due, joint))
@@ -303,24 +319,46 @@ def _finite_data(msg: object) -> tuple[float, ...] | None:
     return data if all(type(v) is float and isfinite(v) for v in data) else None
 
 
-def _positions(msg: object) -> tuple[int, dict[str, float]] | None:
-    """A JointState's header stamp and its finite positions by name, when it has as many
-    names as positions (what the adapter reads the same way), else None."""
-    if not isinstance(msg, JointState):
-        return None
-    names, position = msg.name, msg.position
-    if len(names) != len(position) or not names:
-        return None
-    stamp = msg.header.stamp.to_ns()
-    seen: set[str] = set()
-    found: dict[str, float] = {}
-    for name, value in zip(names, position, strict=True):
-        if name in seen:  # the adapter reads a name's first position only
-            continue
-        seen.add(name)
-        if type(value) is float and math.isfinite(value):
-            found[name] = value
-    return stamp, found
+class _Places:
+    """Where each joint's position is in a JointState: looked up once per name tuple.
+
+    Parameters
+    ----------
+    joints : tuple of str
+        The joints, in the order :meth:`of` gives their places.
+
+    Examples
+    --------
+    >>> places = _Places(("a", "b"))
+    >>> places.of(JointState(Header(), ("b", "c", "b"), (0.1, 0.2, 0.3)))
+    (-1, 0)
+    >>> places.of(JointState(Header(), ("b",), ())) is None  # what the adapter reads one by one
+    True
+    """
+
+    __slots__ = ("_joints", "_names", "_places")
+
+    def __init__(self, joints: tuple[str, ...]) -> None:
+        self._joints = joints
+        self._names: tuple[str, ...] | None = None
+        self._places: tuple[int, ...] = ()
+
+    def of(self, msg: object) -> tuple[int, ...] | None:
+        """Per joint, the index of its name's first position in ``msg`` (-1: not there),
+        when ``msg`` is a JointState with as many names as positions (the adapter reads it
+        the same way), else None."""
+        if not isinstance(msg, JointState):
+            return None
+        names = msg.name
+        if len(names) != len(msg.position) or not names:
+            return None
+        if names != self._names:  # a new name tuple (the same one each message, as a rule)
+            first: dict[str, int] = {}
+            for k, name in enumerate(names):
+                first.setdefault(name, k)  # the adapter reads a name's first position only
+            self._places = tuple(first.get(joint, -1) for joint in self._joints)
+            self._names = names
+        return self._places
 
 
 def _tagged(outputs: list[Output], joint: str) -> list[Output]:

@@ -153,7 +153,7 @@ from genbacklash_core.measured import TrackingVerdict
 from genbacklash_ros.node.align import Aligner
 from genbacklash_ros.node.batch import BlockView
 from genbacklash_ros.node.checkpoint import Checkpoint, CheckpointError, save_checkpoint, warm_start
-from genbacklash_ros.node.compensate import CompensateStage
+from genbacklash_ros.node.compensate import CompensateStage, _no_fault
 
 # the fault thresholds live with the rules in health.py; importable from here as before
 from genbacklash_ros.node.health import _SCALE_SMOOTHING as _SCALE_SMOOTHING
@@ -476,6 +476,7 @@ class BacklashPipeline:
         if self._worker is not None:
             self._worker.close()
         self._worker = self._make_worker(start.identifier)
+        self._poll = self._worker.poll  # every message asks: one look-up less
         ident = start.identifier
         self._use = EstimateInUse(ident.estimate, start.prior, ident.from_seed)
         self._warm_start_note = start.note
@@ -674,9 +675,12 @@ class BacklashPipeline:
         value)``, or None when the command is dropped. The periodic step of an accepted
         command (the data clock, the estimate and diagnostics now due) waits for
         :meth:`periodic`, or runs at the start of the next call that takes data."""
-        self._settle_answered()
-        self._take_results()
-        align, health = self._align, self._health
+        if self._answered is not None:
+            self._settle_answered()
+        results = self._poll()
+        if results:
+            self._take_results(results)
+        align, health, comp = self._align, self._health, self._comp
         self._silence.command(int(receive_ns))
         if not math.isfinite(value):
             self._drop("command_invalid", f"command: value {value} is not finite")
@@ -685,16 +689,19 @@ class BacklashPipeline:
         last = align.last_cmd_ns
         if last is not None and stamp <= last and not self._behind("command", stamp, last):
             return None
-        self._events(health.check_command(stamp, value, int(receive_ns), self._comp.options))
-        sent = self._comp.command(
+        events = health.check_command(stamp, value, int(receive_ns), comp.options)
+        if events:
+            self._events(events)
+        sent = comp.command(
             value,
             self._use.current,
-            passing=lambda: bool(health.faults) and health.passing_through(stamp),
+            # asked only when a model compensates; no fault active (as a rule): no closure
+            passing=(lambda: health.passing_through(stamp)) if health.faults else _no_fault,
             last_y=align.last_y,
         )
-        if self._comp.problems:
-            self._problems(self._comp.problems)
-        self._tracking.command(value, self._comp.last_weight)
+        if comp.problems:
+            self._problems(comp.problems)
+        self._tracking.command(value, comp.last_weight)
         align.add_command(stamp, sent if self._in_loop else value)
         led = self._ledger
         led.commands += 1
@@ -705,7 +712,11 @@ class BacklashPipeline:
     def periodic(self) -> list[Output]:
         """The periodic outputs the last answered command made due (see :meth:`answer`), and
         any made since the last call; ``[]`` when none."""
-        self._settle_answered()
+        stamp = self._answered
+        if stamp is not None:  # _settle_answered, inline: a joint of six pays it per command
+            self._answered = None
+            if self._clock.tick(stamp):
+                self._step(self._due, heavy=False)
         if not self._due:
             return []
         outputs, self._due = self._due, []
@@ -1094,19 +1105,21 @@ class BacklashPipeline:
         any periodic outputs now due (:meth:`on_encoder` is this plus the adapters)."""
         if self._answered is not None or self._due:  # an answer's step comes first
             return [*self.periodic(), *self.on_encoder_value(header_ns, value, receive_ns)]
-        self._take_results()
+        results = self._poll()
+        if results:
+            self._take_results(results)
         self._silence.encoder(int(receive_ns))
         if not math.isfinite(value):
             self._drop("encoder_invalid", f"encoder: value {value} is not finite")
             return []
-        align, health = self._align, self._health
+        align = self._align
         stamp = align.time_of(header_ns, receive_ns)
         last = align.last_enc_ns
         if last is not None and stamp <= last:
             if not self._behind("encoder", stamp, last):
                 return []
             last = None  # re-anchored: this reading starts the new time line
-        check = health.check_reading(
+        stuck, discard_after, events = self._health.check_reading(
             stamp,
             last,
             value,
@@ -1116,18 +1129,20 @@ class BacklashPipeline:
             align.cmd_u,
             self._use.current,
         )
-        if check.discard_after is not None:
-            pending = align.discard_after(check.discard_after)  # keep the first equal one
+        if discard_after is not None:
+            pending = align.discard_after(discard_after)  # keep the first equal one
             if pending:
                 self._drop("encoder_stuck", "encoder reading unchanged", pending)
-        self._events(check.events)
-        align.add_reading(stamp, value, stuck=check.stuck)
+        if events:
+            self._events(events)
+        align.add_reading(stamp, value, stuck=stuck)
         self._tracking.reading(stamp, value)
         self._ledger.encoders += 1
         outputs: list[Output] = []
         if align.pending >= self._feed_at_count:
             self._feed()
-        self._advance(stamp, outputs, heavy=True)
+        if self._clock.tick(stamp):  # a periodic step is due (else nothing to do)
+            self._step(outputs, heavy=True)
         return outputs
 
     def on_motor(self, msg: object, receive_ns: int) -> list[Output]:
@@ -1395,9 +1410,12 @@ class BacklashPipeline:
         Only ``heavy`` calls (encoder messages) feed the identifier and write checkpoints,
         so that a command's compensated command never waits for either.
         """
+        if self._clock.tick(stamp):
+            self._step(outputs, heavy=heavy)
+
+    def _step(self, outputs: list[Output], *, heavy: bool) -> None:
+        """The periodic step :meth:`_advance` found due (the data clock moved already)."""
         clock = self._clock
-        if not clock.tick(stamp):
-            return
         now = clock.now
         assert now is not None
         due = clock.due(now)

@@ -627,6 +627,62 @@ def test_pure_and_stateful_forms_agree_with_a_model_change() -> None:
     np.testing.assert_array_equal(comp.run(x_d[:switch], confidence[:switch]), first)
 
 
+def test_held_targets_give_the_pure_steps_bit_for_bit() -> None:
+    """A held target on a settled state is not recomputed by ``step``: still the pure
+    function's commands and states to the bit, the zero's sign, a new confidence, a state
+    assigned and a new model each stepping again."""
+    options = CompensatorOptions(u_min=-1.5, u_max=1.5, max_rate=0.3, smoothing=3, gate_low=0.2)
+    held = np.repeat(_walk(5, 60, -0.8, 0.8), 7)  # dwells of seven equal targets
+    x_d = [*held.tolist(), *([0.0] * 10), *([-0.0] * 5), *([0.0] * 3)]
+    confidence = [1.0] * len(x_d)
+    confidence[100:110] = [0.5] * 5 + [0.0] * 5  # changed mid-dwell: the fade steps again
+    confidence[-18:] = [0.0] * 18  # passed through: the command is the target, its zero too
+    second = GeneralBacklash((0.55, -0.25, 0.3), 0.6, (0.65, 0.35, 0.2), 0.7)
+    switch, saved_at = 230, 300
+
+    comp = InverseBacklash(EXAMPLE1, options)
+    state = CompensatorState.initial(EXAMPLE1, options=options)
+    saved = state
+    sent = []
+    for t, (target, trust) in enumerate(zip(x_d, confidence, strict=True)):
+        if t == switch:
+            comp.set_model(second)
+        if t == saved_at:  # back to an earlier state mid-dwell
+            comp.state = state = saved
+        model = EXAMPLE1 if t < switch else second
+        u, state = compensate_step(model, state, target, options, trust)
+        got = comp.step(target, trust)
+        assert got.hex() == u.hex(), t  # the zero's sign too
+        assert comp.state == state, t
+        sent.append(got.hex())
+        if t == saved_at - 20:
+            saved = state
+    assert sent[-9:] == ["0x0.0p+0"] * 1 + ["-0x0.0p+0"] * 5 + ["0x0.0p+0"] * 3
+
+
+def test_steps_unread_then_the_state_and_a_run_continue_as_the_pure_form() -> None:
+    """The state a step leaves is built only when read: steps with no read, then the state,
+    a run and steps again are the pure function's, a held dwell included."""
+    options = CompensatorOptions(max_rate=0.3, smoothing=2)
+    x_d = np.repeat(_walk(8, 40, -0.8, 0.8), 4)
+    comp = InverseBacklash(EXAMPLE1, options)
+    state = CompensatorState.initial(EXAMPLE1, options=options)
+    expected, states = [], []
+    for target in x_d:
+        u, state = compensate_step(EXAMPLE1, state, target, options)
+        expected.append(u)
+        states.append(state)
+    got = [comp.step(target) for target in x_d[:100]]
+    assert comp.state == states[99]
+    np.testing.assert_array_equal(comp.run(x_d[100:130]), expected[100:130])
+    got += expected[100:130]
+    got += [comp.step(target) for target in x_d[130:]]
+    assert got == expected
+    assert comp.state == state
+    comp.state = comp.state  # the same snapshot back: nothing changes
+    assert comp.step(x_d[-1]) == compensate_step(EXAMPLE1, state, x_d[-1], options)[0]
+
+
 def test_stateful_reset_and_state_assignment() -> None:
     comp = InverseBacklash(IDEAL, x0=0.2, u0=0.0)
     assert comp.state == CompensatorState(x=0.2, u=0.0, u_inverse=0.0)

@@ -23,7 +23,7 @@ from genbacklash_ros.node.messages import (
     JointState,
     Time,
 )
-from genbacklash_ros.node.multijoint import MultiJointPipeline, make_pipeline
+from genbacklash_ros.node.multijoint import MultiJointPipeline, joint_status_name, make_pipeline
 from genbacklash_ros.node.parameters import NodeParameters, parse_ros_arguments
 from genbacklash_ros.node.pipeline import BacklashPipeline, Output
 
@@ -196,6 +196,69 @@ def test_each_joint_is_exactly_a_single_joint_pipeline(
         alone = _feed(single, arm)
         own = np.array([o.message.data[index] for o in alone if o.topic == "compensated_command"])  # type: ignore[union-attr]
         assert np.array_equal(got[:, index], own), name
+
+
+def _shuffled(
+    messages: list[tuple[int, str, Float64MultiArray | JointState]],
+) -> list[tuple[int, str, Float64MultiArray | JointState]]:
+    """The readings with their names reordered, missing, repeated or not finite now and
+    then (each a new name tuple, then the usual one again)."""
+    out: list[tuple[int, str, Float64MultiArray | JointState]] = []
+    for k, (receive_ns, topic, msg) in enumerate(messages):
+        if isinstance(msg, JointState) and k % 7 == 1:
+            names, position = list(msg.name), list(msg.position)
+            if k % 4 == 1:
+                names, position = names[::-1], position[::-1]
+            elif k % 4 == 3:
+                names, position = names[1:], position[1:]  # the first joint missing
+            if k % 3 == 0:
+                names.append(names[0])  # a repeated name: its first position counts
+                position.append(position[0] + 1.0)
+            elif k % 3 == 1:
+                position[-1] = float("nan")
+            msg = JointState(msg.header, tuple(names), tuple(position))
+        out.append((receive_ns, topic, msg))
+    return out
+
+
+def test_every_joint_gives_what_its_single_joint_pipeline_gives(
+    arm: list[tuple[int, str, Float64MultiArray | JointState]],
+) -> None:
+    """Message by message, each joint's compensated element, estimates and diagnostics are
+    a single-joint pipeline's on the same stream, to the bit, the readings' names reordered,
+    missing, repeated or not finite now and then (one look-up per name tuple)."""
+    messages = _shuffled(arm[: len(arm) // 2])
+    js = JointSet.from_mapping({"joints": list(NAMES), "command_indices": list(INDICES)})
+    multi = MultiJointPipeline(js)
+    singles = [
+        BacklashPipeline(params, status_name=joint_status_name(params.joint))
+        for params in js.per_joint
+    ]
+    compared = 0
+    for receive_ns, topic, msg in messages:
+        if topic == COMMAND_TOPIC:
+            got = multi.on_command(msg, receive_ns)  # type: ignore[arg-type]
+            alone = [single.on_command(msg, receive_ns) for single in singles]  # type: ignore[arg-type]
+        else:
+            got = multi.on_encoder(msg, receive_ns)
+            alone = [single.on_encoder(msg, receive_ns) for single in singles]
+        expected = [
+            (o.topic, name, o.message, o.stamp_ns)
+            for name, outputs in zip(NAMES, alone, strict=True)
+            for o in outputs
+            if o.topic != "compensated_command"
+        ]
+        assert [(o.topic, o.joint, o.message, o.stamp_ns) for o in got if o.joint] == expected
+        compared += len(expected)
+        for index, outputs in zip(INDICES, alone, strict=True):
+            answers = [o.message for o in outputs if o.topic == "compensated_command"]
+            if answers:
+                assert got[0].message.data[index] == answers[0].data[index]  # type: ignore[union-attr]
+    assert compared > 100
+    for name, single in zip(NAMES, singles, strict=True):
+        assert multi.pipelines[name].stats == single.stats
+    assert multi.pipelines[NAMES[0]].stats.dropped["encoder_invalid"] > 0  # missing
+    assert multi.pipelines[NAMES[-1]].stats.dropped["encoder_invalid"] > 0  # not finite
 
 
 def test_the_answer_comes_before_any_joint_builds_its_periodic_outputs(
