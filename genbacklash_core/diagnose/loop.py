@@ -21,10 +21,11 @@
    restarts its simulation at the reading after each loss, a cascade cannot, so their
    estimation errors are not alike. An ``input_lag`` fit whose lag vanishes is named
    ``time_delay``: what it adds is a dead time (whole samples and a fraction). A physical
-   effect fitted behind a servo's lag the model lacks adds two effects in one step: when the
-   best non-physical nominees, each followed by its best follow-up, do better (the BIC, or
-   with lost readings the validation misfit, as in step 7), the best of them is taken
-   instead (:meth:`_Run.two_in_one`).
+   effect fitted behind a servo's lag the model lacks adds two effects in one step, and so
+   does a servo's lag that brings a dead time beyond the model's (the lag and
+   ``time_delay``'s dead time): when the best non-physical nominees, each followed by its
+   best follow-up, do better (the BIC, or with lost readings the validation misfit, as in
+   step 7), the best of them is taken instead (:meth:`_Run.two_in_one`).
 5. The best is accepted only if it lowers the BIC by more than a margin *and* lowers the
    validation gap significantly (a one-sided Newey-West test on the squared errors, plus a
    minimum relative drop, and with a measured floor a drop of more than ``floor_margin - 1``
