@@ -197,3 +197,38 @@ def test_an_effect_that_does_not_earn_its_place_is_dropped() -> None:
     assert refit.model.offset == 0.0 and refit.model.delay == case.truth.delay
     assert after.gap < 1.05 * report.gap and "does not earn its place" in note
     assert run.earns_place(final, report, "time_delay") is None
+
+
+def test_a_servo_lag_with_its_own_dead_time_is_weighed_as_two_effects() -> None:
+    """A load lag of 4.9 ms after the play and a dead time of 3.6 ms (the benchmark's
+    operation pair, seed 14057): a servo's lag with 3.25 samples of dead time fitted closer
+    than the lag after the play alone and was named, then the dead time (``input_lag``,
+    ``time_delay``). That step adds two effects; given its follow-up, with the dead time
+    searched from the block in first order, the lag after the play explains more."""
+    case = operation_case(["linear_dynamics", "time_delay"], seed=14057, duration=30.0)
+    result = diagnose(case.u, case.y, breaks=case.breaks)
+    assert result.effects == ("linear_dynamics", "time_delay"), result.summary()
+    assert "(two effects in one step" in result.steps[0].evidence
+    assert result.model.input_lag == 0.0 and result.model.delay == 3
+
+
+def test_the_two_effect_steps_are_a_servo_lag_with_physics_or_with_a_dead_time() -> None:
+    """Which steps add two catalog effects at once (the loop's ``_two_effects``)."""
+    from genbacklash_core.diagnose.effects import Detection
+    from genbacklash_core.diagnose.fit import fit_model
+    from genbacklash_core.diagnose.loop import _Candidate, _two_effects
+
+    case = operation_case([], seed=6, duration=3.0)
+    plain = fit_model(AugmentedModel(GeneralBacklash.ideal(1.0, 0.05, 0.05)), case.u, case.y)
+
+    def step(effect: str, **changes: float) -> _Candidate:
+        found = Detection(effect, True, 1.0, 1.0, "test", {})
+        return _Candidate(found, replace(plain, model=replace(plain.model, **changes)), -1.0)
+
+    model = plain.model
+    assert _two_effects(model, step("input_lag", input_lag=0.8, delay=3))
+    assert _two_effects(model, step("input_lag", input_lag=0.8, input_lag_fraction=0.5))
+    assert not _two_effects(model, step("input_lag", input_lag=0.8))
+    assert not _two_effects(model, step("time_delay", delay=3))
+    delayed = replace(model, delay=3)
+    assert not _two_effects(delayed, step("input_lag", input_lag=0.8, delay=3))

@@ -48,7 +48,7 @@ from genbacklash_core.diagnose.stats import NestedTest, nested_f_test
 
 from ._base import Detection, format_p, screen_starts
 
-__all__ = ["EFFECT", "InputLag", "vanished"]
+__all__ = ["EFFECT", "InputLag", "adds_dead_time", "vanished"]
 
 _POLES = (0.5, 0.7, 0.8, 0.9, 0.95, 0.98)  # trial poles (time constants 1.4 .. 50 samples)
 _SERVO_DELAYS = 3  # dead time searched with the lag, samples beyond the model's own
@@ -188,6 +188,29 @@ def vanished(model: AugmentedModel) -> bool:
     False
     """
     return 0.0 < model.input_lag**model.input_lag_order < _VANISHED
+
+
+def adds_dead_time(before: AugmentedModel, after: AugmentedModel) -> bool:
+    """True when ``after`` adds a servo's lag that ``before`` lacks *and* a dead time beyond
+    ``before``'s (whole samples or a fraction of one): one ``input_lag`` step then adds two
+    effects of the catalog at once, the lag and ``time_delay``'s dead time.
+
+    >>> from genbacklash_core import GeneralBacklash
+    >>> play = GeneralBacklash.ideal(1.0, 0.1, 0.1)
+    >>> adds_dead_time(AugmentedModel(play), AugmentedModel(play, delay=3, input_lag=0.8))
+    True
+    >>> adds_dead_time(AugmentedModel(play), AugmentedModel(play, input_lag=0.8))
+    False
+    >>> lagged = AugmentedModel(play, input_lag=0.8, input_lag_order=2, input_lag_fraction=0.75)
+    >>> adds_dead_time(AugmentedModel(play), lagged)
+    True
+    >>> adds_dead_time(AugmentedModel(play, delay=3), AugmentedModel(play, delay=3, input_lag=0.8))
+    False
+    """
+    if before.input_lag != 0.0 or after.input_lag == 0.0:
+        return False
+    dead = after.delay + after.input_lag_fraction
+    return dead > before.delay + before.input_lag_fraction
 
 
 def _fractional(context: Context, fit: ModelFit) -> ModelFit:

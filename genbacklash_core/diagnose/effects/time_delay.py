@@ -17,10 +17,15 @@ from __future__ import annotations
 import itertools
 from dataclasses import replace
 
+import numpy as np
+
+from genbacklash_core.backlash import GeneralBacklash
+from genbacklash_core.cascade import Cascade
 from genbacklash_core.diagnose.context import Context
 from genbacklash_core.diagnose.fit import ModelFit, best_fit, fit_model
 from genbacklash_core.diagnose.model import AugmentedModel
 from genbacklash_core.diagnose.spec import ModelSpec
+from genbacklash_core.linear import LinearBlock
 
 from ._base import Detection, format_p, fresh_start, late_input, screened_fir
 
@@ -47,6 +52,49 @@ def _one_stage(model: AugmentedModel) -> list[AugmentedModel]:
         return []
     pole = float(model.input_lag ** (1.0 / model.input_lag_order))
     return [replace(model, input_lag=round(pole, 15), input_lag_order=1)]
+
+
+def _first_order(model: AugmentedModel) -> list[AugmentedModel]:
+    """``model`` with the linear block after its play reduced to a first-order lag (``a =
+    (1,)``, ``b = (-p,)``: eq. 30 with one pole, ``p`` the block's slowest) of the same static
+    gain, the play's slopes rescaled to keep it, when the block has more than one pole or a
+    zero (``[]`` otherwise): searched with each dead time, because the block's second pole
+    and zero are what stood in for the dead time (as a Pade approximant does), as
+    :func:`_one_stage` does for a servo's second stage.
+
+    >>> from genbacklash_core import Cascade, GeneralBacklash, LinearBlock
+    >>> bl = GeneralBacklash.ideal(0.1, 0.1, 0.1)
+    >>> block = LinearBlock(a=(1.0, 0.5), b=(-1.3, 0.4))  # poles 0.8 and 0.5
+    >>> [m.base.linear for m in _first_order(AugmentedModel(Cascade(bl, block)))]
+    [LinearBlock(a=(1.0,), b=(-0.8,))]
+    >>> reduced = _first_order(AugmentedModel(Cascade(bl, block)))[0].base.backlash
+    >>> round(reduced.m_left[0], 6)  # the gain 0.1 x 1.5 / 0.1 kept: 0.3 x 1 / 0.2
+    0.3
+    >>> _first_order(AugmentedModel(Cascade(bl, LinearBlock(a=(1.0,), b=(-0.8,)))))
+    []
+    """
+    base = model.base
+    if not isinstance(base, Cascade):
+        return []
+    block = base.linear
+    if len(block.a) == 1 and len(block.b) <= 1:
+        return []
+    denominator = np.array([1.0, *block.b])
+    poles = np.roots(denominator)
+    pole = float(np.max(np.abs(poles))) if poles.size else 0.0
+    if not 0.0 < pole < 1.0:
+        return []
+    # the static gain of eq. (30): sum(a) / (1 + sum(b)), kept by the play's slopes
+    scale = float(sum(block.a) / (1.0 + sum(block.b))) * (1.0 - pole)
+    play = base.backlash
+    rescaled = GeneralBacklash(
+        tuple(scale * m for m in play.m_left),
+        play.c_left,
+        tuple(scale * m for m in play.m_right),
+        play.c_right,
+    )
+    lag = LinearBlock(a=(1.0,), b=(round(-pole, 15),))
+    return [replace(model, base=Cascade(rescaled, lag))]
 
 
 class TimeDelay:
@@ -103,7 +151,7 @@ class TimeDelay:
     def augment(self, context: Context, detection: Detection) -> ModelFit | None:
         """Search the dead time with short refits, then refit the best candidates fully."""
         trials: list[ModelFit] = []
-        models = [context.fit.model, *_one_stage(context.fit.model)]
+        models = [context.fit.model, *_one_stage(model := context.fit.model), *_first_order(model)]
         for delay, model in itertools.product(range(1, context.settings.max_delay + 1), models):
             spec = ModelSpec.of(model).extended(delay=delay)
             starts = [(spec, spec.embed(model))]
