@@ -916,7 +916,9 @@ def read_params_file(
     except yaml.YAMLError as err:
         where = getattr(err, "problem_mark", None)
         line = f" (line {where.line + 1})" if where is not None else ""
-        raise GenBacklashError(f"params file {file} is not valid YAML{line}: {err}") from err
+        # the parser's problem alone: its message also quotes the line over several lines
+        problem = getattr(err, "problem", None) or str(err).splitlines()[0]
+        raise GenBacklashError(f"params file {file} is not valid YAML{line}: {problem}") from err
     if document is None:
         return {}
     if not isinstance(document, Mapping):

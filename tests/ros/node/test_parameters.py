@@ -254,6 +254,14 @@ def test_malformed_files_are_reported(tmp_path: Path, text: str, match: str) -> 
         load_params_file(write(tmp_path, text))
 
 
+def test_a_file_that_is_not_yaml_is_reported_on_one_line(tmp_path: Path) -> None:
+    with pytest.raises(GenBacklashError) as caught:
+        load_params_file(write(tmp_path, "x: [\n"))
+    message = str(caught.value)
+    assert "\n" not in message, message  # the parser's own message quotes the line below it
+    assert "is not valid YAML (line 2): expected the node content" in message
+
+
 def test_missing_and_empty_files(tmp_path: Path) -> None:
     with pytest.raises(GenBacklashError, match="cannot read params file"):
         load_params_file(tmp_path / "absent.yaml")
