@@ -538,10 +538,10 @@ class _Run:
         the non-physical rivals that lowers the BIC by the margin once each is followed by its
         best follow-up, when that path beats ``chosen`` as :meth:`break_tie` judges (the
         BIC, or with lost readings the validation misfit); else None. (See the module
-        notes, step 4.) ``chosen`` stays when the winning path is its own two effects (the
-        rival, then ``chosen``'s effect) and the path's second step closes more of the
-        validation misfit than its first: the effect that dominates is then ``chosen``'s,
-        which it names first with the other in the same step.
+        notes, step 4.) A physical ``chosen`` stays when the winning path ends in its own
+        effect (the rival, then ``chosen``'s effect) and the path's second step closes more
+        of the validation misfit than its first: the effect that dominates is then the
+        physical one, which ``chosen`` names first with the servo's lag in the same step.
 
         Such a step adds two effects at once, with the parameters of both, and the BIC
         change or the misfit of a one-effect rival is no yardstick for it: the rival is
@@ -574,18 +574,23 @@ class _Run:
             return None
         _, rival, next_rival, better, gap_path = best
         after, verdict = accepted
-        if next_rival == chosen.effect and after.gap - gap_path > report.gap - after.gap:
-            # The path is ``chosen``'s own two effects (its lag, then its physical effect),
+        physical = fitted.physics is not None
+        if (
+            physical
+            and next_rival == chosen.effect
+            and after.gap - gap_path > report.gap - after.gap
+        ):
+            # The path ends in ``chosen``'s own physical effect (the rival, then that effect)
             # and its second step closes more of the misfit than its first: the dominant
-            # effect is the physical one, which ``chosen`` names first with the lag in the
-            # same step. A coasting load behind a 20 Hz servo: the lag alone 0.0584 ->
+            # effect is the physical one, which ``chosen`` names first with the servo's lag
+            # in the same step. A coasting load behind a 20 Hz servo: the lag alone 0.0584 ->
             # 0.0459, then the coasting load -> 0.0069; the load behind the lag in one step
             # 0.0076. (A path to other effects keeps its win: a lag after the play, then an
             # output limit, against a load torque behind a servo's lag.)
             return None
         how = (
             "fitted behind a servo's lag"
-            if fitted.physics is not None
+            if physical
             else f"with a dead time of {fitted.delay + fitted.input_lag_fraction:g} samples"
         )
         note = (
