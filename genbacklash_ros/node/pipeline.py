@@ -712,11 +712,8 @@ class BacklashPipeline:
     def periodic(self) -> list[Output]:
         """The periodic outputs the last answered command made due (see :meth:`answer`), and
         any made since the last call; ``[]`` when none."""
-        stamp = self._answered
-        if stamp is not None:  # _settle_answered, inline: a joint of six pays it per command
-            self._answered = None
-            if self._clock.tick(stamp):
-                self._step(self._due, heavy=False)
+        if self._answered is not None:
+            self._settle_answered()
         if not self._due:
             return []
         outputs, self._due = self._due, []
