@@ -47,6 +47,7 @@ from .structure import Structure
 __all__ = [
     "IdentificationResult",
     "IterationHistory",
+    "backlash_misfit",
     "described_breaks",
     "identify_backlash",
     "identify_cascade",
@@ -236,14 +237,16 @@ def _backlash_columns(
 ) -> FloatArray:
     """Data vector of eq. (22): ``[u f1, f1, xi1^2 f1 .. xi1^n f1, u f2, -f2, xi2^2 f2 ..]``."""
     n = structure.degree
-    _, c_left, _, c_right = structure.split(p)
-    xi1 = u + c_left  # eq. (25)
-    xi2 = u - c_right  # eq. (26)
     cols = np.empty((u.size, 2 * n + 2), order="F")  # column-major: contiguous column writes
     cols[:, 0] = u * f1
     cols[:, 1] = f1
     cols[:, n + 1] = u * f2
     cols[:, n + 2] = -f2
+    if n == 1:  # the ideal backlash: no powers of xi (the servo's score runs this often)
+        return cols
+    _, c_left, _, c_right = structure.split(p)
+    xi1 = u + c_left  # eq. (25)
+    xi2 = u - c_right  # eq. (26)
     power1, power2 = xi1.copy(), xi2.copy()
     for i in range(2, n + 1):
         power1 *= xi1
@@ -280,8 +283,10 @@ def _backlash_regression(
     engaged = (f1 + f2) > 0.0  # rows with neither branch engaged carry no information
     if breaks is not None:
         engaged &= ~breaks[1:]  # eq. (24) needs x(t-1): never across a lost reading
-    phi = _backlash_columns(structure, p, u_t[engaged], f1[engaged], f2[engaged])
-    target = x_t[engaged] - x_prev[engaged] * (1.0 - f1[engaged]) * (1.0 - f2[engaged])  # eq. (29)
+    rows = np.flatnonzero(engaged)  # gathered once: the same values as masking each array
+    f1, f2 = f1[rows], f2[rows]
+    phi = _backlash_columns(structure, p, u_t[rows], f1, f2)
+    target = x_t[rows] - x_prev[rows] * (1.0 - f1) * (1.0 - f2)  # eq. (29)
     return phi, target
 
 
@@ -478,8 +483,14 @@ def _candidate(
     callback: IterationCallback | None,
     breaks: BoolArray | None = None,
     restart_holds: bool = False,
+    support: bool = True,
 ) -> _Candidate:
-    """Iterate from one start (warm-started on a prefix for long records), then refine."""
+    """Iterate from one start (warm-started on a prefix for long records), then refine.
+
+    Without ``support`` a settled candidate is not checked for branches the data never
+    reach (:func:`~genbacklash_core.refine.branch_support`, a free run of its own): its
+    ``converged`` may then overstate, its ``p`` and ``fit`` are the same.
+    """
     history: list[FloatArray] = []
     p = p_start
     if u.size > 4 * _WARM_START_SAMPLES:
@@ -560,9 +571,18 @@ def _candidate(
     else:  # the free run restarts at lost readings only, not at falsified holds
         anchors = restart_points(breaks)
         fit = nrmse(y, simulate_parameters(structure, p_final, u, x0, anchors, y)[1])
-    if converged and (
-        missing := branch_support(
-            structure, p_final, u, y, x0, None if structure.cascade else restart_points(breaks)
+    if (
+        support
+        and converged
+        and (
+            missing := branch_support(
+                structure,
+                p_final,
+                u,
+                y,
+                x0,
+                None if structure.cascade else restart_points(breaks),
+            )
         )
     ):
         # Settled or not, an estimate whose branch the data never reach is no estimate of it.
@@ -674,6 +694,7 @@ def _run(
     callback: IterationCallback | None,
     breaks: BoolArray | None = None,
     restart_holds: bool = False,
+    support: bool = True,
 ) -> IdentificationResult:
     p = structure.start() if start is None else np.asarray(start, dtype=np.float64).copy()
     if p.shape != (structure.n_parameters,):
@@ -711,6 +732,7 @@ def _run(
             callback=callback,
             breaks=breaks,
             restart_holds=restart_holds,
+            support=support,
         )
 
     best = attempt(p)
@@ -827,6 +849,67 @@ def identify_backlash(
     >>> bool(np.max(np.abs(result.model.parameters() - ex.model.parameters())) < 0.03)
     True
     """
+    return _identify_backlash(
+        u,
+        x,
+        degree,
+        sign=sign,
+        start=start,
+        refine=refine,
+        max_iterations=max_iterations,
+        tol=tol,
+        nonfinite=nonfinite,
+        callback=callback,
+        breaks=breaks,
+        restart_holds=restart_holds,
+    )
+
+
+def backlash_misfit(
+    u: ArrayLike, x: ArrayLike, degree: int = 1, *, breaks: ArrayLike | None = None
+) -> float:
+    """The free-run NRMSE of the backlash the paper's iteration finds (no refinement).
+
+    The number ``identify_backlash(u, x, degree, refine=False, breaks=breaks).fit.nrmse``
+    reads, to the bit, at less cost: without the refinement a candidate's ``converged``
+    never chooses between starts (the restarts follow the iteration's own convergence and
+    the lower misfit), so the check that the data reach every branch of a settled candidate
+    (a free run of its own, which decides ``converged`` alone) is skipped. What
+    :func:`~genbacklash_core.servo.estimate_servo` scores each candidate servo by.
+
+    Raises
+    ------
+    GenBacklashError
+        As :func:`identify_backlash` (too few samples, no excitation, bad input).
+
+    >>> from genbacklash_core import paper_example
+    >>> data = paper_example(1).generate(seed=0)
+    >>> misfit = backlash_misfit(data.u, data.y, 3)
+    >>> misfit == identify_backlash(data.u, data.y, 3, refine=False).fit.nrmse
+    True
+    """
+    result = _identify_backlash(u, x, degree, refine=False, breaks=breaks, support=False)
+    return result.fit.nrmse
+
+
+def _identify_backlash(
+    u: ArrayLike,
+    x: ArrayLike,
+    degree: int,
+    *,
+    sign: float | None = None,
+    start: GeneralBacklash | None = None,
+    refine: bool = True,
+    max_iterations: int = 30,
+    tol: float = 1e-4,
+    nonfinite: NonFinitePolicy = "raise",
+    callback: IterationCallback | None = None,
+    breaks: ArrayLike | None = None,
+    restart_holds: bool = False,
+    support: bool = True,
+) -> IdentificationResult:
+    """:func:`identify_backlash`; without ``support`` (see :func:`_candidate`) its
+    ``converged`` may overstate (for :func:`backlash_misfit`, which reads the fit alone)."""
     degree = as_order("degree", degree)
     if degree < 1:
         raise GenBacklashError(f"degree must be >= 1, got {degree}")
@@ -854,6 +937,7 @@ def identify_backlash(
         callback=callback,
         breaks=bb,
         restart_holds=restart_holds,
+        support=support,
     )
 
 

@@ -33,7 +33,10 @@ Before the first event the servo is taken at rest at the first command.
 
 :func:`estimate_servo` chooses ``(D, T)`` with the play: a coarse grid then a local
 refinement, each candidate scored by the free-run misfit of the backlash identified on the
-candidate's modelled input (:func:`~genbacklash_core.identify.identify_backlash`, eqs. 22-29).
+candidate's modelled input (:func:`~genbacklash_core.identify.backlash_misfit`: what
+:func:`~genbacklash_core.identify.identify_backlash` reads without refinement, eqs. 22-29).
+The lag's recursion (S1) runs once per time constant tried, not once per candidate: from the
+stream's start the outputs at the events do not depend on the dead time (``_Outputs``).
 
 Examples
 --------
@@ -55,6 +58,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+import numpy.typing as npt
 
 from ._typing import ArrayLike, BoolArray, FloatArray
 from .errors import GenBacklashError
@@ -135,6 +139,13 @@ class ServoModel:
         """The dead time in integer nanoseconds."""
         return round(self.dead_time * 1e9)
 
+    @property
+    def tau_ns(self) -> float:
+        """The lag's time constant in nanoseconds (0 under a nanosecond: no lag at the
+        stamps' resolution)."""
+        tau_ns = self.time_constant * 1e9
+        return tau_ns if tau_ns >= 1.0 else 0.0
+
     def to_dict(self) -> dict[str, float]:
         """``{"dead_time": s, "time_constant": s}`` (the JSON of identify and replay)."""
         return {"dead_time": self.dead_time, "time_constant": self.time_constant}
@@ -160,12 +171,7 @@ class ServoModel:
 
         A stream cut into pieces gives the same output, to the bit, as in one piece.
         """
-        t = np.asarray(times_ns, dtype=np.int64)
-        u = np.asarray(us, dtype=np.float64)
-        if t.shape != u.shape or t.ndim != 1:
-            raise GenBacklashError(
-                f"times and commands must be 1-D of one length: {t.shape}, {u.shape}"
-            )
+        t, u = _stream(times_ns, us)
         before = state or ServoState()
         if t.size == 0:
             return np.zeros(0), before
@@ -185,36 +191,117 @@ class ServoModel:
         while due < len(events_t) and events_t[due] <= last:
             due += 1
         ev_t = np.empty(due + 1, dtype=np.int64)
-        ev_x = np.empty(due + 1)
         ev_v = np.empty(due + 1)
-        ev_t[0], ev_x[0], ev_v[0] = anchor_t, anchor_x, anchor_v
-        tau_ns = self.time_constant * 1e9
-        if tau_ns < 1.0:  # under a nanosecond: no lag at the stamps' resolution
-            tau_ns = 0.0
-        x_now, t_now, v_now = anchor_x, anchor_t, anchor_v
-        for j in range(due):
-            s, v = events_t[j], events_v[j]
-            if tau_ns > 0.0:
-                x_now = v_now + (x_now - v_now) * math.exp(-(s - t_now) / tau_ns)  # (S1)
-            else:
-                x_now = v_now
-            t_now, v_now = s, v
-            ev_t[j + 1], ev_x[j + 1], ev_v[j + 1] = s, x_now, v
-        # each sample from the event at or before it (S1)
-        where = np.searchsorted(ev_t, t, side="right") - 1
-        v_at = ev_v[where]
-        if tau_ns > 0.0:
-            x = v_at + (ev_x[where] - v_at) * np.exp(-(t - ev_t[where]) / tau_ns)
-        else:
-            x = v_at.copy()
+        ev_t[0], ev_v[0] = anchor_t, anchor_v
+        ev_t[1:], ev_v[1:] = events_t[:due], events_v[:due]
+        tau_ns = self.tau_ns
+        ev_x = _event_outputs(events_t[:due], events_v[:due], anchor_t, anchor_x, anchor_v, tau_ns)
         after = ServoState(
             float(u[-1]),
-            int(t_now),
-            float(x_now),
-            float(v_now),
+            int(ev_t[-1]),
+            float(ev_x[-1]),
+            float(ev_v[-1]),
             tuple(zip(events_t[due:], events_v[due:], strict=True)),
         )
-        return np.asarray(x, dtype=np.float64), after
+        return _sample_outputs(t, ev_t, ev_x, ev_v, tau_ns), after
+
+
+def _stream(
+    times_ns: ArrayLike, us: ArrayLike
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]:
+    """Sample times and commands as arrays, checked 1-D of one length."""
+    t = np.asarray(times_ns, dtype=np.int64)
+    u = np.asarray(us, dtype=np.float64)
+    if t.shape != u.shape or t.ndim != 1:
+        raise GenBacklashError(
+            f"times and commands must be 1-D of one length: {t.shape}, {u.shape}"
+        )
+    return t, u
+
+
+class _Outputs:
+    """Every candidate servo's output on one stream from its start: what
+    ``model.output(times_ns, us)[0]`` returns, to the bit, with the lag's recursion (S1)
+    run once per time constant instead of once per candidate.
+
+    From the stream's start the outputs at the events do not depend on the dead time: the
+    servo rests at the first command until the first event (so the first step of (S1) adds
+    ``(v - v) exp(...) = 0``), and the dead time shifts every later event alike (the
+    differences of integer stamps are exact). A dead time only moves the events against
+    the samples and decides how many are due.
+    """
+
+    def __init__(self, times_ns: ArrayLike, us: ArrayLike) -> None:
+        self._t, self._u = _stream(times_ns, us)
+        changes, values = servo_changes(self._t, self._u)
+        self._changes, self._values = changes, values
+        self._paths: dict[float, FloatArray] = {}  # time constant (ns) -> output per event
+
+    def __call__(self, model: ServoModel) -> FloatArray:
+        t = self._t
+        if t.size == 0:
+            return model.output(t, self._u)[0]
+        tau_ns = model.tau_ns
+        path = self._paths.get(tau_ns)
+        if path is None:  # the events of a dead time 0, anchored where output() anchors them
+            first = float(self._values[0])
+            events = self._changes.tolist()
+            path = _event_outputs(
+                events, self._values.tolist(), events[0] - 1, first, first, tau_ns
+            )
+            self._paths[tau_ns] = path
+        events_t = self._changes + model.dead_ns
+        late = np.flatnonzero(events_t > t[-1])  # the events up to the last sample are due
+        due = int(late[0]) if late.size else events_t.size
+        ev_t = np.empty(due + 1, dtype=np.int64)
+        ev_v = np.empty(due + 1)
+        ev_t[0], ev_v[0] = t[0] - 1, self._values[0]
+        ev_t[1:], ev_v[1:] = events_t[:due], self._values[:due]
+        return _sample_outputs(t, ev_t, path[: due + 1], ev_v, tau_ns)
+
+
+def _event_outputs(
+    events_t: Sequence[int],
+    events_v: Sequence[float],
+    anchor_t: int,
+    anchor_x: float,
+    anchor_v: float,
+    tau_ns: float,
+) -> FloatArray:
+    """The servo's output at the anchor and at each event (S1, from one to the next).
+
+    ``events_t`` (ns, Python ints: their differences are exact) and ``events_v``: the
+    events and the targets they start; the anchor: the last event before them, the output
+    there and the target in force from it. Returns ``len(events_t) + 1`` outputs.
+    """
+    ev_x = np.empty(len(events_t) + 1)
+    ev_x[0] = anchor_x
+    x_now, t_now, v_now = anchor_x, anchor_t, anchor_v
+    for j, (s, v) in enumerate(zip(events_t, events_v, strict=True)):
+        if tau_ns > 0.0:
+            x_now = v_now + (x_now - v_now) * math.exp(-(s - t_now) / tau_ns)  # (S1)
+        else:
+            x_now = v_now
+        t_now, v_now = s, v
+        ev_x[j + 1] = x_now
+    return ev_x
+
+
+def _sample_outputs(
+    t: npt.NDArray[np.int64],
+    ev_t: npt.NDArray[np.int64],
+    ev_x: FloatArray,
+    ev_v: FloatArray,
+    tau_ns: float,
+) -> FloatArray:
+    """The servo's output at each sample from the event at or before it (S1)."""
+    where = np.searchsorted(ev_t, t, side="right") - 1
+    v_at = ev_v[where]
+    if tau_ns > 0.0:
+        x = v_at + (ev_x[where] - v_at) * np.exp(-(t - ev_t[where]) / tau_ns)
+    else:
+        x = v_at.copy()
+    return np.asarray(x, dtype=np.float64)
 
 
 def servo_changes(
@@ -288,6 +375,9 @@ def estimate_servo(
     ``dead_times x time_constants`` is searched first, then a compass search from the best:
     its eight neighbours at half the grid's spacing, moving while one scores better, the
     step halved when none does, ``rounds`` halvings (both values kept at 0 or above).
+    Each candidate's input and score are those of ``ServoModel(D, T).output`` and
+    ``identify_backlash(..., refine=False).fit.nrmse``, to the bit, at less cost (see the
+    module notes).
 
     Parameters
     ----------
@@ -307,10 +397,9 @@ def estimate_servo(
     GenBacklashError
         When no candidate could be scored (too few samples, no excitation).
     """
-    from .identify import identify_backlash  # the identifier imports nothing of this
+    from .identify import backlash_misfit  # the identifier imports nothing of this
 
-    t = np.asarray(times_ns, dtype=np.int64)
-    u = np.asarray(us, dtype=np.float64)
+    outputs = _Outputs(times_ns, us)
     y = np.asarray(ys, dtype=np.float64)
     b: BoolArray | None = None if breaks is None else np.asarray(breaks, dtype=bool)
     scores: dict[tuple[float, float], float] = {}
@@ -318,9 +407,9 @@ def estimate_servo(
     def score(dead: float, tau: float) -> float:
         key = (round(dead, 7), round(tau, 7))
         if key not in scores:
-            x, _ = ServoModel(key[0], key[1]).output(t, u)
+            x = outputs(ServoModel(key[0], key[1]))
             try:
-                fit = identify_backlash(x, y, degree, refine=False, breaks=b).fit.nrmse
+                fit = backlash_misfit(x, y, degree, breaks=b)  # eqs. 22-29, free run
             except GenBacklashError:
                 fit = math.inf
             scores[key] = fit if math.isfinite(fit) else math.inf

@@ -20,6 +20,7 @@ from genbacklash_core import (
     nrmse,
     paper_example,
 )
+from genbacklash_core.identify import backlash_misfit
 from genbacklash_core.structure import Structure
 
 from ._helpers import TOL_PAPER
@@ -353,6 +354,37 @@ def test_long_record_uses_a_prefix_warm_start() -> None:
     assert result.history.values.shape == (result.iterations + 1, 8)
     # a hundred times the data: much closer than the paper's tolerance
     assert _max_error(result.model.parameters(), ex.model.parameters()) < 0.005
+
+
+def _lagged(seed: int, lag: int, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Example 1's input lagged ``lag`` samples before its backlash (a servo the model
+    lacks: the iteration often fails to settle and restarts), 2 % of the rows broken."""
+    ex = paper_example(1)
+    data = ex.generate(seed, n_samples=n)
+    rng = np.random.default_rng(seed)
+    u = np.concatenate([np.full(lag, data.u[0]), data.u[: n - lag]])
+    y = ex.model.simulate(u, 0.0) + rng.normal(0.0, 0.02, n)
+    return data.u, y, rng.random(n) < 0.02
+
+
+@pytest.mark.parametrize("seed", range(6))
+@pytest.mark.parametrize("degree", [1, 3])
+@pytest.mark.parametrize("lag", [0, 3, 8])
+def test_backlash_misfit_is_identify_s_fit_to_the_bit(seed: int, degree: int, lag: int) -> None:
+    """The servo's score skips the branch-support check: the misfit stays the one
+    identify_backlash reads without refinement, on data where it settles and where it
+    restarts."""
+    u, y, breaks = _lagged(seed, lag, 1500)
+    full = identify_backlash(u, y, degree, refine=False, breaks=breaks)
+    assert backlash_misfit(u, y, degree, breaks=breaks) == full.fit.nrmse
+
+
+def test_backlash_misfit_of_a_long_record_and_its_errors() -> None:
+    u, y, breaks = _lagged(1, 4, 90_000)  # a prefix warm start first
+    full = identify_backlash(u, y, 1, refine=False, breaks=breaks)
+    assert backlash_misfit(u, y, 1, breaks=breaks) == full.fit.nrmse
+    with pytest.raises(GenBacklashError, match="degree"):
+        backlash_misfit(u, y, 0)
 
 
 def test_accepts_python_lists() -> None:

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from genbacklash_core import GenBacklashError, GeneralBacklash
 from genbacklash_core.identify import identify_backlash
 from genbacklash_core.play import play_operator
-from genbacklash_core.servo import ServoModel, estimate_servo, servo_changes
+from genbacklash_core.servo import ServoModel, _Outputs, estimate_servo, servo_changes
 
 MS = 1_000_000
 
@@ -85,6 +85,32 @@ def test_a_stream_in_pieces_gives_the_same_output_to_the_bit(
         x, state = model.output(t[piece], u[piece], state)
         parts.append(x)
     np.testing.assert_array_equal(np.concatenate(parts), whole)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    seed=st.integers(0, 10_000),
+    servos=st.lists(
+        st.tuples(
+            st.one_of(st.just(0.0), st.floats(0.0, 0.6)),  # 0.6 s: events beyond the record
+            st.one_of(st.just(0.0), st.just(5e-10), st.floats(0.0, 0.05)),
+        ),
+        min_size=1,
+        max_size=6,
+    ),
+)
+def test_the_estimate_s_candidate_outputs_are_output_s_to_the_bit(
+    seed: int, servos: list[tuple[float, float]]
+) -> None:
+    """estimate_servo runs the lag's recursion once per time constant (_Outputs): every
+    candidate's input is still what ServoModel.output gives, bit for bit."""
+    t, u = _commands(seed, 400)
+    outputs = _Outputs(t, u)
+    for dead, tau in servos + [(dead + 0.001, tau) for dead, tau in servos]:
+        model = ServoModel(dead, tau)
+        np.testing.assert_array_equal(outputs(model), model.output(t, u)[0])
+    empty = _Outputs(np.zeros(0, dtype=np.int64), np.zeros(0))
+    assert empty(ServoModel(0.001, 0.002)).size == 0
 
 
 @settings(max_examples=40, deadline=None)
