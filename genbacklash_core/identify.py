@@ -849,18 +849,17 @@ def identify_backlash(
     >>> bool(np.max(np.abs(result.model.parameters() - ex.model.parameters())) < 0.03)
     True
     """
-    return _identify_backlash(
-        u,
-        x,
-        degree,
-        sign=sign,
-        start=start,
-        refine=refine,
+    structure, uu, xx, bb, p0 = _backlash_problem(u, x, degree, sign, start, nonfinite, breaks)
+    return _run(
+        structure,
+        uu,
+        xx,
+        start=p0,
         max_iterations=max_iterations,
         tol=tol,
-        nonfinite=nonfinite,
+        refine=refine,
         callback=callback,
-        breaks=breaks,
+        breaks=bb,
         restart_holds=restart_holds,
     )
 
@@ -888,28 +887,33 @@ def backlash_misfit(
     >>> misfit == identify_backlash(data.u, data.y, 3, refine=False).fit.nrmse
     True
     """
-    result = _identify_backlash(u, x, degree, refine=False, breaks=breaks, support=False)
+    structure, uu, xx, bb, _ = _backlash_problem(u, x, degree, None, None, "raise", breaks)
+    result = _run(
+        structure,
+        uu,
+        xx,
+        start=None,
+        max_iterations=30,  # identify_backlash's defaults
+        tol=1e-4,
+        refine=False,
+        callback=None,
+        breaks=bb,
+        support=False,
+    )
     return result.fit.nrmse
 
 
-def _identify_backlash(
+def _backlash_problem(
     u: ArrayLike,
     x: ArrayLike,
     degree: int,
-    *,
-    sign: float | None = None,
-    start: GeneralBacklash | None = None,
-    refine: bool = True,
-    max_iterations: int = 30,
-    tol: float = 1e-4,
-    nonfinite: NonFinitePolicy = "raise",
-    callback: IterationCallback | None = None,
-    breaks: ArrayLike | None = None,
-    restart_holds: bool = False,
-    support: bool = True,
-) -> IdentificationResult:
-    """:func:`identify_backlash`; without ``support`` (see :func:`_candidate`) its
-    ``converged`` may overstate (for :func:`backlash_misfit`, which reads the fit alone)."""
+    sign: float | None,
+    start: GeneralBacklash | None,
+    nonfinite: NonFinitePolicy,
+    breaks: ArrayLike | None,
+) -> tuple[Structure, FloatArray, FloatArray, BoolArray | None, FloatArray | None]:
+    """:func:`identify_backlash`'s input checked: the structure (its sign detected unless
+    given), the prepared samples and breaks, the start's parameters (None: the paper's)."""
     degree = as_order("degree", degree)
     if degree < 1:
         raise GenBacklashError(f"degree must be >= 1, got {degree}")
@@ -926,19 +930,7 @@ def _identify_backlash(
         if start.degree != degree:
             raise GenBacklashError(f"start has degree {start.degree}, expected {degree}")
         p0 = start.parameters()
-    return _run(
-        structure,
-        uu,
-        xx,
-        start=p0,
-        max_iterations=max_iterations,
-        tol=tol,
-        refine=refine,
-        callback=callback,
-        breaks=bb,
-        restart_holds=restart_holds,
-        support=support,
-    )
+    return structure, uu, xx, bb, p0
 
 
 def identify_cascade(
