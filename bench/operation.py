@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import sys
 import time
+from typing import Any
 
 import numpy as np
 from _common import command_line, machine_description, md_table, parse_args, write_section
@@ -61,9 +62,10 @@ def true_load(rec: OperationRecord, u: np.ndarray) -> np.ndarray:
     return simulate_worn(rec.settings.model, u, float(rec.x_all[0]), rec.c_left, rec.c_right)
 
 
-def run_pipeline(rec: OperationRecord, method: str) -> dict[str, float]:
-    """Replay the record through the node's pipeline; what it published, judged."""
-    params = NodeParameters(command_type="float64", encoder_type="float64", method=method)
+def run_pipeline(rec: OperationRecord, method: str, **extra: str) -> dict[str, Any]:
+    """Replay the record through the node's pipeline (``extra``: more node parameters, e.g.
+    ``servo_model="auto"``); what it published, judged."""
+    params = NodeParameters(command_type="float64", encoder_type="float64", method=method, **extra)
     pipe = BacklashPipeline(params)
     t0 = time.perf_counter()
     fed = feed_record(pipe, rec, RECEIVE_DELAY_NS)
@@ -72,9 +74,10 @@ def run_pipeline(rec: OperationRecord, method: str) -> dict[str, float]:
     sent, first_estimate = fed.sent, fed.first_estimate_s
     est = pipe.estimate
     model = est.model
-    fit = float("inf")
+    fit, play = float("inf"), float("nan")
     if isinstance(model, GeneralBacklash):
         fit = nrmse(rec.x_all, model.simulate(rec.u_all, rec.x_all[0]))
+        play = model.c_left + model.c_right
     k = np.searchsorted(rec.command_t_ns, rec.sample_t_ns, side="right") - 1
     load_comp = true_load(rec, sent[k])
     half = rec.sample_t_ns >= rec.sample_t_ns[-1] / 2
@@ -89,6 +92,9 @@ def run_pipeline(rec: OperationRecord, method: str) -> dict[str, float]:
         "cut": 1.0 - rms_comp / rms_raw,
         "cost_us": cost * 1e6,
         "state": est.state.value,
+        "play": play,
+        "servo": pipe.servo,
+        "seconds": cost * rec.encoder_t_ns.size,
     }
 
 
