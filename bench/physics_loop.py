@@ -19,7 +19,12 @@ result: seed ``seed + OFFSET`` of the same drivetrain is written as a bag withou
 compensation (the same motion's kind, another draw), ``genbacklash identify BAG --checkpoint
 FILE`` (with ``--motor-encoder /motor_encoder`` when the node's input is one) writes the
 node's start, and the pipeline in the loop takes it (its ``checkpoint_file``). The table
-adds the start's play against the geometric one.
+adds the start's play against the geometric one, and the record's tracking without
+compensation the checkpoint holds (the judge's baseline on that start: ``offline``) against
+this record's. ``--baseline-scale X`` multiplies that stored baseline by ``X`` and
+``--no-offline-baseline`` removes it (the start then measures its baseline first, as before
+it was stored); ``--offline-variant NAME`` identifies the start on another variant's record
+(a mismatched offline record). The robustness runs of issue 23 use them.
 
 The numbers: the RMS load tracking error ``load - desired`` (the true load at every encoder
 instant) and each compensator's cut against ``none`` in percent, over the whole record and
@@ -28,12 +33,14 @@ against the geometric play; the guard's final trust and error ratio.
 
 Run: ``python bench/physics_loop.py [--seeds 0 1 2] [--bandwidths 20 60 100]
 [--variants ...] [--duration 40] [--guard on|off] [--delay-ms 0]
-[--param NAME=VALUE ...] [--motor-encoder] [--seeded-start OFFSET]``
+[--param NAME=VALUE ...] [--motor-encoder] [--seeded-start OFFSET] [--baseline-scale X]
+[--no-offline-baseline] [--offline-variant NAME]``
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import shutil
 import tempfile
 import time
@@ -45,7 +52,7 @@ from _common import PHYSICS_TOPICS, cli_json, json_play, parse_physics_arguments
 
 from genbacklash_core import compensate
 from genbacklash_core.scenarios import OperationSettings
-from genbacklash_ros.node.checkpoint import warm_start
+from genbacklash_ros.node.checkpoint import load_checkpoint, save_checkpoint, warm_start
 from genbacklash_ros.node.parameters import NodeParameters
 from genbacklash_ros.physics.bag import write_physics_bag
 from genbacklash_ros.physics.loop import Clocks, node_loop, open_loop
@@ -96,16 +103,36 @@ def _arguments(argv: Sequence[str] | None = None) -> argparse.Namespace:
         help="start the node from `genbacklash identify --checkpoint` on seed + OFFSET's "
         "record of the same drivetrain (no compensation in it)",
     )
+    parser.add_argument(
+        "--baseline-scale",
+        type=float,
+        default=1.0,
+        metavar="X",
+        help="with --seeded-start: multiply the checkpoint's offline baseline by X",
+    )
+    parser.add_argument(
+        "--no-offline-baseline",
+        action="store_true",
+        help="with --seeded-start: remove the checkpoint's offline baseline",
+    )
+    parser.add_argument(
+        "--offline-variant",
+        choices=list(VARIANTS),
+        default=None,
+        help="with --seeded-start: identify the start on this variant's record",
+    )
     args = parse_physics_arguments(parser, argv)
     return args
 
 
 def _seeded_start(
     args: argparse.Namespace, name: str, bw: float, seed: int, folder: Path
-) -> tuple[Path, float]:
-    """Identify seed ``seed + args.seeded_start`` of the drivetrain offline with the CLI and
-    write the node's start; the file and the start's play (rad). The node must take it."""
-    params = variant(name, bandwidth=bw)
+) -> tuple[Path, float, float]:
+    """Identify seed ``seed + args.seeded_start`` of the drivetrain (``--offline-variant``'s
+    when given) offline with the CLI and write the node's start; the file, the start's play
+    (rad) and its offline baseline as the node takes it (rad rms, NaN: none). The node
+    must take it."""
+    params = variant(args.offline_variant or name, bandwidth=bw)
     offline = seed + args.seeded_start
     bag = folder / f"{name}-{bw:g}-{offline}"
     write_physics_bag(
@@ -121,10 +148,19 @@ def _seeded_start(
         ["identify", str(bag), *PHYSICS_TOPICS, "--json", "--checkpoint", str(start), *motor]
     )
     shutil.rmtree(bag)
+    saved = load_checkpoint(start)
+    if args.no_offline_baseline or args.baseline_scale != 1.0:
+        base = saved.baseline
+        if base is not None and not args.no_offline_baseline:
+            base = dataclasses.replace(base, rms=base.rms * args.baseline_scale)
+        else:
+            base = None
+        save_checkpoint(start, dataclasses.replace(saved, baseline=base))
     taken = warm_start(NodeParameters.from_mapping({"checkpoint_file": str(start)}))
     if taken.prior is None or taken.problem:
         raise SystemExit(f"the node did not take the start {start}: {taken.note}")
-    return start, json_play(result)
+    offline = taken.baseline.rms if taken.baseline is not None else float("nan")
+    return start, json_play(result), offline
 
 
 def main(argv: Sequence[str] | None = None) -> None:
@@ -143,9 +179,11 @@ def _tables(args: argparse.Namespace, folder: Path) -> None:
     print(
         "| variant | bandwidth (Hz) | seed | rms none (mrad) | cut true (%) | cut node (%) "
         "| 2nd half: cut true / node (%) | node play / geometric | guard (trust, ratio) "
-        "| measured (state, ratio) |" + (" start play / geometric |" if seeded else "") + " s |"
+        "| measured (state, ratio) |"
+        + (" start play / geometric | offline / none (mrad) | judged against |" if seeded else "")
+        + " s |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|---|" + ("---|" if seeded else ""))
+    print("|---|---|---|---|---|---|---|---|---|---|---|" + ("---|---|---|" if seeded else ""))
     for name in args.variants:
         for bw in args.bandwidths:
             params = variant(name, bandwidth=bw)
@@ -154,9 +192,9 @@ def _tables(args: argparse.Namespace, folder: Path) -> None:
             for seed in args.seeds:
                 start = time.perf_counter()
                 run_extra = dict(extra)
-                start_play = ""
+                start_play, offline = "", float("nan")
                 if seeded:
-                    file, offline_play = _seeded_start(args, name, bw, seed, folder)
+                    file, offline_play, offline = _seeded_start(args, name, bw, seed, folder)
                     run = folder / "start.json"  # the node checkpoints over its start
                     shutil.copyfile(file, run)
                     run_extra["checkpoint_file"] = str(run)
@@ -192,7 +230,13 @@ def _tables(args: argparse.Namespace, folder: Path) -> None:
                     f"| {late['true']:.1f} / {late['node']:.1f} | {play:.3f} "
                     f"| {verdict.trust:.2f}, {verdict.ratio:.2f} "
                     f"| {measured.state}, {measured.ratio:.2f} |{start_play}"
-                    f" {time.perf_counter() - start:.1f} |",
+                    + (
+                        f" {1e3 * offline:.2f} / {1e3 * _rms(errors['none']):.2f} "
+                        f"| {measured.baseline} |"
+                        if seeded
+                        else ""
+                    )
+                    + f" {time.perf_counter() - start:.1f} |",
                     flush=True,
                 )
 

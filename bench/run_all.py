@@ -29,6 +29,7 @@ BENCHMARKS = (
     "physics_accuracy",
     "csv_vs_bag",
     "physics_loop",
+    "operation_loop",
     "physics_diagnose",
     "coverage",
     "spike_screen",

@@ -32,6 +32,23 @@ grows with the evidence on it: from :data:`RAMP_START` of it to all of it over t
 times ``ratio_off``) is judged: a compensated jump that rings a compliant load costs little
 before a verdict can switch it off (the harm of a jump grows with its size).
 
+A start whose baseline was measured offline (:meth:`TrackingJudge.start_from`, a
+:class:`OfflineBaseline`: the tracking without compensation of the record a checkpoint was
+identified on) needs no ``min_time`` of baseline first: its trial may begin at once, the
+weight growing as above. Such a baseline may be stale or of other work than the machine's
+now, so it is replaced by the live one as soon as :data:`OFFLINE_PROBE` of ``min_time`` of
+that is measured: after :data:`OFFLINE_CHECK` of ``min_time`` of compensating the judge
+probes for it (compensation off), unless readings without compensation gave it before. No
+verdict rests on the offline baseline but the trial's first weights; until the live one is
+there the verdict's ``baseline`` says ``"offline"``. That trial, judged against the live
+baseline after :data:`HARM_SHARE` of ``min_time`` of compensating, passes at once to full
+weight when it clearly helps (``q`` at most ``ratio_full``; at full weight it is measured
+afresh, as any), else it runs its course. The node holds a checkpoint's model until its
+guard has judged it on the machine's own samples, so there the live baseline always comes
+first (:mod:`genbacklash_ros.node.pipeline`; measured in BENCHMARKS.md, issue 23, branch
+base-1: a trial from the first command judged on the offline baseline perturbed a load
+coasting into the play for the rest of a record, 8.9 % worse than no compensation).
+
 Once every ``probe_every`` seconds of compensating the judge asks for a *probe*:
 ``min_time`` seconds with compensation off, to measure the baseline again. After a verdict
 of harm compensation stays off until a new model is adopted or ``retry`` seconds have passed;
@@ -67,9 +84,12 @@ from .samples import stamp_steps
 
 __all__ = [
     "HARM_SHARE",
+    "OFFLINE_CHECK",
+    "OFFLINE_PROBE",
     "RAMP_START",
     "RETRY_CHANGE",
     "STRONG_HARM",
+    "OfflineBaseline",
     "TrackingJudge",
     "TrackingJudgeSettings",
     "TrackingVerdict",
@@ -89,6 +109,14 @@ HARM_SHARE = 1.0 / 3.0
 RAMP_START = 0.1
 """The share of the trial weight a trial starts at; it grows linearly to all of it over
 :data:`HARM_SHARE` of ``min_time``, while nothing could judge the harm it may do."""
+
+OFFLINE_CHECK = HARM_SHARE
+"""On a start from an :class:`OfflineBaseline`: the share of ``min_time`` of compensating
+after which the baseline is probed live (module notes)."""
+
+OFFLINE_PROBE = HARM_SHARE / 2.0
+"""On a start from an :class:`OfflineBaseline`: the share of ``min_time`` the live probe
+lasts; a live baseline that long replaces the offline one (module notes)."""
 
 _MAX_STEP_S = 0.1  # a gap in one kind's readings counts at most this much of its time
 
@@ -159,6 +187,40 @@ class TrackingJudgeSettings:
 
 
 @dataclass(frozen=True)
+class OfflineBaseline:
+    """The tracking without compensation measured offline, on a record of the machine's work.
+
+    What :class:`TrackingJudge` measures as its baseline (``rms(e_off)``, ``y - r`` at every
+    reading, weighted over ``window`` seconds) over a record in which no compensated
+    command drove the drivetrain; a checkpoint start takes it as its baseline
+    (:meth:`TrackingJudge.start_from`).
+
+    Parameters
+    ----------
+    rms : float
+        The root-mean-square tracking error without compensation (rad, > 0).
+    seconds : float
+        Seconds of readings it was measured on (> 0).
+
+    Examples
+    --------
+    >>> OfflineBaseline(0.036, 40.0).rms
+    0.036
+    """
+
+    rms: float
+    seconds: float
+
+    def __post_init__(self) -> None:
+        for name in ("rms", "seconds"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise GenBacklashError(f"{name} must be a number, got {value!r}")
+            if not (math.isfinite(value) and value > 0.0):
+                raise GenBacklashError(f"{name} must be a finite number > 0, got {value!r}")
+
+
+@dataclass(frozen=True)
 class TrackingVerdict:
     """The judge's verdict after the readings so far.
 
@@ -179,6 +241,9 @@ class TrackingVerdict:
         Seconds of readings of each kind judged so far.
     reason : str
         One sentence, with the numbers.
+    baseline : str
+        What ``off_rms`` is: ``"measured"`` (on the machine) or ``"offline"`` (the
+        :class:`OfflineBaseline` of a checkpoint start, until the live one is probed).
     """
 
     trust: float
@@ -189,6 +254,7 @@ class TrackingVerdict:
     on_time: float
     off_time: float
     reason: str
+    baseline: str = "measured"
 
 
 class _Mean:
@@ -242,7 +308,20 @@ class TrackingJudge:
         self._next_probe = self.settings.probe_every  # compensated time of the next probe
         self._on_before = 0.0  # compensated seconds of the means forgotten
         self._trial_done = False  # the trial at part weight passed
+        self._offline: OfflineBaseline | None = None  # a checkpoint start's baseline
+        self._offline_trial = False  # its first trial, which may pass early
+        self._probe_length = self.settings.min_time  # of the probe in progress
         self.verdict = self._judge()
+
+    def start_from(self, baseline: OfflineBaseline) -> TrackingVerdict:
+        """Take ``baseline`` (measured offline) as the baseline until the live one is
+        probed: compensation is tried from the next reading (module notes)."""
+        if not isinstance(baseline, OfflineBaseline):
+            raise GenBacklashError(f"baseline must be an OfflineBaseline, got {baseline!r}")
+        self._offline = baseline
+        self._offline_trial = True
+        self.verdict = self._judge()
+        return self.verdict
 
     def configure(self, settings: TrackingJudgeSettings) -> TrackingVerdict:
         """New settings, the evidence kept; returns the verdict under them."""
@@ -302,20 +381,38 @@ class TrackingJudge:
         if trial:
             self._trial_done = False
 
+    def _offline_in_use(self) -> OfflineBaseline | None:
+        """The offline baseline while no live one of :data:`OFFLINE_PROBE` of ``min_time``
+        is measured, else None."""
+        offline = self._offline
+        if offline is not None and self._off.time < OFFLINE_PROBE * self.settings.min_time:
+            return offline
+        return None
+
     def _ratio(self) -> tuple[float, float, float]:
-        """``(rms(e_on), rms(e_off), their ratio)`` (NaN where a kind has no readings)."""
-        on_rms, off_rms = self._on.rms(), self._off.rms()
+        """``(rms(e_on), rms(e_off), their ratio)`` (NaN where a kind has no readings);
+        ``rms(e_off)`` is the offline baseline's while it is in use."""
+        offline = self._offline_in_use()
+        on_rms = self._on.rms()
+        off_rms = offline.rms if offline is not None else self._off.rms()
         return on_rms, off_rms, on_rms / off_rms if off_rms > 0.0 else math.nan
 
     def _verdict(self, trust: float, state: str, why: str) -> TrackingVerdict:
         on, off = self._on, self._off
         on_rms, off_rms, ratio = self._ratio()
+        offline = self._offline_in_use()
+        if offline is not None:
+            without = f"{off_rms:.3g} rad without, offline over {offline.seconds:.0f} s"
+            off_time, baseline = offline.seconds, "offline"
+        else:
+            without = f"{off_rms:.3g} rad without over {off.time:.0f} s"
+            off_time, baseline = off.time, "measured"
         numbers = (
             f"(measured tracking error {on_rms:.3g} rad rms compensating over {on.time:.0f} s, "
-            f"{off_rms:.3g} rad without over {off.time:.0f} s)"
+            f"{without})"
         )
         return TrackingVerdict(
-            trust, state, ratio, on_rms, off_rms, on.time, off.time, f"{why} {numbers}"
+            trust, state, ratio, on_rms, off_rms, on.time, off_time, f"{why} {numbers}", baseline
         )
 
     def _judge(self) -> TrackingVerdict:
@@ -339,12 +436,12 @@ class TrackingJudge:
                 "not in the loop (compensation_in_loop false): measured tracking watched only",
             )
         if self._probe_from is not None:
-            if off.time - self._probe_from < s.min_time:
+            if off.time - self._probe_from < self._probe_length:
                 return self._verdict(
                     0.0,
                     "probing",
-                    f"compensation held off for {s.min_time:g} s to measure the tracking "
-                    "without it",
+                    f"compensation held off for {self._probe_length:g} s to measure the "
+                    "tracking without it",
                 )
             self._probe_from = None
             self._next_probe = self._on_before + on.time + s.probe_every
@@ -360,7 +457,10 @@ class TrackingJudge:
             self._harm_at = None
             self._measure_afresh(trial=True)
             return self._judge()
-        if off.time < s.min_time:
+        if self._offline_in_use() is not None and on.time >= OFFLINE_CHECK * s.min_time:
+            # the offline baseline checked live before any verdict rests on it
+            return self._probe(OFFLINE_PROBE * s.min_time)
+        if self._offline is None and off.time < s.min_time:
             # no compensation it could not judge: harm is measured against the baseline, so
             # a trial waits for a full one (a fresh start or a checkpoint's alike)
             return self._verdict(
@@ -374,6 +474,19 @@ class TrackingJudge:
         # second of it costs tracking
         if on.time >= harm_judged and ratio >= STRONG_HARM * s.ratio_off:
             return self._harm()
+        early = (
+            self._offline_trial
+            and not self._trial_done
+            and self._offline_in_use() is None
+            and on.time >= harm_judged
+            and ratio <= s.ratio_full
+        )
+        if early:
+            # an offline start's trial, judged against the live baseline, clearly helps
+            self._offline_trial = False
+            self._trial_done = True
+            self._measure_afresh(trial=False)  # now judge it at full weight
+            return self._judge()
         if on.time < s.min_time:
             if self._trial_done:
                 return self._verdict(1.0, "judging", "measuring compensation at full weight")
@@ -393,7 +506,7 @@ class TrackingJudge:
             self._measure_afresh(trial=False)  # now judge it at full weight
             return self._judge()
         if self._on_before + on.time >= self._next_probe:
-            return self._probe()
+            return self._probe(s.min_time)
         fit = min(max((s.ratio_off - ratio) / (s.ratio_off - s.ratio_full), 0.0), 1.0)
         if fit <= 0.0:
             return self._harm()
@@ -403,9 +516,10 @@ class TrackingJudge:
         return self._verdict(1.0, "on", f"compensation on: {kept}")
 
     def _harm(self) -> TrackingVerdict:
+        self._offline_trial = False
         self._harm_at, self._harm_play = self._off.time, self._play
         return self._judge()
 
-    def _probe(self) -> TrackingVerdict:
-        self._probe_from = self._off.time
+    def _probe(self, length: float) -> TrackingVerdict:
+        self._probe_from, self._probe_length = self._off.time, length
         return self._judge()

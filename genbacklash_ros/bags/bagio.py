@@ -49,6 +49,7 @@ from typing import Any, Literal, NamedTuple
 import numpy as np
 
 from genbacklash_core import GenBacklashError
+from genbacklash_core.measured import OfflineBaseline
 from genbacklash_core.servo import ServoFit, ServoModel
 from genbacklash_ros.bags.output_marker import mark_output
 from genbacklash_ros.bags.raw_values import RawValueReader
@@ -1074,6 +1075,9 @@ class AlignedSeries:
     ``damage``: why the bag's reading stopped early ("" when it was read to its end; see
     :func:`read_aligned`'s ``keep_readable``). ``servo``, ``servo_fit``: the servo model
     whose output ``u`` is, and its estimate (:func:`~genbacklash_ros.node.sample_rule.select_rows`).
+    ``baseline``: the record's tracking without compensation as the node's judge measures
+    it (:func:`read_aligned`'s ``baseline``; None when not asked for, or when the bag may
+    hold compensation: :func:`node_outputs`).
     """
 
     t: np.ndarray
@@ -1084,6 +1088,19 @@ class AlignedSeries:
     damage: str = ""
     servo: ServoModel | None = None
     servo_fit: ServoFit | None = None
+    baseline: OfflineBaseline | None = None
+
+
+def node_outputs(topics: Iterable[str]) -> list[str]:
+    """The topics of ``topics`` the node publishes (a compensated command, its estimate): a
+    record that holds one may have had compensation in the loop, so its tracking is not
+    counted as tracking without compensation (``/diagnostics`` is every node's, not counted).
+
+    >>> node_outputs(["/command", "/encoder", "/compensated_command", "/diagnostics"])
+    ['/compensated_command']
+    """
+    marks = ("compensated_command", "backlash_identifier/estimate")
+    return [t for t in topics if t.endswith(marks)]
 
 
 def align(
@@ -1177,10 +1194,17 @@ def read_aligned(
     servo: ServoChoice = None,
     motor_topic: str | None = None,
     motor_joint: str = "",
+    baseline: bool = False,
 ) -> AlignedSeries:
     """Read a command and an encoder topic from a bag and align them (see :func:`align`;
     ``bridge`` for a backlash alone; ``settle_ns`` the servo's settling rule, as the node;
     ``servo`` the servo model, or ``"auto"``).
+
+    With ``baseline`` the record's tracking without compensation is measured as the node's
+    judge measures it (:func:`~genbacklash_ros.node.tracking_stage.record_baseline`, the
+    encoder readings against the commands) into :attr:`AlignedSeries.baseline`, unless
+    the bag holds a node's outputs (:func:`node_outputs`: compensation may have been in the
+    loop).
 
     With ``motor_topic`` (a motor encoder, dual encoders: the node's ``gear_input =
     "motor_encoder"``) the input of each row is the motor reading of the encoder reading's
@@ -1201,6 +1225,7 @@ def read_aligned(
         cmd_info, enc_info = check_selection(
             reader, command_topic, encoder_topic, joint=joint, command_index=command_index
         )
+        plain = not node_outputs(reader.topics)
         cmd_type, enc_type = cmd_info.msgtype, enc_info.msgtype
         motor_joint = motor_joint or joint
         mot_type = ""
@@ -1280,4 +1305,8 @@ def read_aligned(
         )
     if series.t.size == 0:
         raise BagError(f"no encoder reading on {encoder_topic!r} follows the first command{before}")
+    if baseline and plain:
+        from genbacklash_ros.node.tracking_stage import record_baseline
+
+        series = dataclasses.replace(series, baseline=record_baseline(c_t, c_u, e_t, e_y))
     return dataclasses.replace(series, damage=damage) if damage else series

@@ -30,6 +30,7 @@ import numpy as np
 import numpy.typing as npt
 
 from genbacklash_core import GenBacklashError
+from genbacklash_core.measured import OfflineBaseline
 from genbacklash_core.servo import ServoFit, ServoModel
 from genbacklash_ros.node.sample_rule import ServoChoice, select_rows, time_breaks
 
@@ -58,6 +59,8 @@ class Series:
     ``dropped``: the line numbers of the file's rows :func:`read_series_csv` left out.
     ``servo``, ``servo_fit``: the servo model whose output ``u`` is, and its estimate
     (:func:`~genbacklash_ros.node.sample_rule.select_rows`; None: ``u`` is the command).
+    ``baseline``: the record's tracking without compensation as the node's judge measures
+    it (a bag without a node's outputs; None otherwise, and for a CSV, which cannot tell).
     """
 
     u: FloatArray
@@ -67,6 +70,7 @@ class Series:
     dropped: tuple[int, ...] = ()
     servo: ServoModel | None = None
     servo_fit: ServoFit | None = None
+    baseline: OfflineBaseline | None = None
 
     def sample_period(self) -> float | None:
         """The nominal sample period in seconds: the median step of ``t`` (None without

@@ -134,6 +134,9 @@ class ReplayResult:
         The servo model the identifier's input went through
         (:attr:`~genbacklash_ros.node.pipeline.BacklashPipeline.servo`); None with
         ``servo_model`` none.
+    input_topics : tuple of str
+        Every topic of the input bag (whether it holds a node's outputs:
+        :func:`~genbacklash_ros.bags.bagio.node_outputs`).
     """
 
     output: Path
@@ -147,6 +150,7 @@ class ReplayResult:
     error: str = ""
     custom_data: dict[str, str] | None = None
     servo: dict[str, object] | None = None
+    input_topics: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, object]:
         """JSON-ready summary: the final estimate (``Estimate.to_dict``) plus counters."""
@@ -492,6 +496,7 @@ def replay(
         cmd_info = reader.topic(command_topic, COMMAND_MSGTYPES)
         enc_info = reader.topic(encoder_topic, ENCODER_MSGTYPES)
         custom_data = reader.custom_data
+        input_topics = tuple(reader.topics)
         overrides: dict[str, object] = {
             "joint": joint,
             "command_index": command_index,
@@ -634,4 +639,5 @@ def replay(
         error,
         custom_data,
         pipeline.servo,
+        input_topics,
     )

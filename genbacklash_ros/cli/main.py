@@ -257,7 +257,8 @@ def _cmd_identify(args: argparse.Namespace) -> int:
 
         stamps = series.t
         time_ns = round(float(stamps[-1]) * 1e9) if stamps is not None and stamps.size else 0
-        write_start(args.checkpoint, identify_estimate(result, series), time_ns, "identify")
+        estimate = identify_estimate(result, series)
+        write_start(args.checkpoint, estimate, time_ns, "identify", series.baseline)
     if args.plot:
         from genbacklash_ros.reports.plots import save_identification_plots
 

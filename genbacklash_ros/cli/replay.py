@@ -17,8 +17,9 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 from genbacklash_core import GenBacklashError
+from genbacklash_core.measured import OfflineBaseline
 from genbacklash_core.scenarios import PHASE_KINDS
-from genbacklash_ros.bags.bagio import BagError, read_aligned
+from genbacklash_ros.bags.bagio import BagError, node_outputs, read_aligned
 from genbacklash_ros.bags.csvio import Series, dropped_note, read_series_csv
 from genbacklash_ros.bags.replay import OUTPUT_TOPICS, ReplayResult, replay
 from genbacklash_ros.bags.simbags import COMMAND_TOPIC, ENCODER_TOPIC, MOTOR_TOPIC, SimulatedBag
@@ -31,6 +32,7 @@ from genbacklash_ros.node.parameters import (
     parameter_table,
     parse_param_overrides,
 )
+from genbacklash_ros.node.tracking_stage import record_baseline
 from genbacklash_ros.physics.variants import DEFAULT_BANDWIDTH, VARIANTS
 
 __all__ = [
@@ -197,6 +199,7 @@ def load_bag_series(
         servo=params.servo() if params is not None else None,
         motor_topic=motor_topic,
         motor_joint=motor_joint,
+        baseline=True,
     )
     if series.skipped:
         print(
@@ -211,6 +214,7 @@ def load_bag_series(
         breaks=series.breaks,
         servo=series.servo,
         servo_fit=series.servo_fit,
+        baseline=series.baseline,
     )
 
 
@@ -767,6 +771,18 @@ def _summary(result: ReplayResult) -> str:
     return "\n".join(lines)
 
 
+def replay_baseline(result: ReplayResult) -> OfflineBaseline | None:
+    """The replayed record's tracking without compensation, as the node's judge measures it
+    (:func:`~genbacklash_ros.node.tracking_stage.record_baseline` on the recorded commands
+    and encoder readings); None when the record may hold compensation: it holds a node's
+    outputs (:func:`~genbacklash_ros.bags.bagio.node_outputs`) or was replayed with
+    ``compensation_in_loop`` (the recorded command would not be what drove the drivetrain)."""
+    if result.params.compensation_in_loop or node_outputs(result.input_topics):
+        return None
+    h = result.history
+    return record_baseline(h.command_t, h.command_raw, h.encoder_t, h.encoder_y)
+
+
 def cmd_replay(args: argparse.Namespace) -> int:
     """Run ``genbacklash replay``."""
     used = [s.name for s in PARAMETER_SPECS if s.name not in _SET_BY_REPLAY]
@@ -797,7 +813,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
     if args.checkpoint:
         history = result.history
         times = history.estimate_t or history.encoder_t
-        write_start(args.checkpoint, result.estimate, times[-1] if times else 0, "replay")
+        last = times[-1] if times else 0
+        write_start(args.checkpoint, result.estimate, last, "replay", replay_baseline(result))
     if args.report:
         from genbacklash_ros.progress import Progress
         from genbacklash_ros.reports.replay import write_report

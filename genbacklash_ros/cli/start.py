@@ -13,6 +13,15 @@ identify's estimate carries a covariance like the online identifiers' (the least
 parameters by the delta method), so the node's identifier is *seeded* with it and continues
 from it. Where that regression is singular the file still holds the parameters: the node then
 compensates with them until its identifier converges (its note says so).
+
+The file also holds the record's tracking without compensation (the checkpoint's
+``baseline``: :func:`~genbacklash_ros.node.tracking_stage.record_baseline`, what the node's
+measured-tracking judge measures as its baseline) when the record had none in it: a bag
+without the node's outputs (:func:`~genbacklash_ros.bags.bagio.node_outputs`), replayed
+without ``compensation_in_loop``. A CSV cannot tell, and gets none. The node's judge then
+starts from it: compensation is tried from the first command instead of after 3 s of
+tracking without it, and the baseline is probed live after its first second
+(:mod:`genbacklash_core.measured`).
 """
 
 from __future__ import annotations
@@ -26,12 +35,13 @@ import numpy as np
 
 from genbacklash_core import Estimate, GenBacklashError, IdentificationResult, Structure
 from genbacklash_core.estimate import EstimatorState, confidence_of, relative_std
+from genbacklash_core.measured import OfflineBaseline
 from genbacklash_core.online.covariance import natural_covariance
 from genbacklash_core.online.fits import solve_normal
 from genbacklash_core.online.rows import window_rows
 from genbacklash_core.online.settings import WindowedSettings
 from genbacklash_ros.bags.csvio import Series
-from genbacklash_ros.node.checkpoint import CheckpointError, save_checkpoint
+from genbacklash_ros.node.checkpoint import Checkpoint, CheckpointError, save_checkpoint
 
 __all__ = [
     "CHECKPOINT_HELP",
@@ -122,8 +132,15 @@ def node_settings(estimate: Estimate) -> str:
     return f"model=backlash degree={s.degree}"
 
 
-def write_start(path: str | Path, estimate: Estimate, time_ns: int, command: str) -> None:
-    """Save ``estimate`` as the node's checkpoint at ``path`` and say on stderr how the node
+def write_start(
+    path: str | Path,
+    estimate: Estimate,
+    time_ns: int,
+    command: str,
+    baseline: OfflineBaseline | None = None,
+) -> None:
+    """Save ``estimate`` (and the record's tracking without compensation, ``baseline``,
+    when measured) as the node's checkpoint at ``path`` and say on stderr how the node
     takes it; :class:`GenBacklashError` when there is no estimate to save."""
     if estimate.model is None:
         raise GenBacklashError(
@@ -131,11 +148,21 @@ def write_start(path: str | Path, estimate: Estimate, time_ns: int, command: str
             f"{estimate.reason or 'no parameters'}); nothing written"
         )
     try:
-        save_checkpoint(path, estimate, time_ns=int(time_ns))
+        save_checkpoint(path, Checkpoint(estimate, int(time_ns), baseline=baseline))
     except CheckpointError as err:
         raise GenBacklashError(f"--checkpoint: {err}") from err
+    if baseline is not None:
+        tracking = (
+            f"; with the record's tracking without compensation ({1e3 * baseline.rms:.3g} "
+            f"mrad rms over {baseline.seconds:.0f} s) as the measured-tracking baseline"
+        )
+    else:
+        tracking = (
+            "; no tracking baseline stored (a CSV, a record with the node's outputs in it, "
+            "or under 3 s of it)"
+        )
     print(
-        f"genbacklash {command}: wrote checkpoint {path}; the node starts from it with "
-        f"checkpoint_file={path} {node_settings(estimate)}",
+        f"genbacklash {command}: wrote checkpoint {path}{tracking}; the node starts from it "
+        f"with checkpoint_file={path} {node_settings(estimate)}",
         file=sys.stderr,
     )

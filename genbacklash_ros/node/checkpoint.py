@@ -2,11 +2,16 @@
 
 A checkpoint holds one :class:`~genbacklash_core.Estimate` (structure, parameters,
 covariance, residual, excitation, state, confidence, samples, reason) and the data time it
-was taken at, under a format ``version``. :func:`save_checkpoint` writes it atomically: a
-temporary file in the same directory is written, flushed and fsync'ed, then renamed over the
-target (``os.replace``), and the directory is fsync'ed; a crash at any point leaves either
-the old file or the new one, never a half-written one (a process killed while writing leaves
-its temporary file behind: :func:`warm_start`, run when the node starts again, removes it).
+was taken at, under a format ``version``; optionally (``identify``/``replay --checkpoint`` on
+a record without compensation) the record's tracking without compensation as the measured
+tracking judge measures it (:class:`~genbacklash_core.measured.OfflineBaseline`, the field
+``baseline``: ``{"rms": rad, "seconds": s}``), which a start from the file takes as the
+judge's baseline (:func:`warm_start`). A file without the field loads as before.
+:func:`save_checkpoint` writes it atomically: a temporary file in the same directory is
+written, flushed and fsync'ed, then renamed over the target (``os.replace``), and the
+directory is fsync'ed; a crash at any point leaves either the old file or the new one, never
+a half-written one (a process killed while writing leaves its temporary file behind:
+:func:`warm_start`, run when the node starts again, removes it).
 :func:`load_checkpoint` validates everything and raises :class:`CheckpointError` with the
 reason on a corrupt file.
 
@@ -47,6 +52,7 @@ from typing import Any
 import numpy as np
 
 from genbacklash_core import Estimate, GenBacklashError, OnlineIdentifier, Structure
+from genbacklash_core.measured import OfflineBaseline
 from genbacklash_ros.node.parameters import NodeParameters
 
 __all__ = [
@@ -72,11 +78,16 @@ class CheckpointError(GenBacklashError):
 
 @dataclass(frozen=True)
 class Checkpoint:
-    """A saved estimate and the data time (integer nanoseconds) it was taken at."""
+    """A saved estimate and the data time (integer nanoseconds) it was taken at.
+
+    ``baseline``: the tracking without compensation of the record the estimate was
+    identified on (None: not measured, or the record had compensation in it).
+    """
 
     estimate: Estimate
     time_ns: int
     version: int = CHECKPOINT_VERSION
+    baseline: OfflineBaseline | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.estimate, Estimate):
@@ -88,6 +99,8 @@ class Checkpoint:
                 f"checkpoint version {self.version!r} is not supported (this is version "
                 f"{CHECKPOINT_VERSION})"
             )
+        if self.baseline is not None and not isinstance(self.baseline, OfflineBaseline):
+            raise CheckpointError(f"baseline must be an OfflineBaseline, got {self.baseline!r}")
 
     def mismatch(self, structure: Structure) -> str | None:
         """Why the checkpoint cannot warm-start ``structure`` (degree, na, nb), or None."""
@@ -121,7 +134,7 @@ def checkpoint_to_dict(checkpoint: Checkpoint) -> dict[str, Any]:
     """The JSON-ready dict of a checkpoint (NaN becomes null)."""
     est = checkpoint.estimate
     s = est.structure
-    return {
+    out: dict[str, Any] = {
         "format": _FORMAT,
         "version": checkpoint.version,
         "time_ns": checkpoint.time_ns,
@@ -136,6 +149,22 @@ def checkpoint_to_dict(checkpoint: Checkpoint) -> dict[str, Any]:
         "samples": est.samples,
         "reason": est.reason,
     }
+    if checkpoint.baseline is not None:
+        out["baseline"] = {"rms": checkpoint.baseline.rms, "seconds": checkpoint.baseline.seconds}
+    return out
+
+
+def _baseline(data: dict[str, Any]) -> OfflineBaseline | None:
+    """The optional ``baseline`` field (absent or null: None)."""
+    raw = data.get("baseline")
+    if raw is None:
+        return None
+    if not isinstance(raw, dict):
+        raise CheckpointError("baseline must be an object with rms and seconds")
+    try:
+        return OfflineBaseline(_field(raw, "rms"), _field(raw, "seconds"))
+    except GenBacklashError as err:
+        raise CheckpointError(f"baseline: {err}") from err
 
 
 def _field(data: dict[str, Any], key: str) -> Any:
@@ -198,7 +227,7 @@ def checkpoint_from_dict(data: object) -> Checkpoint:
             _field(data, "samples"),
             reason,
         )
-        return Checkpoint(estimate, time_ns, version)
+        return Checkpoint(estimate, time_ns, version, _baseline(data))
     except CheckpointError:
         raise
     except (GenBacklashError, TypeError) as err:
@@ -329,6 +358,10 @@ class WarmStart:
         True when a checkpoint exists but could not be used (corrupt, other structure).
     seeded : bool
         True when the identifier continues from the checkpoint's estimate.
+    baseline : OfflineBaseline or None
+        The checkpoint's tracking without compensation, measured offline, for the measured
+        tracking judge (:meth:`~genbacklash_core.measured.TrackingJudge.start_from`); None
+        without a usable checkpoint or when it holds none.
     """
 
     identifier: OnlineIdentifier
@@ -336,6 +369,7 @@ class WarmStart:
     note: str = ""
     problem: bool = False
     seeded: bool = False
+    baseline: OfflineBaseline | None = None
 
 
 def warm_start(params: NodeParameters, path: str | Path | None = None) -> WarmStart:
@@ -375,6 +409,11 @@ def warm_start(params: NodeParameters, path: str | Path | None = None) -> WarmSt
     else:
         seeded = True
         how = f"{saved_at}; the identifier continues from its estimate"
+    if checkpoint.baseline is not None:
+        how += (
+            f"; its offline baseline ({1e3 * checkpoint.baseline.rms:.3g} mrad rms without "
+            "compensation) lets compensation start at once, checked live after its first second"
+        )
     prior = Estimate(
         estimate.structure,
         estimate.parameters,
@@ -386,4 +425,5 @@ def warm_start(params: NodeParameters, path: str | Path | None = None) -> WarmSt
         0,
         f"from checkpoint {file} ({saved_at}): {estimate.reason}",
     )
-    return WarmStart(identifier, prior, f"warm start from checkpoint {file} ({how})", seeded=seeded)
+    note = f"warm start from checkpoint {file} ({how})"
+    return WarmStart(identifier, prior, note, seeded=seeded, baseline=checkpoint.baseline)

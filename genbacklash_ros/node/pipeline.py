@@ -499,6 +499,15 @@ class BacklashPipeline:
         self._comp = CompensateStage(params.compensator_options(), compensate=params.compensate)
         self._guard = CompensationGuard(params.guard_settings())
         self._tracking = TrackingStage(params.judge_settings())
+        # a checkpoint that holds its record's tracking without compensation: the judge
+        # starts from it, and the model waits for the guard's first verdict on live samples
+        # (min_samples of them): a load that coasts into the play or a coupling that rings
+        # is perturbed for the rest of a record by a trial of a second at a tenth of its
+        # weight (BENCHMARKS.md, issue 23, base-1), and the guard tells them apart first
+        self._await_guard = start.prior is not None and start.baseline is not None
+        if self._await_guard:
+            assert start.baseline is not None
+            self._tracking.judge.start_from(start.baseline)
         self._set_trust()  # a checkpoint's model is judged from its first command
         self._feed_at_count = self._batch
         self._clock.restart()
@@ -1260,6 +1269,11 @@ class BacklashPipeline:
         guard = self._guard.verdict
         measured = self._tracking.verdict
         status = self._comp.status(est, health.active if passing else (), guard, measured)
+        if self._await_guard and est.available and self._params.compensate:
+            parts.append(
+                "compensation held off until the guard has judged the checkpoint's model on "
+                "this machine's samples"
+            )
         if est.available and self._params.compensate and guard.state in ("faded", "off"):
             parts.append(guard.reason)
             if guard.state == "off":
@@ -1287,6 +1301,12 @@ class BacklashPipeline:
             ("compensation_trust", format(guard.trust, ".3g")),
             ("guard_error_ratio", format(guard.ratio, ".3g") if guard.ratio < math.inf else "none"),
             ("measured_tracking", measured.state),
+            (
+                "measured_tracking_baseline",
+                "offline baseline from the checkpoint"
+                if measured.baseline == "offline"
+                else "measured",
+            ),
             (
                 "measured_tracking_ratio",
                 format(measured.ratio, ".3g") if math.isfinite(measured.ratio) else "none",
@@ -1398,8 +1418,13 @@ class BacklashPipeline:
     def _set_trust(self) -> None:
         """The compensator's trust (the guard's judgement of the model) and share (the
         judge's of the tracking measured)."""
-        self._comp.trust = self._guard.verdict.trust
-        self._comp.share = self._tracking.verdict.trust
+        guard = self._guard.verdict
+        self._comp.trust = guard.trust
+        if self._await_guard and (
+            guard.samples >= self._guard.settings.min_samples or not self._guard.settings.enabled
+        ):
+            self._await_guard = False
+        self._comp.share = 0.0 if self._await_guard else self._tracking.verdict.trust
 
     def _advance(self, stamp: int, outputs: list[Output], *, heavy: bool) -> None:
         """Move the data clock to ``stamp``; append the periodic outputs now due.

@@ -8,6 +8,11 @@ identifier). The per-message path pairs a reading with the last command handled;
 of the batch form pairs each reading with the last command of the stretch that came before
 it (by the messages' order), so both forms judge the same pairs.
 
+:func:`record_baseline` runs a stage over a whole record without compensation in it (every
+command with weight 0): what the judge measures as its baseline, which ``identify`` and
+``replay --checkpoint`` store in the checkpoint
+(:class:`~genbacklash_core.measured.OfflineBaseline`).
+
 Examples
 --------
 >>> from genbacklash_core.measured import TrackingJudgeSettings
@@ -21,11 +26,20 @@ Examples
 from __future__ import annotations
 
 import bisect
+import dataclasses
 import math
+from collections.abc import Sequence
 
-from genbacklash_core.measured import TrackingJudge, TrackingJudgeSettings, TrackingVerdict
+import numpy as np
 
-__all__ = ["TrackingStage"]
+from genbacklash_core.measured import (
+    OfflineBaseline,
+    TrackingJudge,
+    TrackingJudgeSettings,
+    TrackingVerdict,
+)
+
+__all__ = ["TrackingStage", "record_baseline"]
 
 
 class TrackingStage:
@@ -100,3 +114,55 @@ class TrackingStage:
             self.judge.readings(self._t, self._y, self._rs, self._ws)
             self._t, self._y, self._rs, self._ws = [], [], [], []
         return self.judge.verdict
+
+
+def record_baseline(
+    command_t: Sequence[int] | np.ndarray,
+    command_u: Sequence[float] | np.ndarray,
+    reading_t: Sequence[int] | np.ndarray,
+    reading_y: Sequence[float] | np.ndarray,
+    settings: TrackingJudgeSettings | None = None,
+) -> OfflineBaseline | None:
+    """The baseline the node's judge measures on a record without compensation in it.
+
+    A :class:`TrackingStage` is given the record's commands (``command_t``, ``command_u``:
+    stamps in ns and values, sorted) and encoder readings (``reading_t``, ``reading_y``,
+    sorted), each reading paired with the last command at or before its stamp (a command
+    and a reading of one stamp: the command first), every command with weight 0; the
+    judge's baseline after the last reading is the result. None when it holds less than
+    ``min_time`` seconds (the judge would not judge on it) or no finite error.
+
+    Only a record in which the commands went to the drivetrain as they are is such a
+    record: the caller decides (``identify``, ``replay``: see
+    :mod:`genbacklash_ros.cli.start`).
+
+    Examples
+    --------
+    >>> t = [k * 1_000_000 for k in range(4000)]
+    >>> base = record_baseline([0], [0.0], t, [0.01] * 4000)
+    >>> round(base.rms, 6), round(base.seconds, 3)
+    (0.01, 3.999)
+    """
+    base = settings if settings is not None else TrackingJudgeSettings()
+    stage = TrackingStage(dataclasses.replace(base, in_loop=True))
+    ct = np.asarray(command_t, dtype=np.int64)
+    et = np.asarray(reading_t, dtype=np.int64)
+    if not (ct.size and et.size):
+        return None
+    # the places of both kinds in one stream ordered by stamp, a command before a reading
+    cmd_order = np.arange(ct.size) + np.searchsorted(et, ct, side="left")
+    order = np.arange(et.size) + np.searchsorted(ct, et, side="right")
+    stage.stretch(
+        cmd_order.tolist(),
+        np.asarray(command_u, dtype=np.float64).tolist(),
+        0.0,
+        order.tolist(),
+        et.tolist(),
+        np.asarray(reading_y, dtype=np.float64).tolist(),
+    )
+    verdict = stage.flush()
+    if not (verdict.off_time >= base.min_time and math.isfinite(verdict.off_rms)):
+        return None
+    if verdict.off_rms <= 0.0:
+        return None
+    return OfflineBaseline(verdict.off_rms, verdict.off_time)

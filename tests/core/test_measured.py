@@ -13,8 +13,11 @@ from hypothesis import strategies as st
 from genbacklash_core import GenBacklashError
 from genbacklash_core.measured import (
     HARM_SHARE,
+    OFFLINE_CHECK,
+    OFFLINE_PROBE,
     RAMP_START,
     RETRY_CHANGE,
+    OfflineBaseline,
     TrackingJudge,
     TrackingJudgeSettings,
 )
@@ -237,3 +240,56 @@ def test_the_verdict_is_a_trust_in_0_1_and_does_not_depend_on_units(
     assert 0.0 <= a.trust <= 1.0
     assert a.state == b.state
     assert a.ratio == pytest.approx(b.ratio, rel=1e-9)
+
+
+def test_an_offline_baseline_starts_the_trial_at_the_first_reading() -> None:
+    judge = TrackingJudge()
+    feed = Feed(judge)
+    verdict = judge.start_from(OfflineBaseline(0.04, 40.0))
+    # no baseline to measure first: the trial at its first weight, judged on the offline one
+    assert verdict.state == "judging" and verdict.trust == pytest.approx(RAMP_START * TRIAL)
+    assert verdict.baseline == "offline" and verdict.off_rms == 0.04
+    feed.run(0.5, 0.01, 1.0)
+    assert RAMP_START * TRIAL < judge.verdict.trust < TRIAL  # the weight grows
+    check = OFFLINE_CHECK * judge.settings.min_time
+    feed.run(check - 0.5 + 0.05, 0.01, 1.0)
+    # after OFFLINE_CHECK of min_time compensating: the baseline probed live
+    assert judge.verdict.state == "probing" and judge.verdict.trust == 0.0
+    feed.run(OFFLINE_PROBE * judge.settings.min_time + 0.05, 0.04, 1.0)
+    v = judge.verdict
+    assert v.baseline == "measured" and v.off_rms == pytest.approx(0.04, rel=0.1)
+    # 0.01 against the live 0.04: the trial passed, measured at full weight next
+    assert v.state == "judging" and v.trust == 1.0
+    feed.run(4.0, 0.01, 1.0)
+    assert judge.verdict.state == "on" and judge.verdict.ratio == pytest.approx(0.25, rel=0.15)
+
+
+def test_a_wrong_offline_baseline_is_caught_by_the_live_probe() -> None:
+    # the offline record tracked twice as badly as the machine does now: a compensation
+    # that makes tracking 1.5 times worse looks like it keeps 75 % of the error
+    judge = TrackingJudge()
+    feed = Feed(judge)
+    judge.start_from(OfflineBaseline(0.08, 40.0))
+    feed.run(OFFLINE_CHECK * judge.settings.min_time + 0.05, 0.06, 1.0)
+    assert judge.verdict.state == "probing"
+    assert judge.verdict.ratio == pytest.approx(0.75, rel=0.15)  # against the offline one
+    feed.run(OFFLINE_PROBE * judge.settings.min_time + 0.05, 0.04, 1.0)
+    v = judge.verdict
+    assert v.state == "off" and v.trust == 0.0 and v.baseline == "measured"
+    assert v.ratio == pytest.approx(1.5, rel=0.15)
+
+
+def test_an_offline_baseline_is_validated() -> None:
+    with pytest.raises(GenBacklashError, match="rms must be a finite number > 0"):
+        OfflineBaseline(0.0, 40.0)
+    with pytest.raises(GenBacklashError, match="seconds must be a finite number > 0"):
+        OfflineBaseline(0.04, math.nan)
+    with pytest.raises(GenBacklashError, match="baseline must be an OfflineBaseline"):
+        TrackingJudge().start_from(0.04)  # type: ignore[arg-type]
+
+
+def test_without_an_offline_baseline_the_verdict_says_measured() -> None:
+    judge = TrackingJudge()
+    Feed(judge).run(1.0, 0.04, 0.0)
+    assert judge.verdict.baseline == "measured" and judge.verdict.state == "judging"
+    assert judge.verdict.trust == 0.0  # a baseline first, as before

@@ -125,3 +125,39 @@ def test_checkpoint_paths_are_checked_before_the_work(
         assert "--checkpoint" in err and err.count("\n") == 1 and "Traceback" not in err, err
     assert csv.read_bytes() == before
     assert not (tmp_path / "o").exists()
+
+
+# ------------------------------------------------------------- the record's tracking baseline
+
+
+def test_identify_and_replay_store_the_records_tracking_without_compensation(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # a bag of commands and readings alone: the drivetrain got the commands as they are
+    bag, topics = ROOT / "bags" / "drivetrain", [*TOPICS, "--joint", "drive_joint"]
+    identified, replayed = tmp_path / "identified.json", tmp_path / "replayed.json"
+    main(["identify", str(bag), *topics, "--checkpoint", str(identified)])
+    out = tmp_path / "out"
+    argv = ["replay", str(bag), *topics, "-o", str(out), "--no-progress"]
+    assert main([*argv, "--checkpoint", str(replayed)]) == EXIT_OK
+    assert "as the measured-tracking baseline" in capsys.readouterr().err
+    first, second = load_checkpoint(identified).baseline, load_checkpoint(replayed).baseline
+    assert first is not None and second is not None
+    assert 9.0 < first.seconds < 10.0  # the 10 s record's readings
+    # one measurement, the judge's, on the same messages
+    assert first.rms == pytest.approx(second.rms, rel=1e-9)
+    assert first.seconds == pytest.approx(second.seconds, rel=1e-9)
+    # the replay's output holds the node's compensated commands: its record is not counted
+    again = tmp_path / "again.json"
+    main(["identify", str(out), *topics, "--checkpoint", str(again)])
+    assert load_checkpoint(again).baseline is None
+    assert "no tracking baseline stored" in capsys.readouterr().err
+
+
+def test_a_csv_cannot_tell_and_stores_no_baseline(
+    csv: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    start = tmp_path / "start.json"
+    assert main(["identify", str(csv), "--checkpoint", str(start)]) == EXIT_OK
+    assert load_checkpoint(start).baseline is None
+    assert "no tracking baseline stored" in capsys.readouterr().err

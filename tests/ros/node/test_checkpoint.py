@@ -22,6 +22,7 @@ from genbacklash_core import (
     WindowedIdentifier,
     paper_example,
 )
+from genbacklash_core.measured import OfflineBaseline
 from genbacklash_ros.node import checkpoint as ckpt
 from genbacklash_ros.node.checkpoint import (
     CHECKPOINT_VERSION,
@@ -87,6 +88,40 @@ def test_file_layout(tmp_path: Path) -> None:
     assert data["names"][3] == "c_left" and data["structure"]["degree"] == 3
     assert checkpoint_from_dict(data).estimate.state is EstimatorState.CONVERGED
     assert checkpoint_from_dict(checkpoint_to_dict(Checkpoint(converged(), 9))).time_ns == 9
+
+
+def test_the_offline_baseline_round_trips(tmp_path: Path) -> None:
+    base = OfflineBaseline(0.0361234567890123, 39.99893)
+    path = save_checkpoint(tmp_path / "c.json", Checkpoint(converged(), 7, baseline=base))
+    back = load_checkpoint(path)
+    assert back.baseline == base  # exact: JSON keeps every digit of a float
+    assert json.loads(path.read_text())["baseline"] == {"rms": base.rms, "seconds": base.seconds}
+    taken = warm_start(NodeParameters(checkpoint_file=str(path)))
+    assert taken.baseline == base and "offline baseline" in taken.note
+
+
+def test_a_checkpoint_without_a_baseline_still_loads(tmp_path: Path) -> None:
+    data = checkpoint_to_dict(Checkpoint(converged(), 3))
+    assert "baseline" not in data  # the old layout, unchanged
+    assert checkpoint_from_dict(data).baseline is None
+    path = save_checkpoint(tmp_path / "c.json", converged(), 3)
+    assert warm_start(NodeParameters(checkpoint_file=str(path))).baseline is None
+
+
+@pytest.mark.parametrize(
+    ("baseline", "match"),
+    [
+        (0.03, "baseline must be an object"),
+        ({"rms": 0.03}, "'seconds' is missing"),
+        ({"rms": -0.03, "seconds": 4.0}, "baseline: rms must be a finite number > 0"),
+        ({"rms": "x", "seconds": 4.0}, "baseline: rms must be a number"),
+    ],
+)
+def test_a_corrupt_baseline_is_reported(baseline: object, match: str) -> None:
+    data = checkpoint_to_dict(Checkpoint(converged(), 3))
+    data["baseline"] = baseline
+    with pytest.raises(CheckpointError, match=match):
+        checkpoint_from_dict(data)
 
 
 # --------------------------------------------------------------------------- atomicity
