@@ -107,8 +107,11 @@ Outputs
   reasons are in the message), ERROR when diverged.
 
 The estimate is checkpointed every ``checkpoint_period`` of data time when
-``checkpoint_file`` is set, and warm-started from it at construction
-(:func:`~genbacklash_ros.node.checkpoint.warm_start`).
+``checkpoint_file`` is set (and at :meth:`BacklashPipeline.finish`), and warm-started from it
+at construction (:func:`~genbacklash_ros.node.checkpoint.warm_start`). Each checkpoint carries
+the tracking without compensation for the next start's judge: the one measured live with
+``compensation_in_loop`` once it holds ``min_time`` seconds, else the one this start took from
+its checkpoint, else none (``BacklashPipeline._baseline``).
 
 Faults
 ------
@@ -149,7 +152,7 @@ import numpy as np
 
 from genbacklash_core import Cascade, Estimate, GenBacklashError, OnlineIdentifier
 from genbacklash_core.guard import CompensationGuard, GuardVerdict
-from genbacklash_core.measured import TrackingVerdict
+from genbacklash_core.measured import OfflineBaseline, TrackingVerdict
 from genbacklash_ros.node.align import Aligner
 from genbacklash_ros.node.batch import BlockView
 from genbacklash_ros.node.checkpoint import Checkpoint, CheckpointError, save_checkpoint, warm_start
@@ -1466,6 +1469,25 @@ class BacklashPipeline:
         self._built_estimate = (est, message)
         return message
 
+    def _baseline(self) -> OfflineBaseline | None:
+        """The tracking without compensation a checkpoint stores, for the next start's judge.
+
+        * With ``compensation_in_loop``: the judge's live baseline once it holds ``min_time``
+          seconds of it (:meth:`~genbacklash_core.measured.TrackingJudge.live_baseline`: the
+          readings while the command went out as it came, weight 0: before the first
+          estimate, while the guard or the judge held compensation off, in probes, or all of
+          them with ``compensate`` false).
+        * Else, the baseline this start took from its checkpoint, carried forward unchanged
+          (:attr:`~genbacklash_core.measured.TrackingJudge.offline`): measured offline, or
+          live by the node that wrote that file.
+        * Else none. Without ``compensation_in_loop`` the node cannot tell which readings
+          went without compensation on the machine (it only watches, and its weights are its
+          own, not what drove the drivetrain), so it never stores what it measured then.
+        """
+        judge = self._tracking.judge
+        live = judge.live_baseline() if self._in_loop else None
+        return live if live is not None else judge.offline
+
     def _checkpoint(self, now: int) -> None:
         path = self._checkpoint_path
         est = self._use.own
@@ -1473,7 +1495,7 @@ class BacklashPipeline:
             return
         led = self._ledger
         try:
-            self._writer(path, Checkpoint(est, now))
+            self._writer(path, Checkpoint(est, now, baseline=self._baseline()))
         except (CheckpointError, OSError) as err:
             led.checkpoint_errors += 1
             self._problem(f"checkpoint not saved: {err}")
