@@ -7,10 +7,10 @@ compensation as the measured tracking judge measures it
 (:class:`~genbacklash_core.measured.OfflineBaseline`, the field ``baseline``: ``{"rms": rad,
 "seconds": s}``), which a start from the file takes as the judge's baseline
 (:func:`warm_start`). ``identify``/``replay --checkpoint`` store the record's (on a record
-without compensation); the node's own checkpoints store the one its judge measured live with
-``compensation_in_loop`` (at least ``min_time`` of it), else carry forward the one it started
-from, else none (:mod:`genbacklash_ros.node.pipeline`). A file without the field loads as
-before.
+without compensation); the node's own checkpoints, with ``compensation_in_loop`` and once its
+judge has measured compensation clearly helping, store the one the judge measured live (at least
+``min_time`` of it) or else carry forward the one it started from, and otherwise none
+(:mod:`genbacklash_ros.node.pipeline`). A file without the field loads as before.
 :func:`save_checkpoint` writes it atomically: a temporary file in the same directory is
 written, flushed and fsync'ed, then renamed over the target (``os.replace``), and the
 directory is fsync'ed; a crash at any point leaves either the old file or the new one, never

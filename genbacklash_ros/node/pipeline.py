@@ -108,10 +108,11 @@ Outputs
 
 The estimate is checkpointed every ``checkpoint_period`` of data time when
 ``checkpoint_file`` is set (and at :meth:`BacklashPipeline.finish`), and warm-started from it
-at construction (:func:`~genbacklash_ros.node.checkpoint.warm_start`). Each checkpoint carries
-the tracking without compensation for the next start's judge: the one measured live with
-``compensation_in_loop`` once it holds ``min_time`` seconds, else the one this start took from
-its checkpoint, else none (``BacklashPipeline._baseline``).
+at construction (:func:`~genbacklash_ros.node.checkpoint.warm_start`). With
+``compensation_in_loop``, a checkpoint taken once the judge has measured compensation helping
+carries the tracking without compensation for the next start's judge: the one measured live
+once it holds ``min_time`` seconds, else the one this start took from its checkpoint; else
+none (``BacklashPipeline._baseline`` says when and why).
 
 Faults
 ------
@@ -211,6 +212,7 @@ __all__ = [
     "COMMAND_WAIT_NS",
     "DIAGNOSTICS_PERIOD_NS",
     "FAULT_HOLD_NS",
+    "STORE_RATIO",
     "BacklashPipeline",
     "BatchOutputs",
     "CheckpointWriter",
@@ -228,6 +230,9 @@ WorkerFactory: TypeAlias = Callable[[OnlineIdentifier], IdentifierWorker]
 COMMAND_WAIT_NS = 100_000_000  # encoder time after which a sample's command counts as held
 BATCH_SAMPLES = 128  # encoder messages per identifier feed (at most)
 BATCH_NS = 100_000_000  # data time between identifier feeds at most
+STORE_RATIO = 0.5
+"""A checkpoint stores the tracking baseline only once compensating was measured to keep at
+most this share of the tracking error (``BacklashPipeline._baseline``)."""
 
 _COMMAND_CLASSES: dict[str, type] = {
     "float64": Float64,
@@ -1472,20 +1477,42 @@ class BacklashPipeline:
     def _baseline(self) -> OfflineBaseline | None:
         """The tracking without compensation a checkpoint stores, for the next start's judge.
 
-        * With ``compensation_in_loop``: the judge's live baseline once it holds ``min_time``
-          seconds of it (:meth:`~genbacklash_core.measured.TrackingJudge.live_baseline`: the
-          readings while the command went out as it came, weight 0: before the first
-          estimate, while the guard or the judge held compensation off, in probes, or all of
-          them with ``compensate`` false).
-        * Else, the baseline this start took from its checkpoint, carried forward unchanged
-          (:attr:`~genbacklash_core.measured.TrackingJudge.offline`): measured offline, or
-          live by the node that wrote that file.
-        * Else none. Without ``compensation_in_loop`` the node cannot tell which readings
-          went without compensation on the machine (it only watches, and its weights are its
-          own, not what drove the drivetrain), so it never stores what it measured then.
+        A stored baseline lets the next start compensate after the guard's first verdict
+        instead of after ``min_time`` of baseline. That shortcut is taken only where this
+        node measured compensation helping on this machine, so with ``compensation_in_loop``:
+
+        * when the judge has measured compensating keep at most :data:`STORE_RATIO` of the
+          tracking error over at least ``min_time`` of compensated readings (its state
+          ``"on"`` with a clear cut, or a probe after it): the judge's live baseline once it holds
+          ``min_time`` seconds of it
+          (:meth:`~genbacklash_core.measured.TrackingJudge.live_baseline`: the readings
+          while the command went out as it came, weight 0: before the first estimate,
+          while the guard or the judge held compensation off, in probes), else
+          the baseline this start took from its checkpoint, carried forward unchanged
+          (:attr:`~genbacklash_core.measured.TrackingJudge.offline`);
+        * else none: compensation not measured yet (``compensate`` false, the guard holding
+          it off, a trial), helping only a little, faded or judged harmful; the next start
+          measures its baseline first. Measured on physics restarts (BENCHMARKS.md, issue
+          23, ckpt-1): a baseline stored whenever one was measured let restarts on
+          compliant drivetrains, whose first node never compensated, try compensation on
+          the guard's first verdict and track 3 % worse than without it; stored whenever
+          compensation was "on" (ratio up to ``ratio_full``), 7.8 % worse on one whose
+          first node had cut 6 %. The shortcut is worth about a second of compensation,
+          which matters where compensation cuts most of the error.
+
+        Without ``compensation_in_loop`` the node cannot tell which readings went without
+        compensation on the machine (it only watches, and its weights are its own, not what
+        drove the drivetrain): it stores nothing it measured, and carries forward the
+        baseline its start took, if any.
         """
         judge = self._tracking.judge
-        live = judge.live_baseline() if self._in_loop else None
+        if not self._in_loop:
+            return judge.offline
+        verdict, settings = judge.verdict, judge.settings
+        helped = verdict.on_time >= settings.min_time and verdict.ratio <= STORE_RATIO
+        if not helped:
+            return None
+        live = judge.live_baseline()
         return live if live is not None else judge.offline
 
     def _checkpoint(self, now: int) -> None:

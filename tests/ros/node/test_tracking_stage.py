@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from genbacklash_core.measured import OfflineBaseline, TrackingJudgeSettings
-from genbacklash_ros.node.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
+from genbacklash_ros.node.checkpoint import load_checkpoint
 from genbacklash_ros.node.parameters import NodeParameters
 from genbacklash_ros.node.pipeline import BacklashPipeline
 from genbacklash_ros.node.tracking_stage import record_baseline
@@ -66,94 +66,75 @@ def test_a_record_shorter_than_min_time_gives_no_baseline() -> None:
 # --------------------------------------------------------------------------- checkpoints
 
 
-def _play_record(seed: int, seconds: float = 8.0) -> tuple[np.ndarray, ...]:
-    """100 Hz commands (two sines, seeded phase and noise) through a play of 0.04 rad, held;
-    1 kHz readings with 2 % lost: a record the node identifies within 2 s."""
+def _motion(seed: int, seconds: float) -> np.ndarray:
+    """100 Hz commands: two sines (seeded phase) and noise."""
     rng = np.random.default_rng(seed)
-    cmd_t = 10 * MS * np.arange(1, round(100 * seconds) + 1)
-    tt = cmd_t / 1e9
-    cmd_u = 0.4 * np.sin(2 * np.pi * 0.7 * tt + seed) + 0.2 * np.sin(2 * np.pi * 1.9 * tt)
-    cmd_u += rng.normal(0.0, 0.01, tt.size)
-    x = np.empty_like(cmd_u)
-    prev = 0.0
-    for i, u in enumerate(cmd_u.tolist()):
-        prev = min(max(prev, u - 0.02), u + 0.02)
-        x[i] = prev
-    enc_t = MS * np.arange(1, round(1000 * seconds))
-    enc_t = enc_t[rng.random(enc_t.size) >= 0.02]
-    k = np.searchsorted(cmd_t, enc_t, side="right") - 1
-    enc_y = np.where(k >= 0, x[np.maximum(k, 0)], 0.0) + rng.normal(0.0, 0.001, enc_t.size)
-    return cmd_t, cmd_u, enc_t, enc_y
+    tt = np.arange(1, round(100 * seconds) + 1) / 100
+    u = 0.4 * np.sin(2 * np.pi * 0.7 * tt + seed) + 0.2 * np.sin(2 * np.pi * 1.9 * tt)
+    return u + rng.normal(0.0, 0.01, tt.size)
 
 
-def _feed(pipe: BacklashPipeline, record: tuple[np.ndarray, ...], seconds: float) -> None:
-    """The record's first ``seconds`` through the pipeline, commands before readings."""
-    cmd_t, cmd_u, enc_t, enc_y = record
-    c = 0
-    for t, y in zip(enc_t.tolist(), enc_y.tolist(), strict=True):
-        if t > seconds * 1e9:
-            break
-        while c < cmd_t.size and cmd_t[c] <= t:
-            pipe.on_command_value(None, float(cmd_u[c]), int(cmd_t[c]))
-            c += 1
-        pipe.on_encoder_value(None, y, t)
+def _loop(pipe: BacklashPipeline, seed: int, seconds: float) -> None:
+    """The pipeline in the loop of a play of 0.04 rad: each command's answer is what the
+    play takes; 10 readings (1 kHz) of the load after each command; then finish."""
+    rng = np.random.default_rng(seed + 1000)
+    x = 0.0
+    for k, value in enumerate(_motion(seed, seconds).tolist()):
+        stamp = 10 * MS * (k + 1)
+        got = pipe.on_command_value(None, value, stamp)
+        sent = value if got is None else got[1]
+        x = min(max(x, sent - 0.02), sent + 0.02)
+        for j, noise in enumerate(rng.normal(0.0, 0.001, 10).tolist(), start=1):
+            pipe.on_encoder_value(None, x + noise, stamp + j * MS)
     pipe.finish(refit=False)
 
 
-def _params(path: Path, *, in_loop: bool = True) -> NodeParameters:
+def _params(path: Path, *, in_loop: bool = True, compensate: bool = True) -> NodeParameters:
     return NodeParameters(
         command_type="float64",
         encoder_type="float64",
-        compensate=False,
+        compensate=compensate,
         compensation_in_loop=in_loop,
         checkpoint_file=str(path),
-        checkpoint_period=1.0,
     )
 
 
 def test_the_nodes_checkpoint_keeps_the_baseline_its_judge_measured(tmp_path: Path) -> None:
     path = tmp_path / "c.json"
-    saved: list[Checkpoint] = []
-
-    def writer(target: Path, checkpoint: Checkpoint) -> None:
-        saved.append(checkpoint)
-        save_checkpoint(target, checkpoint)
-
-    pipe = BacklashPipeline(_params(path), checkpoint_writer=writer)
-    _feed(pipe, _play_record(0), 8.0)
+    pipe = BacklashPipeline(_params(path))
+    _loop(pipe, 0, 14.0)
     measured = pipe.measured
-    assert measured.off_time >= 3.0 and measured.baseline == "measured"
-    # before 3 s of it nothing is stored; after, the judge's numbers
-    early = [c for c in saved if c.time_ns < 2_900 * MS]
-    assert early and all(c.baseline is None for c in early)
+    assert measured.state == "on" and measured.baseline == "measured"  # it helps, measured
     final = load_checkpoint(path)
     assert final.baseline == OfflineBaseline(measured.off_rms, measured.off_time)
     # a restart from it: the judge starts from that baseline
     again = BacklashPipeline(_params(path))
     assert again.measured.baseline == "offline"
-    assert again.measured.off_rms == final.baseline.rms
-    # ... and a short run, under 3 s of its own, carries it forward unchanged
-    _feed(again, _play_record(1), 1.5)
-    assert again.measured.off_time < 3.0
+    assert final.baseline is not None and again.measured.off_rms == final.baseline.rms
+    # ... compensates after the guard's first verdict, under 3 s of its own baseline, and
+    # carries the one it started from forward
+    _loop(again, 1, 10.0)
+    assert again.measured.state == "on" and again.measured.off_time < 3.0
     assert load_checkpoint(path).baseline == final.baseline
 
 
-def test_a_node_that_measured_no_baseline_stores_none(tmp_path: Path) -> None:
+def test_a_node_that_measured_no_help_stores_no_baseline(tmp_path: Path) -> None:
     path = tmp_path / "c.json"
     # not in the loop: its weight-0 readings need not have gone without compensation
-    _feed(BacklashPipeline(_params(path, in_loop=False)), _play_record(0), 8.0)
+    _loop(BacklashPipeline(_params(path, in_loop=False)), 0, 14.0)
     assert load_checkpoint(path).baseline is None
     assert "baseline" not in json.loads(path.read_text())  # the old layout, unchanged
-    # in the loop but under 3 s of it
+    # in the loop with a full baseline, but compensation never measured helping
     path.unlink()
-    _feed(BacklashPipeline(_params(path)), _play_record(0), 2.5)
-    assert load_checkpoint(path).baseline is None
+    pipe = BacklashPipeline(_params(path, compensate=False))
+    _loop(pipe, 0, 14.0)
+    assert pipe.measured.off_time >= 3.0 and load_checkpoint(path).baseline is None
 
 
 def test_a_watching_node_carries_its_starts_baseline_forward(tmp_path: Path) -> None:
     path = tmp_path / "c.json"
-    _feed(BacklashPipeline(_params(path)), _play_record(0), 8.0)
+    _loop(BacklashPipeline(_params(path)), 0, 14.0)
     stored = load_checkpoint(path).baseline
     assert stored is not None
-    _feed(BacklashPipeline(_params(path, in_loop=False)), _play_record(1), 8.0)
+    _loop(BacklashPipeline(_params(path, in_loop=False)), 1, 10.0)
     assert load_checkpoint(path).baseline == stored  # not replaced by what it watched
