@@ -205,7 +205,8 @@ def _restart_tables(args: argparse.Namespace, folder: Path) -> None:
     with the baseline it carries and without (module notes)."""
     extra = {k: _value(v) for k, _, v in (p.partition("=") for p in args.param)}
     print(
-        "| variant | bandwidth (Hz) | seed / restart seed | fresh run: cut node (%) "
+        "| variant | bandwidth (Hz) | seed / restart seed "
+        "| fresh run: cut node (%), measured (state, ratio) "
         "| stored baseline (mrad over s) | rms none (mrad) | cut true (%) "
         "| restart with baseline: whole / 2nd half (%) "
         "| restart without: whole / 2nd half (%) | measured at the end, with / without "
@@ -223,7 +224,7 @@ def _restart_tables(args: argparse.Namespace, folder: Path) -> None:
                 run.unlink(missing_ok=True)
                 node = {**extra, "checkpoint_file": str(run)}
                 first = Clocks(seed, args.duration)
-                loads, *_ = node_loop(
+                loads, _, _, judged = node_loop(
                     params, first, guard=args.guard == "on", delay_ns=delay, extra=node,
                     motor=args.motor_encoder,
                 )  # fmt: skip
@@ -250,7 +251,8 @@ def _restart_tables(args: argparse.Namespace, folder: Path) -> None:
                 base = saved.baseline
                 stored = f"{1e3 * base.rms:.2f} over {base.seconds:.1f}" if base else "none"
                 print(
-                    f"| {name} | {bw:g} | {seed} / {seed + args.restart} | {fresh:.1f} "
+                    f"| {name} | {bw:g} | {seed} / {seed + args.restart} "
+                    f"| {fresh:.1f}, {judged.state}, {judged.ratio:.2f} "
                     f"| {stored} | {1e3 * _rms(errors['none']):.2f} | {cut['true'][0]:.1f} "
                     f"| {cut['with'][0]:.1f} / {cut['with'][1]:.1f} "
                     f"| {cut['without'][0]:.1f} / {cut['without'][1]:.1f} "
