@@ -138,3 +138,23 @@ def test_a_watching_node_carries_its_starts_baseline_forward(tmp_path: Path) -> 
     assert stored is not None
     _loop(BacklashPipeline(_params(path, in_loop=False)), 1, 10.0)
     assert load_checkpoint(path).baseline == stored  # not replaced by what it watched
+
+
+@pytest.mark.parametrize(("kept", "stored"), [(0.25, True), (0.75, False)])
+def test_a_baseline_is_stored_only_where_compensation_clearly_helped(
+    kept: float, stored: bool
+) -> None:
+    # the judge fed directly: 4 s without compensation, then 8 s keeping `kept` of the error
+    pipe = BacklashPipeline(NodeParameters(compensation_in_loop=True))
+    judge = pipe._tracking.judge
+    rng = np.random.default_rng(0)
+    last = 0
+    for seconds, rms, weight in ((4.0, 0.04, 0.0), (8.0, 0.04 * kept, 1.0)):
+        for _ in range(round(10 * seconds)):  # 100 readings at 1 kHz a feed
+            t = last + MS * np.arange(1, 101)
+            last = int(t[-1])
+            judge.readings(t, rng.normal(0.0, rms, 100), np.zeros(100), np.full(100, weight))
+    assert judge.verdict.state == "on"  # both: compensation kept on, ratio below 0.9
+    assert judge.verdict.ratio == pytest.approx(kept, rel=0.15)
+    expected = judge.live_baseline() if stored else None
+    assert pipe._baseline() == expected and (expected is not None) == stored
