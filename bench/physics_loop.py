@@ -26,6 +26,13 @@ this record's. ``--baseline-scale X`` multiplies that stored baseline by ``X`` a
 it was stored); ``--offline-variant NAME`` identifies the start on another variant's record
 (a mismatched offline record). The robustness runs of issue 23 use them.
 
+With ``--restart OFFSET`` the node is restarted from its own checkpoint: a fresh node runs
+seed ``seed`` writing its checkpoints (``checkpoint_file``), then a second node starts from
+the fresh run's final checkpoint on seed ``seed + OFFSET``'s motion (the same drivetrain),
+twice: with the baseline the checkpoint carries (the judge's live one, issue 23 ckpt-1) and
+with it removed (what a node's checkpoint held before: the restart measures its 3 s first).
+The table gives the second record's cuts.
+
 The numbers: the RMS load tracking error ``load - desired`` (the true load at every encoder
 instant) and each compensator's cut against ``none`` in percent, over the whole record and
 over its second half (the node learns in the first); the node's final play ``c_L + c_R``
@@ -34,7 +41,7 @@ against the geometric play; the guard's final trust and error ratio.
 Run: ``python bench/physics_loop.py [--seeds 0 1 2] [--bandwidths 20 60 100]
 [--variants ...] [--duration 40] [--guard on|off] [--delay-ms 0]
 [--param NAME=VALUE ...] [--motor-encoder] [--seeded-start OFFSET] [--baseline-scale X]
-[--no-offline-baseline] [--offline-variant NAME]``
+[--no-offline-baseline] [--offline-variant NAME] [--restart OFFSET]``
 """
 
 from __future__ import annotations
@@ -121,6 +128,14 @@ def _arguments(argv: Sequence[str] | None = None) -> argparse.Namespace:
         default=None,
         help="with --seeded-start: identify the start on this variant's record",
     )
+    parser.add_argument(
+        "--restart",
+        type=int,
+        default=None,
+        metavar="OFFSET",
+        help="restart the node from its own final checkpoint on seed + OFFSET's motion, with "
+        "the checkpoint's baseline and without it",
+    )
     args = parse_physics_arguments(parser, argv)
     return args
 
@@ -170,7 +185,80 @@ def main(argv: Sequence[str] | None = None) -> None:
         "### Compensation in closed loop, driven by the node's own compensated command",
     ):
         with tempfile.TemporaryDirectory() as tmp:
-            _tables(args, Path(tmp))
+            if args.restart is not None:
+                _restart_tables(args, Path(tmp))
+            else:
+                _tables(args, Path(tmp))
+
+
+def _cuts(errors: dict[str, np.ndarray], half: np.ndarray) -> dict[str, tuple[float, float]]:
+    """Each run's cut against ``none`` (%): over the whole record and its second half."""
+    none = errors["none"]
+    return {
+        k: (100 * (1 - _rms(e) / _rms(none)), 100 * (1 - _rms(e[half]) / _rms(none[half])))
+        for k, e in errors.items()
+    }
+
+
+def _restart_tables(args: argparse.Namespace, folder: Path) -> None:
+    """``--restart``: a fresh run writing checkpoints, then the restart from its final one
+    with the baseline it carries and without (module notes)."""
+    extra = {k: _value(v) for k, _, v in (p.partition("=") for p in args.param)}
+    print(
+        "| variant | bandwidth (Hz) | seed / restart seed "
+        "| fresh run: cut node (%), measured (state, ratio) "
+        "| stored baseline (mrad over s) | rms none (mrad) | cut true (%) "
+        "| restart with baseline: whole / 2nd half (%) "
+        "| restart without: whole / 2nd half (%) | measured at the end, with / without "
+        "(state, ratio) | s |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    delay = round(args.delay_ms * 1e6)
+    for name in args.variants:
+        for bw in args.bandwidths:
+            params = variant(name, bandwidth=bw)
+            truth = quasi_static(params, OperationSettings().travel)
+            for seed in args.seeds:
+                began = time.perf_counter()
+                run = folder / "node.json"
+                run.unlink(missing_ok=True)
+                node = {**extra, "checkpoint_file": str(run)}
+                first = Clocks(seed, args.duration)
+                loads, _, _, judged = node_loop(
+                    params, first, guard=args.guard == "on", delay_ns=delay, extra=node,
+                    motor=args.motor_encoder,
+                )  # fmt: skip
+                none = open_loop(params, first, first.values, delay) - first.desired
+                fresh = 100 * (1 - _rms(loads - first.desired) / _rms(none))
+                saved = load_checkpoint(run)
+                clocks = Clocks(seed + args.restart, args.duration)
+                half = clocks.t >= clocks.t[-1] // 2
+                errors = {
+                    "none": open_loop(params, clocks, clocks.values, delay) - clocks.desired,
+                    "true": open_loop(params, clocks, compensate(truth.model, clocks.values), delay)
+                    - clocks.desired,
+                }
+                states = []
+                for key, kept in (("with", saved.baseline), ("without", None)):
+                    save_checkpoint(run, dataclasses.replace(saved, baseline=kept))
+                    loads, _, _, measured = node_loop(
+                        params, clocks, guard=args.guard == "on", delay_ns=delay, extra=node,
+                        motor=args.motor_encoder,
+                    )  # fmt: skip
+                    errors[key] = loads - clocks.desired
+                    states.append(f"{measured.state}, {measured.ratio:.2f}")
+                cut = _cuts(errors, half)
+                base = saved.baseline
+                stored = f"{1e3 * base.rms:.2f} over {base.seconds:.1f}" if base else "none"
+                print(
+                    f"| {name} | {bw:g} | {seed} / {seed + args.restart} "
+                    f"| {fresh:.1f}, {judged.state}, {judged.ratio:.2f} "
+                    f"| {stored} | {1e3 * _rms(errors['none']):.2f} | {cut['true'][0]:.1f} "
+                    f"| {cut['with'][0]:.1f} / {cut['with'][1]:.1f} "
+                    f"| {cut['without'][0]:.1f} / {cut['without'][1]:.1f} "
+                    f"| {' / '.join(states)} | {time.perf_counter() - began:.1f} |",
+                    flush=True,
+                )
 
 
 def _tables(args: argparse.Namespace, folder: Path) -> None:

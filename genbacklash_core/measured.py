@@ -323,6 +323,40 @@ class TrackingJudge:
         self.verdict = self._judge()
         return self.verdict
 
+    @property
+    def offline(self) -> OfflineBaseline | None:
+        """The baseline :meth:`start_from` was given (kept after the live one replaced it
+        in the verdicts; None without one, and after :meth:`reset`)."""
+        return self._offline
+
+    def live_baseline(self) -> OfflineBaseline | None:
+        """The tracking without compensation measured live, for a later start to take.
+
+        Returns
+        -------
+        OfflineBaseline or None
+            ``rms(e_off)`` and the seconds of readings without compensation it was measured
+            on, as the verdict's ``off_rms`` and ``off_time`` say once the live baseline is in
+            use; None before ``min_time`` seconds of it (the judge would not judge on less)
+            or without a finite error above 0. Whether those readings really were without
+            compensation on the machine is the caller's to know (``in_loop``).
+
+        Examples
+        --------
+        >>> judge = TrackingJudge(TrackingJudgeSettings(min_time=1.0))
+        >>> t = [k * 1_000_000 for k in range(2000)]
+        >>> judge.live_baseline() is None
+        True
+        >>> base = judge.readings(t, [0.02] * 2000, [0.0] * 2000, [0.0] * 2000)
+        >>> round(judge.live_baseline().rms, 6), round(judge.live_baseline().seconds, 3)
+        (0.02, 1.999)
+        """
+        off = self._off
+        rms = off.rms()
+        if off.time >= self.settings.min_time and math.isfinite(rms) and rms > 0.0:
+            return OfflineBaseline(rms, off.time)
+        return None
+
     def configure(self, settings: TrackingJudgeSettings) -> TrackingVerdict:
         """New settings, the evidence kept; returns the verdict under them."""
         self.settings = settings

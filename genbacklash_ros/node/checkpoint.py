@@ -2,11 +2,15 @@
 
 A checkpoint holds one :class:`~genbacklash_core.Estimate` (structure, parameters,
 covariance, residual, excitation, state, confidence, samples, reason) and the data time it
-was taken at, under a format ``version``; optionally (``identify``/``replay --checkpoint`` on
-a record without compensation) the record's tracking without compensation as the measured
-tracking judge measures it (:class:`~genbacklash_core.measured.OfflineBaseline`, the field
-``baseline``: ``{"rms": rad, "seconds": s}``), which a start from the file takes as the
-judge's baseline (:func:`warm_start`). A file without the field loads as before.
+was taken at, under a format ``version``; optionally the drivetrain's tracking without
+compensation as the measured tracking judge measures it
+(:class:`~genbacklash_core.measured.OfflineBaseline`, the field ``baseline``: ``{"rms": rad,
+"seconds": s}``), which a start from the file takes as the judge's baseline
+(:func:`warm_start`). ``identify``/``replay --checkpoint`` store the record's (on a record
+without compensation); the node's own checkpoints, with ``compensation_in_loop`` and once its
+judge has measured compensation clearly helping, store the one the judge measured live (at least
+``min_time`` of it) or else carry forward the one it started from, and otherwise none
+(:mod:`genbacklash_ros.node.pipeline`). A file without the field loads as before.
 :func:`save_checkpoint` writes it atomically: a temporary file in the same directory is
 written, flushed and fsync'ed, then renamed over the target (``os.replace``), and the
 directory is fsync'ed; a crash at any point leaves either the old file or the new one, never
@@ -80,8 +84,9 @@ class CheckpointError(GenBacklashError):
 class Checkpoint:
     """A saved estimate and the data time (integer nanoseconds) it was taken at.
 
-    ``baseline``: the tracking without compensation of the record the estimate was
-    identified on (None: not measured, or the record had compensation in it).
+    ``baseline``: the tracking without compensation, measured on the record the estimate
+    was identified on (``identify``, ``replay``) or live by the node that wrote the file
+    (None: not measured, or the record had compensation in it).
     """
 
     estimate: Estimate

@@ -107,8 +107,12 @@ Outputs
   reasons are in the message), ERROR when diverged.
 
 The estimate is checkpointed every ``checkpoint_period`` of data time when
-``checkpoint_file`` is set, and warm-started from it at construction
-(:func:`~genbacklash_ros.node.checkpoint.warm_start`).
+``checkpoint_file`` is set (and at :meth:`BacklashPipeline.finish`), and warm-started from it
+at construction (:func:`~genbacklash_ros.node.checkpoint.warm_start`). With
+``compensation_in_loop``, a checkpoint taken once the judge has measured compensation helping
+carries the tracking without compensation for the next start's judge: the one measured live
+once it holds ``min_time`` seconds, else the one this start took from its checkpoint; else
+none (``BacklashPipeline._baseline`` says when and why).
 
 Faults
 ------
@@ -149,7 +153,7 @@ import numpy as np
 
 from genbacklash_core import Cascade, Estimate, GenBacklashError, OnlineIdentifier
 from genbacklash_core.guard import CompensationGuard, GuardVerdict
-from genbacklash_core.measured import TrackingVerdict
+from genbacklash_core.measured import OfflineBaseline, TrackingVerdict
 from genbacklash_ros.node.align import Aligner
 from genbacklash_ros.node.batch import BlockView
 from genbacklash_ros.node.checkpoint import Checkpoint, CheckpointError, save_checkpoint, warm_start
@@ -208,6 +212,7 @@ __all__ = [
     "COMMAND_WAIT_NS",
     "DIAGNOSTICS_PERIOD_NS",
     "FAULT_HOLD_NS",
+    "STORE_RATIO",
     "BacklashPipeline",
     "BatchOutputs",
     "CheckpointWriter",
@@ -225,6 +230,9 @@ WorkerFactory: TypeAlias = Callable[[OnlineIdentifier], IdentifierWorker]
 COMMAND_WAIT_NS = 100_000_000  # encoder time after which a sample's command counts as held
 BATCH_SAMPLES = 128  # encoder messages per identifier feed (at most)
 BATCH_NS = 100_000_000  # data time between identifier feeds at most
+STORE_RATIO = 0.5
+"""A checkpoint stores the tracking baseline only once compensating was measured to keep at
+most this share of the tracking error (``BacklashPipeline._baseline``)."""
 
 _COMMAND_CLASSES: dict[str, type] = {
     "float64": Float64,
@@ -1466,6 +1474,47 @@ class BacklashPipeline:
         self._built_estimate = (est, message)
         return message
 
+    def _baseline(self) -> OfflineBaseline | None:
+        """The tracking without compensation a checkpoint stores, for the next start's judge.
+
+        A stored baseline lets the next start compensate after the guard's first verdict
+        instead of after ``min_time`` of baseline. That shortcut is taken only where this
+        node measured compensation helping on this machine, so with ``compensation_in_loop``:
+
+        * when the judge has measured compensating keep at most :data:`STORE_RATIO` of the
+          tracking error over at least ``min_time`` of compensated readings (its state
+          ``"on"`` with a clear cut, or a probe after it): the judge's live baseline once it holds
+          ``min_time`` seconds of it
+          (:meth:`~genbacklash_core.measured.TrackingJudge.live_baseline`: the readings
+          while the command went out as it came, weight 0: before the first estimate,
+          while the guard or the judge held compensation off, in probes), else
+          the baseline this start took from its checkpoint, carried forward unchanged
+          (:attr:`~genbacklash_core.measured.TrackingJudge.offline`);
+        * else none: compensation not measured yet (``compensate`` false, the guard holding
+          it off, a trial), helping only a little, faded or judged harmful; the next start
+          measures its baseline first. Measured on physics restarts (BENCHMARKS.md, issue
+          23, ckpt-1): a baseline stored whenever one was measured let restarts on
+          compliant drivetrains, whose first node never compensated, try compensation on
+          the guard's first verdict and track 3 % worse than without it; stored whenever
+          compensation was "on" (ratio up to ``ratio_full``), 7.8 % worse on one whose
+          first node had cut 6 %. The shortcut is worth about a second of compensation,
+          which matters where compensation cuts most of the error.
+
+        Without ``compensation_in_loop`` the node cannot tell which readings went without
+        compensation on the machine (it only watches, and its weights are its own, not what
+        drove the drivetrain): it stores nothing it measured, and carries forward the
+        baseline its start took, if any.
+        """
+        judge = self._tracking.judge
+        if not self._in_loop:
+            return judge.offline
+        verdict, settings = judge.verdict, judge.settings
+        helped = verdict.on_time >= settings.min_time and verdict.ratio <= STORE_RATIO
+        if not helped:
+            return None
+        live = judge.live_baseline()
+        return live if live is not None else judge.offline
+
     def _checkpoint(self, now: int) -> None:
         path = self._checkpoint_path
         est = self._use.own
@@ -1473,7 +1522,7 @@ class BacklashPipeline:
             return
         led = self._ledger
         try:
-            self._writer(path, Checkpoint(est, now))
+            self._writer(path, Checkpoint(est, now, baseline=self._baseline()))
         except (CheckpointError, OSError) as err:
             led.checkpoint_errors += 1
             self._problem(f"checkpoint not saved: {err}")

@@ -293,3 +293,26 @@ def test_without_an_offline_baseline_the_verdict_says_measured() -> None:
     Feed(judge).run(1.0, 0.04, 0.0)
     assert judge.verdict.baseline == "measured" and judge.verdict.state == "judging"
     assert judge.verdict.trust == 0.0  # a baseline first, as before
+
+
+def test_the_live_baseline_is_given_once_min_time_of_it_is_measured() -> None:
+    judge = TrackingJudge()
+    feed = Feed(judge)
+    feed.run(2.0, 0.04, 0.0)
+    assert judge.live_baseline() is None and judge.offline is None  # under min_time
+    feed.run(2.0, 0.04, 0.0)
+    live = judge.live_baseline()
+    assert live == OfflineBaseline(judge.verdict.off_rms, judge.verdict.off_time)
+    feed.run(2.0, 0.01, 1.0)  # compensated readings do not move it
+    assert judge.live_baseline() == live
+
+
+def test_the_offline_baseline_is_kept_after_the_live_one_replaced_it() -> None:
+    judge = TrackingJudge()
+    base = OfflineBaseline(0.04, 40.0)
+    judge.start_from(base)
+    Feed(judge).run(OFFLINE_CHECK * judge.settings.min_time + 1.0, 0.03, 1.0)
+    assert judge.verdict.baseline == "measured"  # probed live ...
+    assert judge.offline == base and judge.live_baseline() is None  # ... but under min_time
+    judge.reset()
+    assert judge.offline is None

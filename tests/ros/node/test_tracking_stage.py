@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import numpy as np
 import pytest
 
-from genbacklash_core.measured import TrackingJudgeSettings
+from genbacklash_core.measured import OfflineBaseline, TrackingJudgeSettings
+from genbacklash_ros.node.checkpoint import load_checkpoint
 from genbacklash_ros.node.parameters import NodeParameters
 from genbacklash_ros.node.pipeline import BacklashPipeline
 from genbacklash_ros.node.tracking_stage import record_baseline
@@ -57,3 +61,100 @@ def test_a_record_shorter_than_min_time_gives_no_baseline() -> None:
     longer = TrackingJudgeSettings(min_time=1.0)
     assert record_baseline(cmd_t, cmd_u, enc_t[short], enc_y[short], longer) is not None
     assert record_baseline([], [], enc_t, enc_y) is None
+
+
+# --------------------------------------------------------------------------- checkpoints
+
+
+def _motion(seed: int, seconds: float) -> np.ndarray:
+    """100 Hz commands: two sines (seeded phase) and noise."""
+    rng = np.random.default_rng(seed)
+    tt = np.arange(1, round(100 * seconds) + 1) / 100
+    u = 0.4 * np.sin(2 * np.pi * 0.7 * tt + seed) + 0.2 * np.sin(2 * np.pi * 1.9 * tt)
+    return u + rng.normal(0.0, 0.01, tt.size)
+
+
+def _loop(pipe: BacklashPipeline, seed: int, seconds: float) -> None:
+    """The pipeline in the loop of a play of 0.04 rad: each command's answer is what the
+    play takes; 10 readings (1 kHz) of the load after each command; then finish."""
+    rng = np.random.default_rng(seed + 1000)
+    x = 0.0
+    for k, value in enumerate(_motion(seed, seconds).tolist()):
+        stamp = 10 * MS * (k + 1)
+        got = pipe.on_command_value(None, value, stamp)
+        sent = value if got is None else got[1]
+        x = min(max(x, sent - 0.02), sent + 0.02)
+        for j, noise in enumerate(rng.normal(0.0, 0.001, 10).tolist(), start=1):
+            pipe.on_encoder_value(None, x + noise, stamp + j * MS)
+    pipe.finish(refit=False)
+
+
+def _params(path: Path, *, in_loop: bool = True, compensate: bool = True) -> NodeParameters:
+    return NodeParameters(
+        command_type="float64",
+        encoder_type="float64",
+        compensate=compensate,
+        compensation_in_loop=in_loop,
+        checkpoint_file=str(path),
+    )
+
+
+def test_the_nodes_checkpoint_keeps_the_baseline_its_judge_measured(tmp_path: Path) -> None:
+    path = tmp_path / "c.json"
+    pipe = BacklashPipeline(_params(path))
+    _loop(pipe, 0, 14.0)
+    measured = pipe.measured
+    assert measured.state == "on" and measured.baseline == "measured"  # it helps, measured
+    final = load_checkpoint(path)
+    assert final.baseline == OfflineBaseline(measured.off_rms, measured.off_time)
+    # a restart from it: the judge starts from that baseline
+    again = BacklashPipeline(_params(path))
+    assert again.measured.baseline == "offline"
+    assert final.baseline is not None and again.measured.off_rms == final.baseline.rms
+    # ... compensates after the guard's first verdict, under 3 s of its own baseline, and
+    # carries the one it started from forward
+    _loop(again, 1, 10.0)
+    assert again.measured.state == "on" and again.measured.off_time < 3.0
+    assert load_checkpoint(path).baseline == final.baseline
+
+
+def test_a_node_that_measured_no_help_stores_no_baseline(tmp_path: Path) -> None:
+    path = tmp_path / "c.json"
+    # not in the loop: its weight-0 readings need not have gone without compensation
+    _loop(BacklashPipeline(_params(path, in_loop=False)), 0, 14.0)
+    assert load_checkpoint(path).baseline is None
+    assert "baseline" not in json.loads(path.read_text())  # the old layout, unchanged
+    # in the loop with a full baseline, but compensation never measured helping
+    path.unlink()
+    pipe = BacklashPipeline(_params(path, compensate=False))
+    _loop(pipe, 0, 14.0)
+    assert pipe.measured.off_time >= 3.0 and load_checkpoint(path).baseline is None
+
+
+def test_a_watching_node_carries_its_starts_baseline_forward(tmp_path: Path) -> None:
+    path = tmp_path / "c.json"
+    _loop(BacklashPipeline(_params(path)), 0, 14.0)
+    stored = load_checkpoint(path).baseline
+    assert stored is not None
+    _loop(BacklashPipeline(_params(path, in_loop=False)), 1, 10.0)
+    assert load_checkpoint(path).baseline == stored  # not replaced by what it watched
+
+
+@pytest.mark.parametrize(("kept", "stored"), [(0.25, True), (0.75, False)])
+def test_a_baseline_is_stored_only_where_compensation_clearly_helped(
+    kept: float, stored: bool
+) -> None:
+    # the judge fed directly: 4 s without compensation, then 8 s keeping `kept` of the error
+    pipe = BacklashPipeline(NodeParameters(compensation_in_loop=True))
+    judge = pipe._tracking.judge
+    rng = np.random.default_rng(0)
+    last = 0
+    for seconds, rms, weight in ((4.0, 0.04, 0.0), (8.0, 0.04 * kept, 1.0)):
+        for _ in range(round(10 * seconds)):  # 100 readings at 1 kHz a feed
+            t = last + MS * np.arange(1, 101)
+            last = int(t[-1])
+            judge.readings(t, rng.normal(0.0, rms, 100), np.zeros(100), np.full(100, weight))
+    assert judge.verdict.state == "on"  # both: compensation kept on, ratio below 0.9
+    assert judge.verdict.ratio == pytest.approx(kept, rel=0.15)
+    expected = judge.live_baseline() if stored else None
+    assert pipe._baseline() == expected and (expected is not None) == stored
