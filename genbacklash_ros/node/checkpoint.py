@@ -417,7 +417,8 @@ def warm_start(params: NodeParameters, path: str | Path | None = None) -> WarmSt
     if checkpoint.baseline is not None:
         how += (
             f"; its offline baseline ({1e3 * checkpoint.baseline.rms:.3g} mrad rms without "
-            "compensation) lets compensation start at once, checked live after its first second"
+            "compensation) lets compensation start once the guard has judged the model on this "
+            "machine's samples, not after a 3 s baseline; the live one replaces it"
         )
     prior = Estimate(
         estimate.structure,
