@@ -45,6 +45,8 @@ from .simulate import play_bounds
 from .structure import Structure
 
 __all__ = [
+    "MAX_ITERATIONS",
+    "TOL",
     "IdentificationResult",
     "IterationHistory",
     "backlash_misfit",
@@ -57,6 +59,11 @@ __all__ = [
 IterationCallback = Callable[[int, FloatArray], None]
 
 _CYCLE_LOOKBACK = 4  # how many earlier iterates a limit cycle may span
+MAX_ITERATIONS = 30
+"""The paper's iteration's default iteration limit (every identification function's)."""
+TOL = 1e-4
+"""The default convergence tolerance: the iteration stops when no parameter moves more than
+``TOL * max(1, max|p|)``."""
 _WARM_START_SAMPLES = 20_000  # prefix length for the warm start on long records
 _RESTART_DEAD_ZONES = (0.05, 0.2)  # restart dead zones, as fractions of the input span
 _HOLD_ROUNDS = 3  # refinements at most, each with the falsified holds of the estimate before it
@@ -793,8 +800,8 @@ def identify_backlash(
     sign: float | None = None,
     start: GeneralBacklash | None = None,
     refine: bool = True,
-    max_iterations: int = 30,
-    tol: float = 1e-4,
+    max_iterations: int = MAX_ITERATIONS,
+    tol: float = TOL,
     nonfinite: NonFinitePolicy = "raise",
     callback: IterationCallback | None = None,
     breaks: ArrayLike | None = None,
@@ -893,8 +900,8 @@ def backlash_misfit(
         uu,
         xx,
         start=None,
-        max_iterations=30,  # identify_backlash's defaults
-        tol=1e-4,
+        max_iterations=MAX_ITERATIONS,
+        tol=TOL,
         refine=False,
         callback=None,
         breaks=bb,
@@ -943,8 +950,8 @@ def identify_cascade(
     sign: float | None = None,
     start: Cascade | None = None,
     refine: bool = True,
-    max_iterations: int = 30,
-    tol: float = 1e-4,
+    max_iterations: int = MAX_ITERATIONS,
+    tol: float = TOL,
     nonfinite: NonFinitePolicy = "raise",
     callback: IterationCallback | None = None,
     breaks: ArrayLike | None = None,

@@ -199,7 +199,8 @@ def load_bag_series(
         servo=params.servo() if params is not None else None,
         motor_topic=motor_topic,
         motor_joint=motor_joint,
-        baseline=True,
+        # the record's tracking without compensation: only a checkpoint stores it
+        baseline=bool(getattr(args, "checkpoint", None)),
     )
     if series.skipped:
         print(
