@@ -29,8 +29,9 @@ it was stored); ``--offline-variant NAME`` identifies the start on another varia
 With ``--restart OFFSET`` the node is restarted from its own checkpoint: a fresh node runs
 seed ``seed`` writing its checkpoints (``checkpoint_file``), then a second node starts from
 the fresh run's final checkpoint on seed ``seed + OFFSET``'s motion (the same drivetrain),
-twice: with the baseline the checkpoint carries (the judge's live one, issue 23 ckpt-1) and
-with it removed (what a node's checkpoint held before: the restart measures its 3 s first).
+twice: with what the checkpoint carries (the judge's live baseline, issue 23 ckpt-1, or its
+standing verdict of harm, which the restart holds) and with both removed (what a node's
+checkpoint held before: the restart measures its 3 s first and tries the model again).
 The table gives the second record's cuts.
 
 The numbers: the RMS load tracking error ``load - desired`` (the true load at every encoder
@@ -202,17 +203,18 @@ def _cuts(errors: dict[str, np.ndarray], half: np.ndarray) -> dict[str, tuple[fl
 
 def _restart_tables(args: argparse.Namespace, folder: Path) -> None:
     """``--restart``: a fresh run writing checkpoints, then the restart from its final one
-    with the baseline it carries and without (module notes)."""
+    with the baseline or harm it carries and without either (module notes)."""
     extra = {k: _value(v) for k, _, v in (p.partition("=") for p in args.param)}
     print(
         "| variant | bandwidth (Hz) | seed / restart seed "
         "| fresh run: cut node (%), measured (state, ratio) "
-        "| stored baseline (mrad over s) | rms none (mrad) | cut true (%) "
-        "| restart with baseline: whole / 2nd half (%) "
-        "| restart without: whole / 2nd half (%) | measured at the end, with / without "
-        "(state, ratio) | s |"
+        "| stored baseline (mrad over s) | stored harm (play mrad, ratio, held s) "
+        "| rms none (mrad) | cut true (%) "
+        "| restart as stored: whole / 2nd half (%) "
+        "| restart with neither: whole / 2nd half (%) | measured at the end, as stored / "
+        "with neither (state, ratio) | s |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     delay = round(args.delay_ms * 1e6)
     for name in args.variants:
         for bw in args.bandwidths:
@@ -239,8 +241,9 @@ def _restart_tables(args: argparse.Namespace, folder: Path) -> None:
                     - clocks.desired,
                 }
                 states = []
-                for key, kept in (("with", saved.baseline), ("without", None)):
-                    save_checkpoint(run, dataclasses.replace(saved, baseline=kept))
+                bare = dataclasses.replace(saved, baseline=None, harm=None)
+                for key, kept in (("with", saved), ("without", bare)):
+                    save_checkpoint(run, kept)
                     loads, _, _, measured = node_loop(
                         params, clocks, guard=args.guard == "on", delay_ns=delay, extra=node,
                         motor=args.motor_encoder,
@@ -250,10 +253,15 @@ def _restart_tables(args: argparse.Namespace, folder: Path) -> None:
                 cut = _cuts(errors, half)
                 base = saved.baseline
                 stored = f"{1e3 * base.rms:.2f} over {base.seconds:.1f}" if base else "none"
+                harm = saved.harm
+                held = (
+                    f"{1e3 * harm.play:.1f}, {harm.ratio:.2f}, {harm.held:.1f}" if harm else "none"
+                )
                 print(
                     f"| {name} | {bw:g} | {seed} / {seed + args.restart} "
                     f"| {fresh:.1f}, {judged.state}, {judged.ratio:.2f} "
-                    f"| {stored} | {1e3 * _rms(errors['none']):.2f} | {cut['true'][0]:.1f} "
+                    f"| {stored} | {held} | {1e3 * _rms(errors['none']):.2f} "
+                    f"| {cut['true'][0]:.1f} "
                     f"| {cut['with'][0]:.1f} / {cut['with'][1]:.1f} "
                     f"| {cut['without'][0]:.1f} / {cut['without'][1]:.1f} "
                     f"| {' / '.join(states)} | {time.perf_counter() - began:.1f} |",

@@ -52,7 +52,9 @@ coasting into the play for the rest of a record, 8.9 % worse than no compensatio
 Once every ``probe_every`` seconds of compensating the judge asks for a *probe*:
 ``min_time`` seconds with compensation off, to measure the baseline again. After a verdict
 of harm compensation stays off until a new model is adopted or ``retry`` seconds have passed;
-then it is tried (and measured) again.
+then it is tried (and measured) again. That verdict outlives a restart: a checkpoint carries it
+(:meth:`TrackingJudge.held_harm`, a :class:`HeldHarm`) and the next start holds it
+(:meth:`TrackingJudge.hold`), the retry counted on.
 
 Without ``compensation_in_loop`` (replay; a node that only watches) compensation changes
 nothing the readings show, and the judge only watches: trust 1 always, and when tracking is
@@ -89,6 +91,7 @@ __all__ = [
     "RAMP_START",
     "RETRY_CHANGE",
     "STRONG_HARM",
+    "HeldHarm",
     "OfflineBaseline",
     "TrackingJudge",
     "TrackingJudgeSettings",
@@ -221,6 +224,49 @@ class OfflineBaseline:
 
 
 @dataclass(frozen=True)
+class HeldHarm:
+    """A verdict of harm the judge holds: compensation off for a model of this play.
+
+    What a checkpoint carries to the next start (:meth:`TrackingJudge.held_harm`,
+    :meth:`TrackingJudge.hold`), so that a restarted node holds the model it measured
+    tracking worse than without off, as a running node does, until a new model or ``retry``
+    (measured in BENCHMARKS.md, issue 23: a restart that tried the same model again tracked
+    2.4 % worse than without compensation over a whole physics record).
+
+    Parameters
+    ----------
+    play : float
+        ``c_L + c_R`` of the model judged harmful (rad, finite).
+    ratio : float
+        The measured ratio ``q`` harm was judged on (finite, > 0).
+    held : float
+        Seconds of readings without compensation it has been held off so far (>= 0): the
+        retry counts on from there.
+
+    Examples
+    --------
+    >>> HeldHarm(0.0384, 1.11, 12.5).ratio
+    1.11
+    """
+
+    play: float
+    ratio: float
+    held: float
+
+    def __post_init__(self) -> None:
+        for name in ("play", "ratio", "held"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise GenBacklashError(f"{name} must be a number, got {value!r}")
+            if not math.isfinite(value):
+                raise GenBacklashError(f"{name} must be a finite number, got {value!r}")
+        if self.ratio <= 0.0 or self.held < 0.0:
+            raise GenBacklashError(
+                f"ratio must be > 0 and held >= 0, got {self.ratio!r} and {self.held!r}"
+            )
+
+
+@dataclass(frozen=True)
 class TrackingVerdict:
     """The judge's verdict after the readings so far.
 
@@ -301,9 +347,12 @@ class TrackingJudge:
         """Forget every reading (identification restarted)."""
         self._on = _Mean()
         self._off = _Mean()
-        self._harm_at: float | None = None  # off_time when harm was judged
+        self._harm_at: float | None = None  # off_time when harm was judged (None: no verdict)
+        self._held = False  # the model in use is the one judged harmful: off
         self._play = math.nan  # the play of the model in use
         self._harm_play: float | None = None  # ... when harm was judged
+        self._harm_ratio = math.nan  # the ratio harm was judged on
+        self._harm_carried = False  # the harm was judged before a restart (hold)
         self._probe_from: float | None = None  # off_time when a probe began
         self._next_probe = self.settings.probe_every  # compensated time of the next probe
         self._on_before = 0.0  # compensated seconds of the means forgotten
@@ -357,6 +406,72 @@ class TrackingJudge:
             return OfflineBaseline(rms, off.time)
         return None
 
+    def held_harm(self) -> HeldHarm | None:
+        """The standing verdict of harm, for a later start to hold.
+
+        Returns
+        -------
+        HeldHarm or None
+            Until ``retry`` seconds of readings without compensation have passed since a
+            verdict of harm (whether compensation is off for it now, or a model further
+            away is tried): the play of the model judged harmful, the ratio it was judged on
+            and the seconds held so far; None otherwise (also when the model's play was
+            never given by :meth:`new_model`).
+
+        Examples
+        --------
+        >>> judge = TrackingJudge(TrackingJudgeSettings(min_time=1.0))
+        >>> _ = judge.new_model(0.04)
+        >>> t = [k * 1_000_000 for k in range(4000)]
+        >>> _ = judge.readings(t[:2000], [0.05] * 2000, [0.0] * 2000, [0.0] * 2000)
+        >>> _ = judge.readings(t[2000:], [0.08] * 2000, [0.0] * 2000, [1.0] * 2000)
+        >>> held = judge.held_harm()
+        >>> held.play, round(held.ratio, 2), held.held
+        (0.04, 1.6, 0.0)
+        """
+        play = self._harm_play
+        if self._harm_at is None or play is None or not math.isfinite(play):
+            return None
+        ratio = self._harm_ratio
+        if not (math.isfinite(ratio) and ratio > 0.0):
+            return None
+        return HeldHarm(play, ratio, max(self._off.time - self._harm_at, 0.0))
+
+    def hold(self, harm: HeldHarm) -> TrackingVerdict:
+        """Take ``harm`` (judged before a restart) as the standing verdict of harm, as if
+        judged here: a model within :data:`RETRY_CHANGE` of ``harm.play`` (or of unknown
+        play) is off until ``retry`` seconds of readings without compensation, counted on
+        from ``harm.held`` (:meth:`new_model`); returns the verdict.
+
+        Examples
+        --------
+        >>> judge = TrackingJudge(TrackingJudgeSettings(retry=10.0))
+        >>> judge.hold(HeldHarm(0.04, 1.11, 4.0)).state
+        'off'
+        >>> judge.new_model(0.041).state  # the same model, within 10 %
+        'off'
+        >>> judge.new_model(0.03).state  # a new model: measured again
+        'judging'
+        """
+        if not isinstance(harm, HeldHarm):
+            raise GenBacklashError(f"harm must be a HeldHarm, got {harm!r}")
+        if self.settings.in_loop:
+            self._harm_at = self._off.time - float(harm.held)
+            self._harm_play, self._harm_ratio = float(harm.play), float(harm.ratio)
+            self._harm_carried = True
+            self._offline_trial = False
+            self._held = not math.isfinite(self._play) or self._near_harm(self._play)
+            self._measure_afresh(trial=True)
+        self.verdict = self._judge()
+        return self.verdict
+
+    def _near_harm(self, play: float) -> bool:
+        """``play`` lies within :data:`RETRY_CHANGE` of the play judged harmful."""
+        harmful = self._harm_play
+        if harmful is None or not math.isfinite(harmful):
+            return False
+        return abs(play - harmful) <= RETRY_CHANGE * abs(harmful)
+
     def configure(self, settings: TrackingJudgeSettings) -> TrackingVerdict:
         """New settings, the evidence kept; returns the verdict under them."""
         self.settings = settings
@@ -364,19 +479,30 @@ class TrackingJudge:
         return self.verdict
 
     def new_model(self, play: float) -> TrackingVerdict:
-        """A model with the play ``play`` (rad) is in use. After a verdict of harm, a play
-        more than :data:`RETRY_CHANGE` away from the one judged harmful is tried (and
-        measured) again at once; the baseline is kept."""
+        """A model with the play ``play`` (rad) is in use.
+
+        Until ``retry`` seconds after a verdict of harm: a play more than
+        :data:`RETRY_CHANGE` away from the one judged harmful is tried (and measured) at
+        once, with a trial; one within it is off again, also after such a trial began (an
+        estimate that wanders away and back, as a restarted identifier's first ones do, does
+        not retry the model judged harmful: measured in BENCHMARKS.md, issue 23). The
+        baseline is kept.
+
+        Examples
+        --------
+        >>> judge = TrackingJudge(TrackingJudgeSettings(retry=10.0))
+        >>> judge.hold(HeldHarm(0.04, 1.2, 0.0)).state
+        'off'
+        >>> judge.new_model(0.046).state, judge.new_model(0.041).state
+        ('judging', 'off')
+        """
         self._play = float(play)
-        harmful = self._harm_play
-        if self._harm_at is not None and (
-            harmful is None
-            or not math.isfinite(harmful)
-            or abs(self._play - harmful) > RETRY_CHANGE * abs(harmful)
-        ):
-            self._harm_at = None
-            self._measure_afresh(trial=True)
-            self.verdict = self._judge()
+        if self._harm_at is not None:
+            near = self._near_harm(self._play)
+            if near != self._held:
+                self._held = near
+                self._measure_afresh(trial=True)  # a trial for each model tried anew
+                self.verdict = self._judge()
         return self.verdict
 
     def readings(
@@ -479,18 +605,22 @@ class TrackingJudge:
                 )
             self._probe_from = None
             self._next_probe = self._on_before + on.time + s.probe_every
-        if self._harm_at is not None:
-            if off.time - self._harm_at < s.retry:
-                return self._verdict(
-                    0.0,
-                    "off",
-                    f"compensation off: measured, it tracked worse than without "
-                    f"({100 * ratio:.0f} % of the error); tried again with a new model or "
-                    f"after {s.retry:g} s",
-                )
-            self._harm_at = None
-            self._measure_afresh(trial=True)
+        if self._harm_at is not None and off.time - self._harm_at >= s.retry:
+            self._harm_at = None  # the verdict has run its time: tried again
+            if self._held:
+                self._held = False
+                self._measure_afresh(trial=True)
             return self._judge()
+        if self._held:
+            when = "measured before this start" if self._harm_carried else "measured"
+            judged = ratio if math.isfinite(ratio) else self._harm_ratio
+            return self._verdict(
+                0.0,
+                "off",
+                f"compensation off: {when}, it tracked worse than without "
+                f"({100 * judged:.0f} % of the error); tried again with a new model or "
+                f"after {s.retry:g} s",
+            )
         if self._offline_in_use() is not None and on.time >= OFFLINE_CHECK * s.min_time:
             # the offline baseline checked live before any verdict rests on it
             return self._probe(OFFLINE_PROBE * s.min_time)
@@ -551,7 +681,8 @@ class TrackingJudge:
 
     def _harm(self) -> TrackingVerdict:
         self._offline_trial = False
-        self._harm_at, self._harm_play = self._off.time, self._play
+        self._harm_at, self._harm_play, self._held = self._off.time, self._play, True
+        self._harm_ratio, self._harm_carried = self._ratio()[2], False
         return self._judge()
 
     def _probe(self, length: float) -> TrackingVerdict:

@@ -10,7 +10,11 @@ compensation as the measured tracking judge measures it
 without compensation); the node's own checkpoints, with ``compensation_in_loop`` and once its
 judge has measured compensation clearly helping, store the one the judge measured live (at least
 ``min_time`` of it) or else carry forward the one it started from, and otherwise none
-(:mod:`genbacklash_ros.node.pipeline`). A file without the field loads as before.
+(:mod:`genbacklash_ros.node.pipeline`). A node whose judge holds compensation off because it
+measured it tracking worse than without stores that verdict too
+(:class:`~genbacklash_core.measured.HeldHarm`, the field ``harm``: ``{"play": rad, "ratio": q,
+"held": s}``), which the next start holds: the model stays off until a new one or the judge's
+``retry``, as in the running node. A file without these fields loads as before.
 :func:`save_checkpoint` writes it atomically: a temporary file in the same directory is
 written, flushed and fsync'ed, then renamed over the target (``os.replace``), and the
 directory is fsync'ed; a crash at any point leaves either the old file or the new one, never
@@ -56,7 +60,7 @@ from typing import Any
 import numpy as np
 
 from genbacklash_core import Estimate, GenBacklashError, OnlineIdentifier, Structure
-from genbacklash_core.measured import OfflineBaseline
+from genbacklash_core.measured import HeldHarm, OfflineBaseline
 from genbacklash_ros.node.parameters import NodeParameters
 
 __all__ = [
@@ -86,13 +90,16 @@ class Checkpoint:
 
     ``baseline``: the tracking without compensation, measured on the record the estimate
     was identified on (``identify``, ``replay``) or live by the node that wrote the file
-    (None: not measured, or the record had compensation in it).
+    (None: not measured, or the record had compensation in it). ``harm``: the node's
+    verdict that compensation with this model tracked worse than without, held when the file
+    was written (None: no such verdict held).
     """
 
     estimate: Estimate
     time_ns: int
     version: int = CHECKPOINT_VERSION
     baseline: OfflineBaseline | None = None
+    harm: HeldHarm | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.estimate, Estimate):
@@ -106,6 +113,8 @@ class Checkpoint:
             )
         if self.baseline is not None and not isinstance(self.baseline, OfflineBaseline):
             raise CheckpointError(f"baseline must be an OfflineBaseline, got {self.baseline!r}")
+        if self.harm is not None and not isinstance(self.harm, HeldHarm):
+            raise CheckpointError(f"harm must be a HeldHarm, got {self.harm!r}")
 
     def mismatch(self, structure: Structure) -> str | None:
         """Why the checkpoint cannot warm-start ``structure`` (degree, na, nb), or None."""
@@ -156,6 +165,9 @@ def checkpoint_to_dict(checkpoint: Checkpoint) -> dict[str, Any]:
     }
     if checkpoint.baseline is not None:
         out["baseline"] = {"rms": checkpoint.baseline.rms, "seconds": checkpoint.baseline.seconds}
+    if checkpoint.harm is not None:
+        harm = checkpoint.harm
+        out["harm"] = {"play": harm.play, "ratio": harm.ratio, "held": harm.held}
     return out
 
 
@@ -170,6 +182,19 @@ def _baseline(data: dict[str, Any]) -> OfflineBaseline | None:
         return OfflineBaseline(_field(raw, "rms"), _field(raw, "seconds"))
     except GenBacklashError as err:
         raise CheckpointError(f"baseline: {err}") from err
+
+
+def _harm(data: dict[str, Any]) -> HeldHarm | None:
+    """The optional ``harm`` field (absent or null: None)."""
+    raw = data.get("harm")
+    if raw is None:
+        return None
+    if not isinstance(raw, dict):
+        raise CheckpointError("harm must be an object with play, ratio and held")
+    try:
+        return HeldHarm(_field(raw, "play"), _field(raw, "ratio"), _field(raw, "held"))
+    except GenBacklashError as err:
+        raise CheckpointError(f"harm: {err}") from err
 
 
 def _field(data: dict[str, Any], key: str) -> Any:
@@ -232,7 +257,7 @@ def checkpoint_from_dict(data: object) -> Checkpoint:
             _field(data, "samples"),
             reason,
         )
-        return Checkpoint(estimate, time_ns, version, _baseline(data))
+        return Checkpoint(estimate, time_ns, version, _baseline(data), _harm(data))
     except CheckpointError:
         raise
     except (GenBacklashError, TypeError) as err:
@@ -367,6 +392,10 @@ class WarmStart:
         The checkpoint's tracking without compensation, measured offline, for the measured
         tracking judge (:meth:`~genbacklash_core.measured.TrackingJudge.start_from`); None
         without a usable checkpoint or when it holds none.
+    harm : HeldHarm or None
+        The verdict of harm the node that wrote the checkpoint held, for the judge to hold
+        (:meth:`~genbacklash_core.measured.TrackingJudge.hold`); None without a usable
+        checkpoint or when it holds none.
     """
 
     identifier: OnlineIdentifier
@@ -375,6 +404,7 @@ class WarmStart:
     problem: bool = False
     seeded: bool = False
     baseline: OfflineBaseline | None = None
+    harm: HeldHarm | None = None
 
 
 def warm_start(params: NodeParameters, path: str | Path | None = None) -> WarmStart:
@@ -420,6 +450,12 @@ def warm_start(params: NodeParameters, path: str | Path | None = None) -> WarmSt
             "compensation) lets compensation start once the guard has judged the model on this "
             "machine's samples, not after a 3 s baseline; the live one replaces it"
         )
+    if checkpoint.harm is not None:
+        how += (
+            f"; compensation with its model was measured tracking worse than without "
+            f"({100 * checkpoint.harm.ratio:.0f} % of the error) and stays off until a new "
+            f"model or the judge's retry ({checkpoint.harm.held:.0f} s of it held so far)"
+        )
     prior = Estimate(
         estimate.structure,
         estimate.parameters,
@@ -432,4 +468,11 @@ def warm_start(params: NodeParameters, path: str | Path | None = None) -> WarmSt
         f"from checkpoint {file} ({saved_at}): {estimate.reason}",
     )
     note = f"warm start from checkpoint {file} ({how})"
-    return WarmStart(identifier, prior, note, seeded=seeded, baseline=checkpoint.baseline)
+    return WarmStart(
+        identifier,
+        prior,
+        note,
+        seeded=seeded,
+        baseline=checkpoint.baseline,
+        harm=checkpoint.harm,
+    )

@@ -112,7 +112,9 @@ at construction (:func:`~genbacklash_ros.node.checkpoint.warm_start`). With
 ``compensation_in_loop``, a checkpoint taken once the judge has measured compensation helping
 carries the tracking without compensation for the next start's judge: the one measured live
 once it holds ``min_time`` seconds, else the one this start took from its checkpoint; else
-none (``BacklashPipeline._baseline`` says when and why).
+none (``BacklashPipeline._baseline`` says when and why). A checkpoint taken while the judge holds
+compensation off for harm carries that verdict, and the next start holds the model off
+until a new model or the retry (``BacklashPipeline._harm``).
 
 Faults
 ------
@@ -151,9 +153,9 @@ from typing import Literal, TypeAlias
 
 import numpy as np
 
-from genbacklash_core import Cascade, Estimate, GenBacklashError, OnlineIdentifier
+from genbacklash_core import Cascade, Estimate, GenBacklashError, GeneralBacklash, OnlineIdentifier
 from genbacklash_core.guard import CompensationGuard, GuardVerdict
-from genbacklash_core.measured import OfflineBaseline, TrackingVerdict
+from genbacklash_core.measured import HeldHarm, OfflineBaseline, TrackingVerdict
 from genbacklash_ros.node.align import Aligner
 from genbacklash_ros.node.batch import BlockView
 from genbacklash_ros.node.checkpoint import Checkpoint, CheckpointError, save_checkpoint, warm_start
@@ -381,6 +383,15 @@ def _order_text(stream: str, stamp: int, last: int) -> str:
     return text if stamp == last else f"{text} ({(last - stamp) / 1e9:.3f} s back)"
 
 
+def _play(model: object) -> float | None:
+    """``c_L + c_R`` of a model's backlash (None without a model)."""
+    if isinstance(model, Cascade):
+        model = model.backlash
+    if isinstance(model, GeneralBacklash):
+        return float(model.c_left + model.c_right)
+    return None
+
+
 class BacklashPipeline:
     """Command and encoder messages in, compensated command, estimate and diagnostics out.
 
@@ -513,9 +524,19 @@ class BacklashPipeline:
         # is perturbed for the rest of a record by a trial of a second at a tenth of its
         # weight (BENCHMARKS.md, issue 23, base-1), and the guard tells them apart first
         self._await_guard = start.prior is not None and start.baseline is not None
+        judge = self._tracking.judge
         if self._await_guard:
             assert start.baseline is not None
-            self._tracking.judge.start_from(start.baseline)
+            judge.start_from(start.baseline)
+        if start.prior is not None:
+            play = _play(start.prior.model)
+            if play is not None:  # the judge knows the play of the model it judges
+                judge.new_model(play)
+            if start.harm is not None:
+                # the model the last node measured tracking worse than without stays off
+                # until a new model or the retry, as in a running node (BENCHMARKS.md,
+                # issue 23: a restart that tried it again tracked 2.4 % worse)
+                judge.hold(start.harm)
         self._set_trust()  # a checkpoint's model is judged from its first command
         self._feed_at_count = self._batch
         self._clock.restart()
@@ -1415,9 +1436,9 @@ class BacklashPipeline:
             # the new model judged at once on the samples the guard remembers
             model = self._use.current.model
             self._guard.adopt(model)
-            if model is not None:
-                backlash = model.backlash if isinstance(model, Cascade) else model
-                self._tracking.judge.new_model(backlash.c_left + backlash.c_right)
+            play = _play(model)
+            if play is not None:
+                self._tracking.judge.new_model(play)
             self._set_trust()
             self._comp.adopt(self._use.current, self._align.last_y)
             if self._comp.problems:
@@ -1515,6 +1536,16 @@ class BacklashPipeline:
         live = judge.live_baseline()
         return live if live is not None else judge.offline
 
+    def _harm(self) -> HeldHarm | None:
+        """The judge's verdict of harm a checkpoint stores, for the next start to hold.
+
+        With ``compensation_in_loop``, while the judge holds compensation off because it
+        measured it tracking worse than without: the next start holds that model off too,
+        until a new model or the retry (counted on), instead of trying it again after its
+        baseline. Without it the judge never judges harm: none.
+        """
+        return self._tracking.judge.held_harm() if self._in_loop else None
+
     def _checkpoint(self, now: int) -> None:
         path = self._checkpoint_path
         est = self._use.own
@@ -1522,7 +1553,7 @@ class BacklashPipeline:
             return
         led = self._ledger
         try:
-            self._writer(path, Checkpoint(est, now, baseline=self._baseline()))
+            self._writer(path, Checkpoint(est, now, baseline=self._baseline(), harm=self._harm()))
         except (CheckpointError, OSError) as err:
             led.checkpoint_errors += 1
             self._problem(f"checkpoint not saved: {err}")
