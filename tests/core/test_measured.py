@@ -17,6 +17,7 @@ from genbacklash_core.measured import (
     OFFLINE_PROBE,
     RAMP_START,
     RETRY_CHANGE,
+    HeldHarm,
     OfflineBaseline,
     TrackingJudge,
     TrackingJudgeSettings,
@@ -169,6 +170,86 @@ def test_harm_is_retried_with_a_new_play_or_after_retry_seconds() -> None:
     assert judge.verdict.state == "off"  # 4 s of the 5 s
     feed.run(1.5, 0.04, 0.0)
     assert judge.verdict.state == "judging" and judge.verdict.trust == RAMP_START * TRIAL
+
+
+def test_a_wandering_estimate_does_not_retry_the_harmful_model() -> None:
+    # a restarted identifier's first estimates moved 64 -> 51 -> 56 mrad around a model
+    # judged harmful at 56.4 (physics, gravity 60 Hz seed 0): the model came back and must
+    # stay off, not be retried under cover of the wander
+    judge = TrackingJudge(TrackingJudgeSettings(retry=60.0))
+    feed = Feed(judge)
+    judge.new_model(0.0564)
+    feed.run(4.0, 0.04, 0.0)
+    feed.run(4.0, 0.06, 1.0)
+    assert judge.verdict.state == "off"
+    judge.new_model(0.0643)  # away: a trial
+    assert judge.verdict.state == "judging" and judge.verdict.trust > 0.0
+    feed.run(0.3, 0.05, 1.0)
+    judge.new_model(0.0513)  # back within RETRY_CHANGE: off again, at once
+    assert judge.verdict.state == "off" and judge.verdict.trust == 0.0
+    assert "tracked worse than without" in judge.verdict.reason
+    held = judge.held_harm()
+    assert held is not None and held.play == 0.0564
+    judge.new_model(0.0644)  # away again: a fresh trial from its first weight
+    assert judge.verdict.trust == RAMP_START * TRIAL
+
+
+def test_the_standing_verdict_of_harm_is_given_and_held() -> None:
+    judge = TrackingJudge(TrackingJudgeSettings(retry=10.0))
+    feed = Feed(judge)
+    assert judge.held_harm() is None
+    judge.new_model(0.07)
+    feed.run(4.0, 0.04, 0.0)
+    feed.run(4.0, 0.06, 1.0)  # judged harmful within it; the rest goes out uncompensated
+    feed.run(2.0, 0.04, 0.0)
+    held = judge.held_harm()
+    assert held is not None and held.play == 0.07
+    assert held.ratio == pytest.approx(1.5, rel=0.1)
+    assert held.held == pytest.approx(judge.verdict.off_time - 4.0, abs=0.01)  # since harm
+    assert 2.0 < held.held < 6.0
+    # the next start holds it, the retry counted on from there
+    again = TrackingJudge(TrackingJudgeSettings(retry=10.0))
+    again.new_model(0.07 * (1 + RETRY_CHANGE / 2))
+    assert again.hold(held).state == "off" and again.verdict.trust == 0.0
+    assert "measured before this start" in again.verdict.reason
+    assert f"{100 * held.ratio:.0f} % of the error" in again.verdict.reason
+    follow = Feed(again, seed=1)
+    follow.run(10.0 - held.held - 0.1, 0.04, 0.0)
+    assert again.verdict.state == "off"
+    follow.run(0.2, 0.04, 0.0)
+    assert again.verdict.state == "judging" and again.verdict.trust == RAMP_START * TRIAL
+    assert again.held_harm() is None  # run its time
+
+
+def test_a_held_verdict_lets_a_new_model_be_tried_and_is_ignored_when_watching() -> None:
+    held = HeldHarm(0.04, 1.3, 0.0)
+    judge = TrackingJudge(TrackingJudgeSettings(min_time=1.0))
+    judge.new_model(0.05)  # 25 % away from the harmful play
+    assert judge.hold(held).state == "judging"  # a baseline first, then a trial
+    Feed(judge).run(1.1, 0.04, 0.0)
+    assert judge.verdict.trust == RAMP_START * TRIAL
+    judge.new_model(0.041)
+    assert judge.verdict.state == "off"
+    judge.reset()
+    assert judge.held_harm() is None and judge.verdict.state == "judging"
+    watching = TrackingJudge(TrackingJudgeSettings(in_loop=False))
+    assert watching.hold(held).state == "watching" and watching.held_harm() is None
+
+
+@pytest.mark.parametrize(
+    ("play", "ratio", "held", "match"),
+    [
+        (math.nan, 1.2, 0.0, "play must be a finite number"),
+        (0.04, 0.0, 0.0, "ratio must be > 0"),
+        (0.04, 1.2, -1.0, "held >= 0"),
+        (0.04, True, 0.0, "ratio must be a number"),
+    ],
+)
+def test_a_held_verdict_is_validated(play: float, ratio: float, held: float, match: str) -> None:
+    with pytest.raises(GenBacklashError, match=match):
+        HeldHarm(play, ratio, held)
+    with pytest.raises(GenBacklashError, match="must be a HeldHarm"):
+        TrackingJudge().hold((0.04, 1.2, 0.0))  # type: ignore[arg-type]
 
 
 def test_the_baseline_does_not_fade_while_compensating() -> None:

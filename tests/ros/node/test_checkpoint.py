@@ -22,7 +22,7 @@ from genbacklash_core import (
     WindowedIdentifier,
     paper_example,
 )
-from genbacklash_core.measured import OfflineBaseline
+from genbacklash_core.measured import HeldHarm, OfflineBaseline
 from genbacklash_ros.node import checkpoint as ckpt
 from genbacklash_ros.node.checkpoint import (
     CHECKPOINT_VERSION,
@@ -120,6 +120,38 @@ def test_a_checkpoint_without_a_baseline_still_loads(tmp_path: Path) -> None:
 def test_a_corrupt_baseline_is_reported(baseline: object, match: str) -> None:
     data = checkpoint_to_dict(Checkpoint(converged(), 3))
     data["baseline"] = baseline
+    with pytest.raises(CheckpointError, match=match):
+        checkpoint_from_dict(data)
+
+
+def test_a_verdict_of_harm_round_trips_and_the_start_says_so(tmp_path: Path) -> None:
+    harm = HeldHarm(0.056396459711464, 1.1951608204238333, 5.888067188999997)
+    path = save_checkpoint(tmp_path / "c.json", Checkpoint(converged(), 7, harm=harm))
+    back = load_checkpoint(path)
+    assert back.harm == harm and back.baseline is None  # exact
+    data = json.loads(path.read_text())
+    assert data["harm"] == {"play": harm.play, "ratio": harm.ratio, "held": harm.held}
+    assert "baseline" not in data
+    taken = warm_start(NodeParameters(checkpoint_file=str(path)))
+    assert taken.harm == harm
+    assert "tracking worse than without (120 % of the error)" in taken.note
+    assert "harm" not in checkpoint_to_dict(Checkpoint(converged(), 3))  # the old layout
+    assert warm_start(NodeParameters(checkpoint_file=str(save_checkpoint(
+        tmp_path / "d.json", converged(), 3)))).harm is None  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("harm", "match"),
+    [
+        ([0.04, 1.2, 0.0], "harm must be an object"),
+        ({"play": 0.04, "ratio": 1.2}, "'held' is missing"),
+        ({"play": None, "ratio": 1.2, "held": 0.0}, "harm: play must be a number"),
+        ({"play": 0.04, "ratio": -1.0, "held": 0.0}, "harm: ratio must be > 0"),
+    ],
+)
+def test_a_corrupt_verdict_of_harm_is_reported(harm: object, match: str) -> None:
+    data = checkpoint_to_dict(Checkpoint(converged(), 3))
+    data["harm"] = harm
     with pytest.raises(CheckpointError, match=match):
         checkpoint_from_dict(data)
 

@@ -2,14 +2,15 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from genbacklash_core.measured import OfflineBaseline, TrackingJudgeSettings
-from genbacklash_ros.node.checkpoint import load_checkpoint
+from genbacklash_core.measured import HeldHarm, OfflineBaseline, TrackingJudgeSettings
+from genbacklash_ros.node.checkpoint import load_checkpoint, save_checkpoint
 from genbacklash_ros.node.parameters import NodeParameters
 from genbacklash_ros.node.pipeline import BacklashPipeline
 from genbacklash_ros.node.tracking_stage import record_baseline
@@ -74,19 +75,25 @@ def _motion(seed: int, seconds: float) -> np.ndarray:
     return u + rng.normal(0.0, 0.01, tt.size)
 
 
-def _loop(pipe: BacklashPipeline, seed: int, seconds: float) -> None:
+def _loop(pipe: BacklashPipeline, seed: int, seconds: float, gain: float = 1.0) -> int:
     """The pipeline in the loop of a play of 0.04 rad: each command's answer is what the
-    play takes; 10 readings (1 kHz) of the load after each command; then finish."""
+    play takes; 10 readings (1 kHz) of the load after each command; then finish. ``gain``:
+    what the drive makes of the compensation (-1: a drive that turns it round, so that
+    compensating tracks worse). Returns how many commands went out compensated."""
     rng = np.random.default_rng(seed + 1000)
     x = 0.0
+    compensated = 0
     for k, value in enumerate(_motion(seed, seconds).tolist()):
         stamp = 10 * MS * (k + 1)
         got = pipe.on_command_value(None, value, stamp)
         sent = value if got is None else got[1]
-        x = min(max(x, sent - 0.02), sent + 0.02)
+        compensated += sent != value
+        drive = value + gain * (sent - value)
+        x = min(max(x, drive - 0.02), drive + 0.02)
         for j, noise in enumerate(rng.normal(0.0, 0.001, 10).tolist(), start=1):
             pipe.on_encoder_value(None, x + noise, stamp + j * MS)
     pipe.finish(refit=False)
+    return compensated
 
 
 def _params(path: Path, *, in_loop: bool = True, compensate: bool = True) -> NodeParameters:
@@ -158,3 +165,46 @@ def test_a_baseline_is_stored_only_where_compensation_clearly_helped(
     assert judge.verdict.ratio == pytest.approx(kept, rel=0.15)
     expected = judge.live_baseline() if stored else None
     assert pipe._baseline() == expected and (expected is not None) == stored
+
+
+def _play_of(pipe: BacklashPipeline) -> float:
+    model = pipe.estimate.model
+    assert model is not None
+    return float(model.c_left + model.c_right)  # type: ignore[union-attr]
+
+
+def test_the_nodes_checkpoint_keeps_its_verdict_of_harm(tmp_path: Path) -> None:
+    path = tmp_path / "c.json"
+    pipe = BacklashPipeline(_params(path))
+    _loop(pipe, 0, 14.0, gain=-1.0)  # compensation turned round: it tracks worse
+    assert pipe.measured.state == "off"
+    saved = load_checkpoint(path)
+    assert saved.harm is not None and saved.baseline is None
+    assert saved.harm.ratio >= 1.0 and 0.0 < saved.harm.held < 14.0
+    assert saved.harm == pipe._tracking.judge.held_harm()
+    # not in the loop: the judge never judges harm, and nothing is stored
+    path.unlink()
+    _loop(BacklashPipeline(_params(path, in_loop=False)), 0, 14.0, gain=-1.0)
+    assert load_checkpoint(path).harm is None
+
+
+def test_a_restart_holds_the_model_its_checkpoint_says_tracked_worse(tmp_path: Path) -> None:
+    # a checkpoint of a model that helps on this loop, told it was measured tracking worse
+    path = tmp_path / "c.json"
+    first = BacklashPipeline(_params(path))
+    _loop(first, 0, 14.0)
+    play = _play_of(first)
+    saved = dataclasses.replace(load_checkpoint(path), baseline=None, harm=HeldHarm(play, 1.3, 1.0))
+    held, bare = tmp_path / "held.json", tmp_path / "bare.json"
+    save_checkpoint(held, saved)
+    save_checkpoint(bare, dataclasses.replace(saved, harm=None))
+    restart = BacklashPipeline(_params(held))
+    assert restart.measured.state == "off" and "before this start" in restart.measured.reason
+    # the model stays off while the estimate stays within RETRY_CHANGE of its play
+    assert _loop(restart, 1, 10.0) == 0
+    assert abs(_play_of(restart) / play - 1.0) < 0.1
+    assert restart.measured.state == "off"
+    kept = load_checkpoint(held).harm
+    assert kept is not None and kept.play == play and kept.held > 9.0  # carried on
+    # without the verdict the same restart tries the model after its 3 s baseline
+    assert _loop(BacklashPipeline(_params(bare)), 1, 10.0) > 0
