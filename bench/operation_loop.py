@@ -17,11 +17,17 @@ FILE`` on seed ``seed + OFFSET`` of the scenario written as a bag without compen
 checkpoint holds that record's tracking without compensation (the judge's offline
 baseline). ``--baseline-scale X`` multiplies it by ``X`` (a robustness run).
 
+With ``--restart OFFSET`` the node is restarted from its own checkpoint, as
+``bench/physics_loop.py --restart``: a fresh node on seed ``seed`` writes its checkpoints,
+then a second node starts from the final one on seed ``seed + OFFSET``'s motion; the table
+gives that second record's cuts and what the checkpoint carried (the live baseline, a
+standing verdict of harm, or neither).
+
 The numbers: the RMS load tracking error against no compensation, whole record and second
 half, in percent; the judge's final state, ratio and which baseline it judged against.
 
 Run: ``python bench/operation_loop.py [--seeds 0 1 2 3 4 5] [--duration 40]
-[--seeded-start OFFSET] [--baseline-scale X]``
+[--seeded-start OFFSET] [--baseline-scale X] [--restart OFFSET]``
 """
 
 from __future__ import annotations
@@ -110,6 +116,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--duration", type=float, default=40.0)
     parser.add_argument("--seeded-start", type=int, default=None, metavar="OFFSET")
     parser.add_argument("--baseline-scale", type=float, default=1.0, metavar="X")
+    parser.add_argument("--restart", type=int, default=None, metavar="OFFSET")
     parser.add_argument("--quick", action="store_true", help="seed 0, 10 s (a smoke test)")
     args = parser.parse_args(argv)
     if args.quick:
@@ -123,9 +130,15 @@ def main(argv: Sequence[str] | None = None) -> None:
             "| seed | rms none (mrad) | cut true (%) | cut node (%) | 2nd half: true / node (%) "
             "| measured (state, ratio) | judged against |"
             + (" offline / none (mrad) |" if seeded else "")
+            + (" checkpoint carried |" if args.restart is not None else "")
             + " s |"
         )
-        print("|---|---|---|---|---|---|---|" + ("---|" if seeded else "") + "---|")
+        print(
+            "|---|---|---|---|---|---|---|"
+            + ("---|" if seeded else "")
+            + ("---|" if args.restart is not None else "")
+            + "---|"
+        )
         with tempfile.TemporaryDirectory() as tmp:
             for seed in args.seeds:
                 began = time.perf_counter()
@@ -136,6 +149,21 @@ def main(argv: Sequence[str] | None = None) -> None:
                     run = Path(tmp) / "start.json"  # the node checkpoints over its start
                     run.write_bytes(file.read_bytes())
                     extra["checkpoint_file"] = str(run)
+                carried, label = "", str(seed)
+                if args.restart is not None:
+                    run = Path(tmp) / "node.json"
+                    run.unlink(missing_ok=True)
+                    extra["checkpoint_file"] = str(run)
+                    _node(Clocks(seed, args.duration), extra)  # the first node's run
+                    saved = load_checkpoint(run)
+                    carried = ", ".join(
+                        name
+                        for name, kept in (("baseline", saved.baseline), ("harm", saved.harm))
+                        if kept is not None
+                    )
+                    carried = f" {carried or 'neither'} |"
+                    seed += args.restart
+                    label = f"{seed - args.restart} / {seed}"
                 clocks = Clocks(seed, args.duration)
                 half = clocks.t >= clocks.t[-1] // 2
                 errors = {
@@ -150,10 +178,11 @@ def main(argv: Sequence[str] | None = None) -> None:
                 late = {k: 100 * (1 - _rms(e[half]) / _rms(none[half])) for k, e in errors.items()}
                 m = pipe.measured
                 print(
-                    f"| {seed} | {1e3 * _rms(none):.2f} | {whole['true']:.1f} "
+                    f"| {label} | {1e3 * _rms(none):.2f} | {whole['true']:.1f} "
                     f"| {whole['node']:.1f} | {late['true']:.1f} / {late['node']:.1f} "
                     f"| {m.state}, {m.ratio:.2f} | {m.baseline} |"
                     + (f" {1e3 * offline:.2f} / {1e3 * _rms(none):.2f} |" if seeded else "")
+                    + carried
                     + f" {time.perf_counter() - began:.1f} |",
                     flush=True,
                 )
