@@ -207,7 +207,7 @@ def _restart_tables(args: argparse.Namespace, folder: Path) -> None:
     extra = {k: _value(v) for k, _, v in (p.partition("=") for p in args.param)}
     print(
         "| variant | bandwidth (Hz) | seed / restart seed "
-        "| fresh run: cut node (%), measured (state, ratio) "
+        "| fresh run: cut node, whole / 2nd half (%), measured (state, ratio) "
         "| stored baseline (mrad over s) | stored harm (play mrad, ratio, held s) "
         "| rms none (mrad) | cut true (%) "
         "| restart as stored: whole / 2nd half (%) "
@@ -232,6 +232,8 @@ def _restart_tables(args: argparse.Namespace, folder: Path) -> None:
                 )  # fmt: skip
                 none = open_loop(params, first, first.values, delay) - first.desired
                 fresh = 100 * (1 - _rms(loads - first.desired) / _rms(none))
+                late = first.t >= first.t[-1] // 2
+                fresh_late = 100 * (1 - _rms((loads - first.desired)[late]) / _rms(none[late]))
                 saved = load_checkpoint(run)
                 clocks = Clocks(seed + args.restart, args.duration)
                 half = clocks.t >= clocks.t[-1] // 2
@@ -259,7 +261,7 @@ def _restart_tables(args: argparse.Namespace, folder: Path) -> None:
                 )
                 print(
                     f"| {name} | {bw:g} | {seed} / {seed + args.restart} "
-                    f"| {fresh:.1f}, {judged.state}, {judged.ratio:.2f} "
+                    f"| {fresh:.1f} / {fresh_late:.1f}, {judged.state}, {judged.ratio:.2f} "
                     f"| {stored} | {held} | {1e3 * _rms(errors['none']):.2f} "
                     f"| {cut['true'][0]:.1f} "
                     f"| {cut['with'][0]:.1f} / {cut['with'][1]:.1f} "
