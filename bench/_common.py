@@ -237,6 +237,25 @@ def simulation_residual(structure: Any, u: Any, y: Any, x0: float) -> Any:
     return residual
 
 
+def physics_parser(description: str | None, duration: float) -> argparse.ArgumentParser:
+    """A physics bench's parser with its grid: ``--seeds`` (0 1 2), ``--bandwidths`` (20 60
+    100 Hz), ``--variants`` (all of :data:`~genbacklash_ros.physics.variants.VARIANTS`) and
+    ``--duration`` (s; default ``duration``)."""
+    from genbacklash_ros.physics.variants import VARIANTS
+
+    parser = argparse.ArgumentParser(description=(description or "").split("\n\n")[0])
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--bandwidths", type=float, nargs="+", default=[20.0, 60.0, 100.0])
+    parser.add_argument("--variants", nargs="+", default=list(VARIANTS))
+    parser.add_argument("--duration", type=float, default=duration)
+    return parser
+
+
+def rms(e: np.ndarray) -> float:
+    """The root-mean-square of ``e``."""
+    return float(np.sqrt(np.mean(e * e)))
+
+
 def parse_physics_arguments(
     parser: argparse.ArgumentParser, argv: Sequence[str] | None
 ) -> argparse.Namespace:

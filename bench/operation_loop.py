@@ -40,7 +40,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
-from _common import PHYSICS_TOPICS, cli_json, printed_section
+from _common import PHYSICS_TOPICS, cli_json, printed_section, rms
 
 from genbacklash_core import compensate, simulate_backlash
 from genbacklash_core.scenarios import OPERATION_BACKLASH, OperationSettings
@@ -49,10 +49,6 @@ from genbacklash_ros.node.checkpoint import load_checkpoint, save_checkpoint
 from genbacklash_ros.node.parameters import NodeParameters
 from genbacklash_ros.node.pipeline import BacklashPipeline
 from genbacklash_ros.physics.loop import Clocks
-
-
-def _rms(e: np.ndarray) -> float:
-    return float(np.sqrt(np.mean(e * e)))
 
 
 def _loads(clocks: Clocks, sent: np.ndarray) -> np.ndarray:
@@ -174,14 +170,14 @@ def main(argv: Sequence[str] | None = None) -> None:
                 loads, pipe = _node(clocks, extra)
                 errors["node"] = loads - clocks.desired
                 none = errors["none"]
-                whole = {k: 100 * (1 - _rms(e) / _rms(none)) for k, e in errors.items()}
-                late = {k: 100 * (1 - _rms(e[half]) / _rms(none[half])) for k, e in errors.items()}
+                whole = {k: 100 * (1 - rms(e) / rms(none)) for k, e in errors.items()}
+                late = {k: 100 * (1 - rms(e[half]) / rms(none[half])) for k, e in errors.items()}
                 m = pipe.measured
                 print(
-                    f"| {label} | {1e3 * _rms(none):.2f} | {whole['true']:.1f} "
+                    f"| {label} | {1e3 * rms(none):.2f} | {whole['true']:.1f} "
                     f"| {whole['node']:.1f} | {late['true']:.1f} / {late['node']:.1f} "
                     f"| {m.state}, {m.ratio:.2f} | {m.baseline} |"
-                    + (f" {1e3 * offline:.2f} / {1e3 * _rms(none):.2f} |" if seeded else "")
+                    + (f" {1e3 * offline:.2f} / {1e3 * rms(none):.2f} |" if seeded else "")
                     + carried
                     + f" {time.perf_counter() - began:.1f} |",
                     flush=True,

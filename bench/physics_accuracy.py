@@ -29,11 +29,18 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from _common import PHYSICS_TOPICS, cli_json, json_play, parse_physics_arguments, printed_section
+from _common import (
+    PHYSICS_TOPICS,
+    cli_json,
+    json_play,
+    parse_physics_arguments,
+    physics_parser,
+    printed_section,
+)
 
 from genbacklash_core.scenarios import OperationSettings
 from genbacklash_ros.physics.bag import write_physics_bag
-from genbacklash_ros.physics.variants import VARIANTS, variant
+from genbacklash_ros.physics.variants import variant
 
 # the head of BENCHMARKS.md's physics section (this script's part comes first in run_all.py;
 # csv_vs_bag, physics_loop and physics_diagnose add their subsections after it)
@@ -65,11 +72,7 @@ SUBSECTION = "### The play found, online and in batch (no compensation in the re
 
 
 def _arguments(argv: Sequence[str] | None = None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
-    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
-    parser.add_argument("--bandwidths", type=float, nargs="+", default=[20.0, 60.0, 100.0])
-    parser.add_argument("--variants", nargs="+", default=list(VARIANTS))
-    parser.add_argument("--duration", type=float, default=40.0)
+    parser = physics_parser(__doc__, duration=40.0)
     parser.add_argument("--param", action="append", default=[], metavar="NAME=VALUE")
     parser.add_argument(
         "--motor-encoder",

@@ -53,14 +53,14 @@ from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
-from _common import parse_physics_arguments, printed_section
+from _common import parse_physics_arguments, physics_parser, printed_section
 
 from genbacklash_core.diagnose import DiagnoseSettings, diagnose, operation_case
 from genbacklash_core.diagnose.physics import PHYSICS_NAMES
 from genbacklash_core.scenarios import OperationSettings
 from genbacklash_ros.bags.bagio import read_aligned
 from genbacklash_ros.physics.bag import write_physics_bag
-from genbacklash_ros.physics.variants import VARIANTS, variant
+from genbacklash_ros.physics.variants import variant
 
 DOMINANT: dict[str, tuple[str, ...]] = {
     "near_ideal": ("time_delay", "input_lag"),
@@ -133,11 +133,7 @@ def _operation(job: tuple[tuple[str, ...], int, int]) -> str:
 
 
 def _arguments(argv: Sequence[str] | None = None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
-    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
-    parser.add_argument("--bandwidths", type=float, nargs="+", default=[20.0, 60.0, 100.0])
-    parser.add_argument("--variants", nargs="+", default=list(VARIANTS))
-    parser.add_argument("--duration", type=float, default=30.0)
+    parser = physics_parser(__doc__, duration=30.0)
     parser.add_argument("--max-steps", type=int, default=1)
     parser.add_argument(
         "--motor-bandwidths",

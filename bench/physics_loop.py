@@ -56,7 +56,15 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
-from _common import PHYSICS_TOPICS, cli_json, json_play, parse_physics_arguments, printed_section
+from _common import (
+    PHYSICS_TOPICS,
+    cli_json,
+    json_play,
+    parse_physics_arguments,
+    physics_parser,
+    printed_section,
+    rms,
+)
 
 from genbacklash_core import compensate
 from genbacklash_core.scenarios import OperationSettings
@@ -76,16 +84,8 @@ def _value(text: str) -> object:
         return text
 
 
-def _rms(e: np.ndarray) -> float:
-    return float(np.sqrt(np.mean(e * e)))
-
-
 def _arguments(argv: Sequence[str] | None = None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
-    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
-    parser.add_argument("--bandwidths", type=float, nargs="+", default=[20.0, 60.0, 100.0])
-    parser.add_argument("--variants", nargs="+", default=list(VARIANTS))
-    parser.add_argument("--duration", type=float, default=40.0)
+    parser = physics_parser(__doc__, duration=40.0)
     parser.add_argument("--guard", choices=("on", "off"), default="on")
     parser.add_argument(
         "--delay-ms",
@@ -196,7 +196,7 @@ def _cuts(errors: dict[str, np.ndarray], half: np.ndarray) -> dict[str, tuple[fl
     """Each run's cut against ``none`` (%): over the whole record and its second half."""
     none = errors["none"]
     return {
-        k: (100 * (1 - _rms(e) / _rms(none)), 100 * (1 - _rms(e[half]) / _rms(none[half])))
+        k: (100 * (1 - rms(e) / rms(none)), 100 * (1 - rms(e[half]) / rms(none[half])))
         for k, e in errors.items()
     }
 
@@ -231,9 +231,9 @@ def _restart_tables(args: argparse.Namespace, folder: Path) -> None:
                     motor=args.motor_encoder,
                 )  # fmt: skip
                 none = open_loop(params, first, first.values, delay) - first.desired
-                fresh = 100 * (1 - _rms(loads - first.desired) / _rms(none))
+                fresh = 100 * (1 - rms(loads - first.desired) / rms(none))
                 late = first.t >= first.t[-1] // 2
-                fresh_late = 100 * (1 - _rms((loads - first.desired)[late]) / _rms(none[late]))
+                fresh_late = 100 * (1 - rms((loads - first.desired)[late]) / rms(none[late]))
                 saved = load_checkpoint(run)
                 clocks = Clocks(seed + args.restart, args.duration)
                 half = clocks.t >= clocks.t[-1] // 2
@@ -262,7 +262,7 @@ def _restart_tables(args: argparse.Namespace, folder: Path) -> None:
                 print(
                     f"| {name} | {bw:g} | {seed} / {seed + args.restart} "
                     f"| {fresh:.1f} / {fresh_late:.1f}, {judged.state}, {judged.ratio:.2f} "
-                    f"| {stored} | {held} | {1e3 * _rms(errors['none']):.2f} "
+                    f"| {stored} | {held} | {1e3 * rms(errors['none']):.2f} "
                     f"| {cut['true'][0]:.1f} "
                     f"| {cut['with'][0]:.1f} / {cut['with'][1]:.1f} "
                     f"| {cut['without'][0]:.1f} / {cut['without'][1]:.1f} "
@@ -314,22 +314,22 @@ def _tables(args: argparse.Namespace, folder: Path) -> None:
                     motor=args.motor_encoder,
                 )
                 errors["node"] = loads - clocks.desired
-                whole = {k: 100 * (1 - _rms(e) / _rms(errors["none"])) for k, e in errors.items()}
+                whole = {k: 100 * (1 - rms(e) / rms(errors["none"])) for k, e in errors.items()}
                 late = {
-                    k: 100 * (1 - _rms(e[half]) / _rms(errors["none"][half]))
+                    k: 100 * (1 - rms(e[half]) / rms(errors["none"][half]))
                     for k, e in errors.items()
                 }
                 model = est.model
                 bl = getattr(model, "backlash", model)
                 play = (bl.c_left + bl.c_right) / geometric if bl is not None else float("nan")
                 print(
-                    f"| {name} | {bw:g} | {seed} | {1e3 * _rms(errors['none']):.2f} "
+                    f"| {name} | {bw:g} | {seed} | {1e3 * rms(errors['none']):.2f} "
                     f"| {whole['true']:.1f} | {whole['node']:.1f} "
                     f"| {late['true']:.1f} / {late['node']:.1f} | {play:.3f} "
                     f"| {verdict.trust:.2f}, {verdict.ratio:.2f} "
                     f"| {measured.state}, {measured.ratio:.2f} |{start_play}"
                     + (
-                        f" {1e3 * offline:.2f} / {1e3 * _rms(errors['none']):.2f} "
+                        f" {1e3 * offline:.2f} / {1e3 * rms(errors['none']):.2f} "
                         f"| {measured.baseline} |"
                         if seeded
                         else ""

@@ -28,22 +28,14 @@ import time
 from collections.abc import Sequence
 
 import numpy as np
-from _common import parse_physics_arguments, printed_section
+from _common import parse_physics_arguments, physics_parser, printed_section, rms
 
 from genbacklash_ros.physics.loop import Clocks, open_loop
 from genbacklash_ros.physics.variants import VARIANTS, variant
 
 
-def _rms(e: np.ndarray) -> float:
-    return float(np.sqrt(np.mean(e * e)))
-
-
 def _arguments(argv: Sequence[str] | None = None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
-    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
-    parser.add_argument("--bandwidths", type=float, nargs="+", default=[20.0, 60.0, 100.0])
-    parser.add_argument("--variants", nargs="+", default=list(VARIANTS))
-    parser.add_argument("--duration", type=float, default=40.0)
+    parser = physics_parser(__doc__, duration=40.0)
     parser.add_argument("--draws", type=int, default=4, help="null runs per record")
     parser.add_argument("--amplitude", type=float, default=1e-6, help="rad added (default 1e-6)")
     parser.add_argument("--window", type=float, default=4.0, help="seconds it is added over")
@@ -67,8 +59,8 @@ def null_cuts(
         inside = (clocks.cmd_t >= start * 1e9) & (clocks.cmd_t < (start + args.window) * 1e9)
         values = np.where(inside, clocks.values + args.amplitude, clocks.values)
         e = open_loop(params, clocks, values) - clocks.desired
-        whole.append(100 * (1 - _rms(e) / _rms(none)))
-        second.append(100 * (1 - _rms(e[half]) / _rms(none[half])))
+        whole.append(100 * (1 - rms(e) / rms(none)))
+        second.append(100 * (1 - rms(e[half]) / rms(none[half])))
     return whole, second
 
 

@@ -30,6 +30,7 @@ BENCHMARKS = (
     "csv_vs_bag",
     "physics_loop",
     "operation_loop",
+    "physics_null",
     "physics_diagnose",
     "coverage",
     "spike_screen",
