@@ -189,6 +189,17 @@ class TrackingJudgeSettings:
             raise GenBacklashError(f"probe_every must be > 0, got {self.probe_every!r}")
 
 
+def _finite_number(name: str, value: object, *, above_zero: bool = False) -> None:
+    """:class:`GenBacklashError` naming ``name`` unless ``value`` is a finite number (a bool
+    is not one), and with ``above_zero`` one above 0."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise GenBacklashError(f"{name} must be a number, got {value!r}")
+    if above_zero and not (math.isfinite(value) and value > 0.0):
+        raise GenBacklashError(f"{name} must be a finite number > 0, got {value!r}")
+    if not math.isfinite(value):
+        raise GenBacklashError(f"{name} must be a finite number, got {value!r}")
+
+
 @dataclass(frozen=True)
 class OfflineBaseline:
     """The tracking without compensation measured offline, on a record of the machine's work.
@@ -216,11 +227,7 @@ class OfflineBaseline:
 
     def __post_init__(self) -> None:
         for name in ("rms", "seconds"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int | float):
-                raise GenBacklashError(f"{name} must be a number, got {value!r}")
-            if not (math.isfinite(value) and value > 0.0):
-                raise GenBacklashError(f"{name} must be a finite number > 0, got {value!r}")
+            _finite_number(name, getattr(self, name), above_zero=True)
 
 
 @dataclass(frozen=True)
@@ -255,11 +262,7 @@ class HeldHarm:
 
     def __post_init__(self) -> None:
         for name in ("play", "ratio", "held"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int | float):
-                raise GenBacklashError(f"{name} must be a number, got {value!r}")
-            if not math.isfinite(value):
-                raise GenBacklashError(f"{name} must be a finite number, got {value!r}")
+            _finite_number(name, getattr(self, name))
         if self.ratio <= 0.0 or self.held < 0.0:
             raise GenBacklashError(
                 f"ratio must be > 0 and held >= 0, got {self.ratio!r} and {self.held!r}"

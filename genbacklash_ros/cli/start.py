@@ -19,9 +19,10 @@ The file also holds the record's tracking without compensation (the checkpoint's
 measured-tracking judge measures as its baseline) when the record had none in it: a bag
 without the node's outputs (:func:`~genbacklash_ros.bags.bagio.node_outputs`), replayed
 without ``compensation_in_loop``. A CSV cannot tell, and gets none. The node's judge then
-starts from it: compensation is tried from the first command instead of after 3 s of
-tracking without it, and the baseline is probed live after its first second
-(:mod:`genbacklash_core.measured`).
+starts from it: compensation is tried once the node's guard has judged the model on the
+machine's own samples (about 1-2 s) instead of after 3 s of tracking without it, and the live
+baseline replaces the stored one after half a second of it (:mod:`genbacklash_core.measured`,
+:mod:`genbacklash_ros.node.pipeline`).
 """
 
 from __future__ import annotations

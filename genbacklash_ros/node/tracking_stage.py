@@ -160,9 +160,5 @@ def record_baseline(
         et.tolist(),
         np.asarray(reading_y, dtype=np.float64).tolist(),
     )
-    verdict = stage.flush()
-    if not (verdict.off_time >= base.min_time and math.isfinite(verdict.off_rms)):
-        return None
-    if verdict.off_rms <= 0.0:
-        return None
-    return OfflineBaseline(verdict.off_rms, verdict.off_time)
+    stage.flush()
+    return stage.judge.live_baseline()
