@@ -50,6 +50,7 @@ __all__ = [
     "IdentificationResult",
     "IterationHistory",
     "backlash_misfit",
+    "backlash_rows",
     "described_breaks",
     "identify_backlash",
     "identify_cascade",
@@ -273,6 +274,63 @@ def _switching(
     return f1, f2
 
 
+def backlash_rows(
+    structure: Structure,
+    p: FloatArray,
+    u: FloatArray,
+    x: FloatArray,
+    breaks: BoolArray | None = None,
+    deadband: float | None = None,
+) -> tuple[FloatArray, FloatArray, BoolArray]:
+    """The rows of eqs. (24)/(29) for a measured backlash output ``x``: the row rule of the
+    batch iteration and of the online identifiers' windows, in one place.
+
+    Row ``t`` pairs ``x(t)`` with ``x(t-1)``. It carries information when
+
+    * a branch is engaged at ``x(t-1)``, the measured load (eqs. 27-28; a row with neither
+      engaged holds the state and tells nothing, eq. 29);
+    * sample ``t`` follows sample ``t-1`` on the encoder's clock (``breaks``,
+      :mod:`genbacklash_core.samples`): eq. (24) needs ``x(t-1)``;
+    * with ``deadband``, the input moved by more than ``deadband`` (the online identifiers,
+      whose memory files the rows of moves; ``input_deadband`` of the input span). Batch
+      identification passes None and keeps the engaged rows of a held input too: on the
+      physics drivetrains with the command as the input, the moved rows alone read the
+      play 0.45-0.81 of the geometric on coasting and gravity at 60 and 100 Hz where all
+      engaged rows read 0.74-0.98 (BENCHMARKS.md, "Rerun 2026-11-28, branch batch-1").
+
+    Parameters
+    ----------
+    structure : Structure
+    p : ndarray
+        The parameters the switching functions are evaluated at.
+    u, x : ndarray, shape (N,)
+        Input and measured output.
+    breaks : ndarray of bool, shape (N,), optional
+        The sample rule's breaks (None: every sample follows the one before).
+    deadband : float, optional
+        The least input move a row needs (None: none needed).
+
+    Returns
+    -------
+    phi, target : ndarray
+        The regressors (eq. 22) and targets (eq. 29) of the informative rows.
+    informative : ndarray of bool, shape (N - 1,)
+        Which rows those are (row ``t - 1`` of it pairs samples ``t - 1`` and ``t``).
+    """
+    u_t, x_prev, x_t = u[1:], x[:-1], x[1:]
+    f1, f2 = _switching(structure, p, u_t, x_prev)
+    informative = (f1 + f2) > 0.0  # rows with neither branch engaged carry no information
+    if breaks is not None:
+        informative &= ~breaks[1:]  # eq. (24) needs x(t-1): never across a lost reading
+    if deadband is not None:
+        informative &= np.abs(np.diff(u)) > deadband
+    rows = np.flatnonzero(informative)  # gathered once: the same values as masking each array
+    f1, f2 = f1[rows], f2[rows]
+    phi = _backlash_columns(structure, p, u_t[rows], f1, f2)
+    target = x_t[rows] - x_prev[rows] * (1.0 - f1) * (1.0 - f2)  # eq. (29)
+    return phi, target, informative
+
+
 def _backlash_regression(
     structure: Structure,
     p: FloatArray,
@@ -280,20 +338,9 @@ def _backlash_regression(
     x: FloatArray,
     breaks: BoolArray | None = None,
 ) -> tuple[FloatArray, FloatArray]:
-    """Regressors and target of eqs. (24)/(29) for a measured backlash output ``x``.
-
-    Row ``t`` pairs ``x(t)`` with ``x(t-1)``: it is formed only when sample ``t`` follows
-    sample ``t-1`` on the encoder's clock (``breaks``, :mod:`genbacklash_core.samples`).
-    """
-    u_t, x_prev, x_t = u[1:], x[:-1], x[1:]
-    f1, f2 = _switching(structure, p, u_t, x_prev)
-    engaged = (f1 + f2) > 0.0  # rows with neither branch engaged carry no information
-    if breaks is not None:
-        engaged &= ~breaks[1:]  # eq. (24) needs x(t-1): never across a lost reading
-    rows = np.flatnonzero(engaged)  # gathered once: the same values as masking each array
-    f1, f2 = f1[rows], f2[rows]
-    phi = _backlash_columns(structure, p, u_t[rows], f1, f2)
-    target = x_t[rows] - x_prev[rows] * (1.0 - f1) * (1.0 - f2)  # eq. (29)
+    """Regressors and target of the batch iteration's rows (:func:`backlash_rows`, every
+    engaged row whether the input moved or not)."""
+    phi, target, _ = backlash_rows(structure, p, u, x, breaks)
     return phi, target
 
 

@@ -40,7 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from genbacklash_core._typing import BoolArray, FloatArray, IntArray
-from genbacklash_core.identify import _backlash_columns, _switching
+from genbacklash_core.identify import _backlash_columns, _switching, backlash_rows
 from genbacklash_core.play import play_operator
 from genbacklash_core.samples import breaks_to_rows
 from genbacklash_core.simulate import play_bounds
@@ -149,16 +149,10 @@ def _window_backlash_rows(
     deadband: float,
     breaks: BoolArray | None = None,
 ) -> WindowRows:
-    """Rows of eq. (24) for the measured backlash output ``y`` (the informative ones); never
-    across a break of the sample rule (:mod:`genbacklash_core.samples`)."""
-    u_t = u[1:]
-    f1, f2 = _switching(structure, p, u_t, y[:-1])  # eqs. (27)-(28), x(t-1) measured
-    moving = np.abs(np.diff(u)) > deadband
-    informative = ((f1 + f2) > 0.0) & moving  # other rows carry no information (eq. 29)
-    if breaks is not None:
-        informative &= ~breaks[1:]  # x(t-1) must be the reading just before x(t)
-    phi = _backlash_columns(structure, p, u_t[informative], f1[informative], f2[informative])
-    return WindowRows(phi, y[1:][informative], informative)  # target x(t): the hold term vanishes
+    """Rows of eq. (24) for the measured backlash output ``y`` (the informative ones): the
+    batch iteration's rule (:func:`~genbacklash_core.identify.backlash_rows`) with the
+    input's ``deadband``."""
+    return WindowRows(*backlash_rows(structure, p, u, y, breaks, deadband))
 
 
 def _merge_index(lo: FloatArray, hi: FloatArray, x_low: FloatArray) -> int:
