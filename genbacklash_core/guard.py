@@ -22,6 +22,16 @@ from 1, the estimate's confidence gate alone, towards that value as the evidence
 node multiplies the estimate's confidence by it, so compensation fades out where it would
 not help and the reason is said.
 
+Once the guard has judged compensation off, it comes back only after ``min_samples`` *new*
+samples in a row judged at or below ``rho_full``, or at once for a model that leaves at most
+:data:`CLEAR_FIT` of ``rho_full`` (hysteresis): a new model is judged at once on the samples
+remembered, the samples it was fitted on, and a model that reads near the fade band there
+after an "off" is not evidence enough to compensate on; one far below it (a first estimate
+replaced by a good one) is. On a
+compliant coupling after 15 s off a restarted node's models read 0.75-0.91, the guard faded
+compensation in, and the trial it allowed tracked 12-21 % worse than no compensation
+(BENCHMARKS.md, issue 23, "the guard's hysteresis").
+
 Examples
 --------
 >>> import numpy as np
@@ -54,6 +64,7 @@ from .play import play_operator
 from .simulate import play_bounds
 
 __all__ = [
+    "CLEAR_FIT",
     "HISTORY",
     "JUDGE_EVERY",
     "CompensationGuard",
@@ -64,6 +75,11 @@ __all__ = [
 
 JUDGE_EVERY = 1024
 """Samples the guard lets gather before it judges them (a new model is judged at once)."""
+
+CLEAR_FIT = 0.5
+"""After a verdict of "off", a model whose error ratio is at most this share of ``rho_full``
+brings compensation back at once; one between it and ``rho_full`` only after ``min_samples``
+new samples in a row (module notes, hysteresis)."""
 
 HISTORY = 3
 """Windows of samples the guard remembers to judge a new model on (the exponential weight
@@ -81,7 +97,8 @@ class GuardSettings:
         mean squares are taken.
     min_samples : int
         Samples judged with a model before the guard's judgement counts in full; before,
-        trust moves linearly from 1 towards it with the evidence.
+        trust moves linearly from 1 towards it with the evidence. Also the new samples in
+        a row at or below ``rho_full`` that bring compensation back after an "off".
     rho_full, rho_off : float
         The error ratio ``rho`` at or below which compensation is applied in full, and at or
         above which it is off; linear in between (``0 < rho_full < rho_off``).
@@ -180,6 +197,9 @@ class CompensationGuard:
         self._sum_none = 0.0
         self._weight = 0.0  # exponentially weighted sample count
         self._samples = 0
+        self._was_off = False  # judged off, and not back on since (hysteresis)
+        self._recovered = 0  # new samples judged at or below rho_full since then, in a row
+        self._unjudged = 0  # samples remembered since the last judgement
         self.verdict: GuardVerdict = self._judge()
 
     def configure(self, settings: GuardSettings) -> GuardVerdict:
@@ -227,6 +247,7 @@ class CompensationGuard:
             y = np.concatenate([p[1] for p in pending])
             brk = np.concatenate([p[2] for p in pending])
             self._judge_batch(u, y, brk, model)
+            self._recover()
             self.verdict = self._judge()
         pending.clear()
         self._waiting = 0
@@ -250,13 +271,35 @@ class CompensationGuard:
             brk = np.concatenate([h[2] for h in self._history])
             brk[0] = True
             self._judge_batch(u, y, brk, model)
+        self._recover()
         self.verdict = self._judge()
         return self.verdict
+
+    def _recover(self) -> None:
+        """After a verdict of "off": count the samples that arrived since the last judgement
+        (not the remembered ones a new model is judged on again) towards coming back on, if
+        the ratio is at or below ``rho_full`` now; start the count again if not (module
+        notes, hysteresis)."""
+        new, self._unjudged = self._unjudged, 0
+        if not self._was_off:
+            return
+        if self._weight > 0.0 and self._errors()[2] <= self.settings.rho_full:
+            self._recovered += new
+        else:
+            self._recovered = 0
+
+    def _errors(self) -> tuple[float, float, float]:
+        """``(rms(e_m), rms(e_0), rho)`` over the window (``self._weight`` above 0)."""
+        model_rms = math.sqrt(self._sum_model / self._weight)
+        none_rms = math.sqrt(self._sum_none / self._weight)
+        ratio = model_rms / none_rms if none_rms > 0 else (0.0 if model_rms == 0 else math.inf)
+        return model_rms, none_rms, ratio
 
     def _remember(self, u: FloatArray, y: FloatArray, brk: np.ndarray) -> None:
         history = self._history
         history.append((u, y, brk))
         self._held += u.size
+        self._unjudged += u.size
         cap = HISTORY * self.settings.window
         while self._held - history[0][0].size >= cap:
             self._held -= history.pop(0)[0].size
@@ -330,9 +373,7 @@ class CompensationGuard:
         if self._weight <= 0.0:
             nan = math.nan
             return GuardVerdict(1.0, "judging", nan, nan, nan, 0, _JUDGING)
-        model_rms = math.sqrt(self._sum_model / self._weight)
-        none_rms = math.sqrt(self._sum_none / self._weight)
-        ratio = model_rms / none_rms if none_rms > 0 else (0.0 if model_rms == 0 else math.inf)
+        model_rms, none_rms, ratio = self._errors()
         fit = min(max((s.rho_off - ratio) / (s.rho_off - s.rho_full), 0.0), 1.0)
         evidence = 1.0 if s.min_samples == 0 else min(self._samples / s.min_samples, 1.0)
         # without evidence the confidence gate alone decides; with it, the fit
@@ -342,7 +383,25 @@ class CompensationGuard:
             f"(model error {model_rms:.4g} rad rms against {none_rms:.4g} rad without "
             f"compensation, over the last {min(self._samples, s.window)} samples)"
         )
-        if judged == 0.0:
+        held = (
+            self._was_off
+            and evidence >= 1.0
+            and ratio > CLEAR_FIT * s.rho_full
+            and self._recovered < max(s.min_samples, 1)
+        )
+        if held and judged > 0.0:
+            # hysteresis: once off, back on only after min_samples new samples at or below
+            # rho_full in a row
+            judged = 0.0
+            state = "off"
+            why = (
+                f"compensation off: judged off before and back on only after "
+                f"{max(s.min_samples, 1)} new samples in a row in which the model leaves at "
+                f"most {100 * s.rho_full:.0f} % of the tracking error ({self._recovered} so "
+                f"far; now {100 * ratio:.0f} %), or at once below "
+                f"{100 * CLEAR_FIT * s.rho_full:.0f} %"
+            )
+        elif judged == 0.0:
             state = "off"
             why = (
                 f"compensation off: {kept}, at or above {100 * s.rho_off:.0f} %; the model "
@@ -353,6 +412,10 @@ class CompensationGuard:
             why = f"compensation faded to {100 * judged:.0f} %: {kept}"
         else:
             state, why = "on", f"compensation on: {kept}"
+        if evidence >= 1.0:
+            self._was_off = judged == 0.0
+            if not self._was_off:
+                self._recovered = 0
         trust = judged
         if not s.enabled:
             trust, why = 1.0, f"guard disabled, compensation kept in full; judged: {why}"

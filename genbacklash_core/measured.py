@@ -508,6 +508,36 @@ class TrackingJudge:
                 self.verdict = self._judge()
         return self.verdict
 
+    def resume(self) -> TrackingVerdict:
+        """Compensation comes back after something else held it off for a while (the
+        model's guard judged the model off): what was measured compensating before no longer
+        says what compensating does now, so it is measured afresh, starting with a trial at
+        part weight (the baseline is kept); returns the verdict.
+
+        A seeded start whose trial had passed went back to full weight at once when the
+        guard let compensation back 10 s later, on another part of the travel, and tracked
+        33 % worse there for 2 s before the judge switched it off (BENCHMARKS.md, issue 23,
+        "the guard's hysteresis").
+
+        Examples
+        --------
+        >>> judge = TrackingJudge(TrackingJudgeSettings(min_time=1.0))
+        >>> t = [k * 1_000_000 for k in range(6000)]
+        >>> _ = judge.readings(t[:2000], [0.05] * 2000, [0.0] * 2000, [0.0] * 2000)
+        >>> for part in (slice(2000, 4000), slice(4000, 6000)):  # a trial, then full weight
+        ...     verdict = judge.readings(t[part], [0.01] * 2000, [0.0] * 2000, [1.0] * 2000)
+        >>> verdict.state
+        'on'
+        >>> verdict = judge.resume()
+        >>> verdict.state, round(verdict.trust, 2)  # a trial again, from its first weight
+        ('judging', 0.05)
+        """
+        if self.settings.in_loop:
+            self._measure_afresh(trial=True)
+            self._offline_trial = False
+        self.verdict = self._judge()
+        return self.verdict
+
     def readings(
         self,
         stamps: ArrayLike,

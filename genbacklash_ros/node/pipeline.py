@@ -524,6 +524,7 @@ class BacklashPipeline:
         # is perturbed for the rest of a record by a trial of a second at a tenth of its
         # weight (BENCHMARKS.md, issue 23, base-1), and the guard tells them apart first
         self._await_guard = start.prior is not None and start.baseline is not None
+        self._guard_off = False  # the guard's last verdict was "off"
         judge = self._tracking.judge
         if self._await_guard:
             assert start.baseline is not None
@@ -1449,6 +1450,11 @@ class BacklashPipeline:
         judge's of the tracking measured)."""
         guard = self._guard.verdict
         self._comp.trust = guard.trust
+        off = guard.state == "off"
+        if self._guard_off and not off:
+            # back after the guard held it off: measured afresh, with a trial (the judge)
+            self._tracking.judge.resume()
+        self._guard_off = off
         if self._await_guard and (
             guard.samples >= self._guard.settings.min_samples or not self._guard.settings.enabled
         ):

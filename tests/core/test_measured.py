@@ -397,3 +397,25 @@ def test_the_offline_baseline_is_kept_after_the_live_one_replaced_it() -> None:
     assert judge.offline == base and judge.live_baseline() is None  # ... but under min_time
     judge.reset()
     assert judge.offline is None
+
+
+def test_resume_tries_compensation_again_but_keeps_a_verdict_of_harm() -> None:
+    t = [k * 1_000_000 for k in range(8000)]
+    judge = TrackingJudge(TrackingJudgeSettings(min_time=1.0))
+    judge.new_model(0.04)
+    judge.readings(t[:2000], [0.05] * 2000, [0.0] * 2000, [0.0] * 2000)
+    for part in (slice(2000, 4000), slice(4000, 6000)):
+        verdict = judge.readings(t[part], [0.01] * 2000, [0.0] * 2000, [1.0] * 2000)
+    assert verdict.state == "on"
+    resumed = judge.resume()
+    assert resumed.state == "judging" and resumed.trust < 0.1
+    assert resumed.off_time == verdict.off_time  # the baseline kept
+    # harm held stays held
+    harmed = TrackingJudge(TrackingJudgeSettings(min_time=1.0, retry=100.0))
+    harmed.new_model(0.04)
+    harmed.readings(t[:2000], [0.05] * 2000, [0.0] * 2000, [0.0] * 2000)
+    assert harmed.readings(t[2000:4000], [0.09] * 2000, [0.0] * 2000, [1.0] * 2000).state == "off"
+    assert harmed.resume().state == "off"
+    # a judge that only watches is not moved
+    watching = TrackingJudge(TrackingJudgeSettings(in_loop=False))
+    assert watching.resume().state == "watching"

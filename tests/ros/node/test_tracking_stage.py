@@ -208,3 +208,23 @@ def test_a_restart_holds_the_model_its_checkpoint_says_tracked_worse(tmp_path: P
     assert kept is not None and kept.play == play and kept.held > 9.0  # carried on
     # without the verdict the same restart tries the model after its 3 s baseline
     assert _loop(BacklashPipeline(_params(bare)), 1, 10.0) > 0
+
+
+def test_compensation_back_after_the_guard_held_it_off_is_tried_again(tmp_path: Path) -> None:
+    """The judge measures compensation afresh, with a trial, when the model's guard lets it
+    back after an "off" (a seeded start on gravity 60 Hz went back to full weight at once
+    10 s after its trial and tracked 33 % worse for 2 s: BENCHMARKS.md, issue 23)."""
+    pipe = BacklashPipeline(_params(tmp_path / "c.json"))
+    _loop(pipe, 0, 14.0)
+    assert pipe.measured.state == "on" and pipe.measured.trust == 1.0
+    verdict = pipe.guard
+    pipe._set_trust()  # the guard still on: nothing changes
+    assert pipe.measured.state == "on"
+    pipe._guard.verdict = dataclasses.replace(verdict, trust=0.0, state="off")
+    pipe._set_trust()
+    assert pipe.measured.state == "on"  # the judge's own verdict, the guard's trust apart
+    pipe._guard.verdict = verdict
+    pipe._set_trust()
+    measured = pipe.measured
+    assert measured.state == "judging" and "trial" in measured.reason
+    assert measured.trust < 0.1 and measured.off_time > 3.0  # the baseline is kept

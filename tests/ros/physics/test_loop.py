@@ -33,14 +33,17 @@ def test_the_measured_tracking_keeps_compensation_on_where_it_helps() -> None:
 
 
 def test_compensation_on_a_flank_held_by_gravity_never_tracks_worse() -> None:
-    # gravity holds one flank over part of the travel: the model's guard lets compensation
-    # run for a second before it switches it off (before the measured tracking's trial at
-    # half weight this record tracked 2.6 % worse than doing nothing)
+    # gravity holds one flank over part of the travel: the model's guard let compensation
+    # run for a second before it switched it off (before the measured tracking's trial at
+    # half weight this record tracked 2.6 % worse than doing nothing). Since the guard's
+    # hysteresis: it judges the model off at 7.1 s; the next one reads 0.71 on the samples
+    # remembered (it was tried at once before), its successors 0.86-1.13, never 1000 new
+    # samples in a row at or below 0.75: nothing is tried and the guard ends off
     params = variant("gravity", bandwidth=60.0)
     clocks = Clocks(1, 40.0)
-    loads, _est, _guard, measured = node_loop(params, clocks, guard=True)
+    loads, _est, guard, _measured = node_loop(params, clocks, guard=True)
     none = open_loop(params, clocks, clocks.values)
-    assert measured.on_time > 0.5  # it was tried
+    assert guard.state == "off", guard.reason
     assert _rms(loads - clocks.desired) <= 1.02 * _rms(none - clocks.desired)
 
 
