@@ -27,10 +27,9 @@ samples in a row judged at or below ``rho_full``, or at once for a model that le
 :data:`CLEAR_FIT` of ``rho_full`` (hysteresis): a new model is judged at once on the samples
 remembered, the samples it was fitted on, and a model that reads near the fade band there
 after an "off" is not evidence enough to compensate on; one far below it (a first estimate
-replaced by a good one) is. On a
-compliant coupling after 15 s off a restarted node's models read 0.75-0.91, the guard faded
-compensation in, and the trial it allowed tracked 12-21 % worse than no compensation
-(BENCHMARKS.md, issue 23, "the guard's hysteresis").
+replaced by a good one) is. On a compliant coupling after 15 s off a restarted node's models
+read 0.75-0.91, the guard faded compensation in, and the trial it allowed tracked 12-21 %
+worse than no compensation (BENCHMARKS.md, issue 23, "the guard's hysteresis").
 
 Examples
 --------
