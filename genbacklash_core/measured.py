@@ -37,7 +37,9 @@ A start whose baseline was measured offline (:meth:`TrackingJudge.start_from`, a
 identified on) needs no ``min_time`` of baseline first: its trial may begin at once, the
 weight growing as above. Such a baseline may be stale or of other work than the machine's
 now, so it is replaced by the live one as soon as :data:`OFFLINE_PROBE` of ``min_time`` of
-that is measured: after :data:`OFFLINE_CHECK` of ``min_time`` of compensating the judge
+that is measured, unless the live one, still shorter than ``min_time``, agrees with it within
+:data:`OFFLINE_AGREE` (it then confirms it: a short probe reads the motion of its own
+seconds): after :data:`OFFLINE_CHECK` of ``min_time`` of compensating the judge
 probes for it (compensation off), unless readings without compensation gave it before. No
 verdict rests on the offline baseline but the trial's first weights; until the live one is
 there the verdict's ``baseline`` says ``"offline"``. That trial, judged against the live
@@ -86,6 +88,7 @@ from .samples import stamp_steps
 
 __all__ = [
     "HARM_SHARE",
+    "OFFLINE_AGREE",
     "OFFLINE_CHECK",
     "OFFLINE_PROBE",
     "RAMP_START",
@@ -120,6 +123,14 @@ after which the baseline is probed live (module notes)."""
 OFFLINE_PROBE = HARM_SHARE / 2.0
 """On a start from an :class:`OfflineBaseline`: the share of ``min_time`` the live probe
 lasts; a live baseline that long replaces the offline one (module notes)."""
+
+OFFLINE_AGREE = 1.35
+"""A live baseline shorter than ``min_time`` within this factor of the offline one confirms
+it, and the offline one (measured over a whole record) stays in use: the error of a second
+of work varies with its motion by more than a third (an operation-shaped seeded start's
+half-second probe read 0.040 rad against 0.048 offline, and its trial was judged harmful
+against it at a raw 1.44 where compensating kept 1 % of the error; BENCHMARKS.md, issue
+23). Further apart, the live one replaces it: the offline one is stale or of other work."""
 
 _MAX_STEP_S = 0.1  # a gap in one kind's readings counts at most this much of its time
 
@@ -574,12 +585,25 @@ class TrackingJudge:
         if trial:
             self._trial_done = False
 
+    def _unprobed(self) -> bool:
+        """A start from an offline baseline whose live one (:data:`OFFLINE_PROBE` of
+        ``min_time``) is not measured yet."""
+        return self._offline is not None and self._off.time < OFFLINE_PROBE * self.settings.min_time
+
     def _offline_in_use(self) -> OfflineBaseline | None:
         """The offline baseline while no live one of :data:`OFFLINE_PROBE` of ``min_time``
-        is measured, else None."""
+        is measured, and after, while the live one is shorter than ``min_time`` and agrees
+        with it within :data:`OFFLINE_AGREE`; else None."""
         offline = self._offline
-        if offline is not None and self._off.time < OFFLINE_PROBE * self.settings.min_time:
+        if offline is None:
+            return None
+        if self._unprobed():
             return offline
+        live = self._off
+        if live.time < self.settings.min_time:
+            share = live.rms() / offline.rms
+            if 1.0 / OFFLINE_AGREE <= share <= OFFLINE_AGREE:
+                return offline  # a second of the live one confirms it, not replaces it
         return None
 
     def _ratio(self) -> tuple[float, float, float]:
@@ -596,6 +620,8 @@ class TrackingJudge:
         offline = self._offline_in_use()
         if offline is not None:
             without = f"{off_rms:.3g} rad without, offline over {offline.seconds:.0f} s"
+            if not self._unprobed():
+                without += f" (a live {off.rms():.3g} over {off.time:.1f} s agrees)"
             off_time, baseline = offline.seconds, "offline"
         else:
             without = f"{off_rms:.3g} rad without over {off.time:.0f} s"
@@ -654,7 +680,7 @@ class TrackingJudge:
                 f"({100 * judged:.0f} % of the error); tried again with a new model or "
                 f"after {s.retry:g} s",
             )
-        if self._offline_in_use() is not None and on.time >= OFFLINE_CHECK * s.min_time:
+        if self._unprobed() and on.time >= OFFLINE_CHECK * s.min_time:
             # the offline baseline checked live before any verdict rests on it
             return self._probe(OFFLINE_PROBE * s.min_time)
         if self._offline is None and off.time < s.min_time:
@@ -674,7 +700,7 @@ class TrackingJudge:
         early = (
             self._offline_trial
             and not self._trial_done
-            and self._offline_in_use() is None
+            and not self._unprobed()
             and on.time >= harm_judged
             and ratio <= s.ratio_full
         )
