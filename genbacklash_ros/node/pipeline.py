@@ -146,7 +146,6 @@ from __future__ import annotations
 import bisect
 import math
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
 from typing import Literal, TypeAlias
@@ -191,7 +190,6 @@ from genbacklash_ros.node.identify import (
 from genbacklash_ros.node.ledger import ENCODER_REJECTS, QUIET_DROPS, SHOWN_WHEN_ANY, Ledger
 from genbacklash_ros.node.messages import (
     CommandMessage,
-    DiagnosticArray,
     DiagnosticStatus,
     Float64,
     Float64MultiArray,
@@ -203,6 +201,13 @@ from genbacklash_ros.node.messages import (
     level_of,
     read_command,
     read_encoder,
+)
+from genbacklash_ros.node.outputs import (
+    BatchCollector,
+    BatchOutputs,
+    Output,
+    PipelineStats,
+    TopicKey,
 )
 from genbacklash_ros.node.parameters import NodeParameters
 from genbacklash_ros.node.publish import DIAGNOSTICS_PERIOD_NS, Schedule
@@ -224,7 +229,6 @@ __all__ = [
     "WorkerFactory",
 ]
 
-TopicKey: TypeAlias = Literal["compensated_command", "estimate", "diagnostics"]
 CheckpointWriter: TypeAlias = Callable[[Path, Checkpoint], object]
 WorkerFactory: TypeAlias = Callable[[OnlineIdentifier], IdentifierWorker]
 """Makes the identify stage's worker for an identifier (``SyncWorker``, ``ThreadWorker``)."""
@@ -241,109 +245,6 @@ _COMMAND_CLASSES: dict[str, type] = {
     "float64_multi_array": Float64MultiArray,
     "joint_state": JointState,
 }
-
-
-@dataclass(frozen=True, slots=True)
-class Output:
-    """One message to publish.
-
-    Attributes
-    ----------
-    topic : {"compensated_command", "estimate", "diagnostics"}
-        Which publisher (GUIDE §4: ``compensated_command``, ``~/estimate``, ``/diagnostics``).
-    message : Float64, Float64MultiArray, JointState or DiagnosticArray
-    stamp_ns : int
-        Data time of the message (a compensated command: its command's time), e.g. the log
-        time when writing a bag.
-    estimate : Estimate or None
-        The estimate behind an ``estimate`` or ``diagnostics`` output (with its covariance,
-        for reports); None for commands.
-    joint : str
-        With several joints in one node (:mod:`~genbacklash_ros.node.multijoint`): the joint
-        an ``estimate`` or ``diagnostics`` output is about (an estimate goes to
-        ``~/<joint>/estimate``); "" for a single joint's outputs and for the compensated
-        command.
-    """
-
-    topic: TopicKey
-    message: CommandMessage | Float64MultiArray | DiagnosticArray
-    stamp_ns: int
-    estimate: Estimate | None = None
-    joint: str = ""
-
-
-@dataclass(frozen=True)
-class PipelineStats:
-    """Counters since construction (a snapshot).
-
-    ``dropped`` maps each reason key (``command_invalid``, ``command_duplicate``,
-    ``command_out_of_order``, the same for ``encoder_``, ``identifier_error``,
-    ``before_first_command``, ``encoder_spike``, ``encoder_stuck``, ``encoder_after_gap``,
-    ``identifier_behind``) to a count; ``last_problem`` is the latest reason text.
-    """
-
-    commands: int
-    encoder_messages: int
-    samples: int
-    compensated: int
-    checkpoints: int
-    checkpoint_errors: int
-    dropped: MappingProxyType[str, int]
-    last_problem: str
-
-
-@dataclass(frozen=True, slots=True)
-class BatchOutputs:
-    """What :meth:`BacklashPipeline.on_batch` made of a batch of messages.
-
-    Attributes
-    ----------
-    accepted : numpy.ndarray of bool
-        Per message: a command the pipeline accepted (it has a compensated command).
-    stamps : numpy.ndarray of int64
-        Per message: an accepted command's time (0 for the others).
-    sent : numpy.ndarray of float
-        Per message: an accepted command's compensated value (NaN for the others).
-    outputs : list of (int, Output)
-        The periodic outputs (estimates, diagnostics), each with the index of the message
-        that made it due, in order; compensated commands are in ``sent`` instead.
-    """
-
-    accepted: np.ndarray
-    stamps: np.ndarray
-    sent: np.ndarray
-    outputs: list[tuple[int, Output]]
-
-
-class _BatchResult:
-    """What :meth:`BacklashPipeline.on_batch` fills in as it goes."""
-
-    __slots__ = ("_sent", "_stamps", "_where", "accepted", "outputs", "sent", "stamps")
-
-    def __init__(self, n: int) -> None:
-        self.accepted = np.zeros(n, dtype=bool)
-        self.stamps = np.zeros(n, dtype=np.int64)
-        self.sent = np.full(n, math.nan)
-        self.outputs: list[tuple[int, Output]] = []
-        # the stretches' accepted commands, put in the arrays once at the end
-        self._where: list[int] = []
-        self._stamps: list[int] = []
-        self._sent: list[float] = []
-
-    def commands(self, where: list[int], stamps: list[int], sent: list[float]) -> None:
-        """Accepted commands at the messages ``where``: their times and compensated values."""
-        self._where += where
-        self._stamps += stamps
-        self._sent += sent
-
-    def done(self) -> BatchOutputs:
-        """The batch's outputs."""
-        if self._where:
-            where = np.array(self._where, dtype=np.intp)
-            self.accepted[where] = True
-            self.stamps[where] = self._stamps
-            self.sent[where] = self._sent
-        return BatchOutputs(self.accepted, self.stamps, self.sent, self.outputs)
 
 
 def _seen(
@@ -816,7 +717,7 @@ class BacklashPipeline:
             self._params.stamp_source == "header",
         )
         n = view.n
-        out = _BatchResult(n)
+        out = BatchCollector(n)
         i = 0
         while i < n:
             end, ended = self._quiet(view, i, out)
@@ -841,7 +742,7 @@ class BacklashPipeline:
             i += 1
         return out.done()
 
-    def _quiet(self, view: BlockView, i: int, out: _BatchResult) -> tuple[int, bool]:
+    def _quiet(self, view: BlockView, i: int, out: BatchCollector) -> tuple[int, bool]:
         """Take the messages from ``i`` on that make nothing happen but bookkeeping in one
         step (see :meth:`on_batch`): where they end, and whether the stretch ended by itself
         (else the message there takes the per-message path)."""
@@ -1050,7 +951,7 @@ class BacklashPipeline:
         return stop
 
     def _take_stretch(
-        self, view: BlockView, i: int, end: int, out: _BatchResult, marks: list[int]
+        self, view: BlockView, i: int, end: int, out: BatchCollector, marks: list[int]
     ) -> None:
         """Accept the messages ``i .. end - 1`` (all quiet) in one step; at the commands of
         ``marks`` the periodic steps due, and at the last message what the per-message path
