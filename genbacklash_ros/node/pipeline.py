@@ -143,7 +143,6 @@ Float64(data=0.5)
 
 from __future__ import annotations
 
-import bisect
 import math
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -176,9 +175,9 @@ from genbacklash_ros.node.health import SILENCE_UNKNOWN_NS as SILENCE_UNKNOWN_NS
 from genbacklash_ros.node.health import SPIKE_MAX_SHARE as SPIKE_MAX_SHARE
 from genbacklash_ros.node.health import SPIKE_SIGMAS as SPIKE_SIGMAS
 from genbacklash_ros.node.health import STILL_HOLD_NS as STILL_HOLD_NS
-from genbacklash_ros.node.health import STUCK_INPUT_NS, Drop, HealthEvent, StreamHealth
 from genbacklash_ros.node.health import STUCK_NS as STUCK_NS
 from genbacklash_ros.node.health import STUCK_SIGMAS as STUCK_SIGMAS
+from genbacklash_ros.node.health import Drop, HealthEvent, StreamHealth
 from genbacklash_ros.node.identify import (
     EstimateInUse,
     Identified,
@@ -213,6 +212,7 @@ from genbacklash_ros.node.parameters import NodeParameters
 from genbacklash_ros.node.publish import DIAGNOSTICS_PERIOD_NS, Schedule
 from genbacklash_ros.node.screen import Screen
 from genbacklash_ros.node.silence import SilentStreams
+from genbacklash_ros.node.stretch import QuietStretches
 from genbacklash_ros.node.tracking_stage import TrackingStage
 
 __all__ = [
@@ -245,37 +245,6 @@ _COMMAND_CLASSES: dict[str, type] = {
     "float64_multi_array": Float64MultiArray,
     "joint_state": JointState,
 }
-
-
-def _seen(
-    view: BlockView, i: int, end: int, c0: int, c1: int, e0: int, e1: int, commands: bool
-) -> tuple[int, int, int] | None:
-    """What :meth:`SilentStreams.arrived_many` needs of one stream over ``i .. end - 1``."""
-    own_pos, own_count = (view.cmd_pos, c1 - c0) if commands else (view.enc_pos, e1 - e0)
-    other_pos, other_rx, o0, o1 = (
-        (view.enc_pos, view.enc_rx, e0, e1) if commands else (view.cmd_pos, view.cmd_rx, c0, c1)
-    )
-    own_rx = view.cmd_rx if commands else view.enc_rx
-    if own_count:
-        last_own = (c1 if commands else e1) - 1
-        after = bisect.bisect_right(other_pos, own_pos[last_own], o0, o1)
-        first = other_rx[after] if after < o1 else -1
-        return own_rx[last_own], o1 - after, first
-    if o1 > o0:
-        return -1, o1 - o0, other_rx[o0]
-    return None
-
-
-def _first_at(times: np.ndarray, due: int, start: int, end: int) -> int:
-    """The first message of ``start .. end - 1`` whose time is ``due`` or later (``end``:
-    none); the times need not be in order. Two array methods, not ``np.flatnonzero``'s
-    wrappers: it runs at every stretch."""
-    late = times[start:end] >= due
-    return start + int(late.argmax()) if late.any() else end
-
-
-_STRETCH_MAX = 8192  # messages looked at for one stretch at most
-_NOT_JUDGED = object()
 
 
 def _order_text(stream: str, stamp: int, last: int) -> str:
@@ -353,7 +322,6 @@ class BacklashPipeline:
         )
         self._wait = command_wait_ns
         self._batch = batch
-        self._closing = -1  # batch path: the message whose reading closes the rate window
         self._make_worker = worker
         self._ledger = Ledger()
         self._health = StreamHealth()
@@ -365,6 +333,8 @@ class BacklashPipeline:
             checkpoint_ns=self._checkpoint_period(),
             feed_ns=batch_ns,
         )
+        # the batch form's quiet stretches (bound to the stages at each start)
+        self._stretches = QuietStretches(self._clock, self._health, self._silence, self._ledger)
         self._worker: IdentifierWorker | None = None
         # the time of a command answered by answer_value whose periodic step has not run
         # yet (periodic() runs it), and periodic outputs made but not taken yet
@@ -419,6 +389,9 @@ class BacklashPipeline:
         self._comp = CompensateStage(params.compensator_options(), compensate=params.compensate)
         self._guard = CompensationGuard(params.guard_settings())
         self._tracking = TrackingStage(params.judge_settings())
+        self._stretches.bind(
+            self._align, self._comp, self._use, self._tracking, in_loop=self._in_loop
+        )
         # a checkpoint that holds its record's tracking without compensation: the judge
         # starts from it, and the model waits for the guard's first verdict on live samples
         # (min_samples of them): a load that coasts into the play or a coupling that rings
@@ -744,267 +717,27 @@ class BacklashPipeline:
 
     def _quiet(self, view: BlockView, i: int, out: BatchCollector) -> tuple[int, bool]:
         """Take the messages from ``i`` on that make nothing happen but bookkeeping in one
-        step (see :meth:`on_batch`): where they end, and whether the stretch ended by itself
-        (else the message there takes the per-message path)."""
+        step (see :meth:`on_batch` and :mod:`~genbacklash_ros.node.stretch`): where they
+        end, and whether the stretch ended by itself (else the message there takes the
+        per-message path)."""
         self._take_results()
-        clock = self._clock
-        due = clock.next_due
-        now = clock.now
-        if due is None or now is None or now >= due or self._align.motor:
-            return i, False  # (a motor encoder's input: every message by itself)
-        self._closing = -1
-        end = min(view.n, i + _STRETCH_MAX)
-        feeds = view.enc_before[i] + self._to_feed() - 1
-        if feeds < len(view.enc_pos):  # the reading that feeds ends it at the latest
-            end = min(end, view.enc_pos[feeds] + 1)
-        natural = end  # where the stretch ends by itself (its last message's steps made)
-        k = bisect.bisect_left(view.nonfinite, i)
-        if k < len(view.nonfinite):
-            end = min(end, view.nonfinite[k])
-        marks: list[int] = []  # commands at which an estimate (or nothing) comes due
-        if end > i:
-            late = _first_at(view.times, due, i, end)  # a periodic step is due
-            if late < end:
-                end = natural = self._periodic_end(view, late, end, marks)
+        stretches = self._stretches
+        end, natural, marks = stretches.find(view, i, self._feed_at_count)
         if end == i:
             return i, False
-        c0, e0 = view.cmd_before[i], view.enc_before[i]
-        if view.cmd_before[end] > c0:
-            end = self._commands_end(view, i, c0, end)
-        if view.enc_before[end] > e0:
-            end = self._readings_end(view, e0, c0, end)
-        if end > i:
-            self._take_stretch(view, i, end, out, marks)
-        return end, end == natural or end - 1 == self._closing
+        stretches.take(view, i, end, out)
+        self._stretch_steps(view, i, end, out, marks)
+        return end, end == natural or end - 1 == stretches.closing
 
-    def _to_feed(self) -> int:
-        """Encoder readings to accept until the identifier is fed (the last of them feeds)."""
-        return max(self._feed_at_count - self._align.pending, 1)
-
-    def _periodic_end(self, view: BlockView, p: int, end: int, marks: list[int]) -> int:
-        """Where a stretch whose message ``p`` is the first with a periodic step due ends
-        (at most ``end``); appends to ``marks`` the commands inside it where steps are due.
-
-        A command's message steps only the estimate (:meth:`_advance` with ``heavy``
-        False): while no diagnostics report is due either, the stretch goes on through it
-        and :meth:`_take_stretch` makes the step there. An encoder reading (it may feed) or
-        a report (it counts what came before) ends the stretch: the message is its last,
-        whose steps :meth:`_take_stretch` makes after all the stretch's bookkeeping, as the
-        per-message path makes them. What comes due next is worked out on a copy of the
-        schedule, with the steps the stretch would make.
-        """
-        clock = self._clock.copy()
-        times, cmd_before = view.times, view.cmd_before
-        while True:
-            if cmd_before[p + 1] == cmd_before[p]:  # an encoder reading
-                return p + 1
-            clock.tick(int(times[p]))
-            now = clock.now
-            assert now is not None
-            due = clock.due(now)
-            if due.diagnostics:
-                return p + 1
-            marks.append(p)
-            if due.estimate:
-                clock.estimate_done(now)
-            clock.settle()
-            after = clock.next_due
-            assert after is not None
-            p += 1
-            if after > now:  # else (a feed due) the next message has a step due
-                p = _first_at(times, after, p, end)
-            if p >= end:
-                return end
-
-    def _commands_end(self, view: BlockView, i: int, c0: int, end: int) -> int:
-        """Where the stretch from ``i`` ends for its commands (ordinals from ``c0``)."""
-        c1 = view.cmd_before[end]
-        first = view.cmd_pos[c0]
-        health = self._health
-        if self._in_loop or not self._comp.ready(self._use.current) or not health.commands_quiet():
-            return first
-        last = self._align.last_cmd_ns
-        if last is not None and view.cmd_t[c0] <= last:
-            return first
-        stop = min(c1, c0 + max(self._align.room, 0))
-        options = self._comp.options
-        for found, after in (
-            (view.cmd_disorder, c0 + 1),  # the first command was checked against the state
-            (view.saturated(options.u_min, options.u_max), c0),
-        ):
-            k = bisect.bisect_left(found, after)
-            if k < len(found) and found[k] < stop:
-                stop = found[k]
-        # late commands: more than the silence limit after the last reading
-        silence = health.silence_ns
-        known = health.last_encoder_receive
-        e0 = view.enc_before[i]
-        o = c0
-        while o < stop and view.cmd_prev_enc[o] < e0:  # no reading of this stretch before it
-            if known is not None and view.cmd_rx[o] - known > silence:
-                stop = o
-            o += 1
-        k = bisect.bisect_left(view.cmd_late, o)
-        while k < len(view.cmd_late) and view.cmd_late[k] < stop:
-            if view.cmd_gap[view.cmd_late[k]] > silence:
-                stop = view.cmd_late[k]
-                break
-            k += 1
-        return view.cmd_pos[stop] if stop < c1 else end
-
-    def _readings_end(self, view: BlockView, e0: int, c0: int, end: int) -> int:
-        """Where the stretch ends for its encoder readings (ordinals from ``e0``; the
-        stretch's commands from ordinal ``c0``)."""
-        e1 = view.enc_before[end]
-        first = view.enc_pos[e0]
-        align, health = self._align, self._health
-        last, previous = align.last_enc_ns, align.last_y
-        if last is None or previous is None or not health.readings_quiet():
-            return first
-        t = view.enc_t
-        silence = health.silence_ns
-        if t[e0] <= last or t[e0] - last > silence:
-            return first
-        stop = min(e1, e0 + self._to_feed())  # the last reading feeds
-        k = bisect.bisect_right(view.enc_disorder, e0)
-        if k < len(view.enc_disorder) and view.enc_disorder[k] < stop:
-            stop = view.enc_disorder[k]
-        k = bisect.bisect_right(view.enc_long, e0)
-        while k < len(view.enc_long) and view.enc_long[k] < stop:
-            if view.enc_step[view.enc_long[k] - 1] > silence:
-                stop = view.enc_long[k]
-                break
-            k += 1
-        start, count = health.rate_window
-        low = e0 + max(LOSS_WINDOW_READINGS - count - 1, 1 if start is None else 0)
-        closing = e1
-        if low < stop:  # the readings up to stop are in order: bisect their times
-            base = last if start is None else start
-            closing = bisect.bisect_left(t, base + LOSS_WINDOW_NS, low, stop)
-            if closing < stop:  # it closes the rate window: the stretch's last message
-                stop = closing + 1
-        if stop > e0:
-            stop = self._stuck_end(view, e0, c0, stop)
-        if stop == closing + 1:
-            self._closing = view.enc_pos[closing]
-            return self._closing + 1
-        return view.enc_pos[stop] if stop < e1 else end
-
-    def _stuck_end(self, view: BlockView, e0: int, c0: int, stop: int) -> int:
-        """Where the readings ``e0 .. stop - 1`` stop being quiet for the stuck-encoder
-        check: the first one :meth:`StreamHealth.check_reading` would find stuck (the
-        stretch's commands, from ordinal ``c0``, count from when they come).
-
-        The still run the stretch starts in (or that its first reading starts) is judged
-        here, once for each command it holds (:meth:`StreamHealth.stuck_reason`, the
-        per-message test itself); a later run that lasts ``STUCK_NS`` within the stretch
-        ends it (its reading goes the per-message way, and the next stretch starts in it).
-        """
-        t, y = view.enc_t, view.enc_y
-        align, health = self._align, self._health
-        k = bisect.bisect_right(view.enc_changed, e0)
-        run_end = min(view.enc_changed[k] if k < len(view.enc_changed) else stop, stop)
-        k = bisect.bisect_left(view.enc_still, run_end)
-        if k < len(view.enc_still) and view.enc_still[k] < stop:
-            stop = view.enc_still[k]  # a run that began in the stretch lasts STUCK_NS
-        run_end = min(run_end, stop)
-        if y[e0] == align.last_y:  # the run goes on from before the stretch
-            since, begin = health.still_since, e0
-            since = align.last_enc_ns if since is None else since
-        else:  # the run starts at e0
-            since, begin = t[e0], e0 + 1
-        assert since is not None
-        o = bisect.bisect_left(t, since + STUCK_NS, begin, run_end)
-        if o >= run_end:
-            return stop
-        # candidates o .. run_end - 1: judged at each command they hold (the command in
-        # force STUCK_INPUT_NS before the reading, among those that came before it)
-        est = self._use.current
-        value = y[o]
-        known_t, known_u = align.cmd_t, align.cmd_u  # the commands before the stretch
-        n_known = len(known_t)  # and the stretch's own from ordinal c0, as they come
-        c_end = view.cmd_before[view.enc_pos[run_end - 1]]
-        total = n_known + c_end - c0
-
-        def time_of(j: int) -> int:
-            return known_t[j] if j < n_known else view.cmd_t[c0 + j - n_known]
-
-        judged: object = _NOT_JUDGED  # the command judged last (a dwell repeats one)
-        while o < run_end:
-            at = t[o] - STUCK_INPUT_NS
-            count = bisect.bisect_right(known_t, at)
-            if count == n_known:
-                count += bisect.bisect_right(view.cmd_t, at, c0, c_end) - c0
-            came = n_known + view.cmd_before[view.enc_pos[o]] - c0
-            j = min(count, came) - 1
-            held = None if j < 0 else known_u[j] if j < n_known else view.cmd_u[c0 + j - n_known]
-            if held != judged:  # else the same reading, estimate and command: the same answer
-                if health.stuck_reason(value, held, est):
-                    return o
-                judged = held
-            if count > came:  # held back by a command not come yet: the next reading
-                o += 1
-            elif j + 1 < total:  # the next command holds from its time + STUCK_INPUT_NS
-                o = bisect.bisect_left(t, time_of(j + 1) + STUCK_INPUT_NS, o + 1, run_end)
-            else:
-                break
-        return stop
-
-    def _take_stretch(
+    def _stretch_steps(
         self, view: BlockView, i: int, end: int, out: BatchCollector, marks: list[int]
     ) -> None:
-        """Accept the messages ``i .. end - 1`` (all quiet) in one step; at the commands of
-        ``marks`` the periodic steps due, and at the last message what the per-message path
-        does after its bookkeeping (the feed when its reading brings the pending readings to
-        the feed count, the periodic steps due), as that path does them."""
-        c0, c1 = view.cmd_before[i], view.cmd_before[end]
+        """After a stretch ``i .. end - 1`` was taken: at the commands of ``marks`` the
+        periodic steps due, and at the last message what the per-message path does after
+        its bookkeeping (the feed when its reading brings the pending readings to the feed
+        count, the periodic steps due), as that path does them."""
         e0, e1 = view.enc_before[i], view.enc_before[end]
-        align, health, led = self._align, self._health, self._ledger
-        self._silence.arrived_many(
-            _seen(view, i, end, c0, c1, e0, e1, True), _seen(view, i, end, c0, c1, e0, e1, False)
-        )
-        stamps: list[int] = []
-        values: list[float] = []
-        if c1 > c0:
-            est = self._use.current
-            comp = self._comp
-            last_y = align.last_y
-            values = view.cmd_u[c0:c1]
-            sent = comp.commands(values, est, last_y=last_y)  # no fault active in a stretch
-            health.accept_commands()
-            stamps = view.cmd_t[c0:c1]
-            align.add_commands(stamps, values)
-            led.commands += c1 - c0
-            led.compensated += c1 - c0
-            out.commands(view.cmd_pos[c0:c1], stamps, sent)
-        if e1 > e0:
-            last = align.last_enc_ns
-            assert last is not None
-            t, y = view.enc_t, view.enc_y
-            gaps = [t[e0] - last, *view.enc_step[e0 : e1 - 1]]
-            final = e1 - 1
-            if (y[final] != y[final - 1]) if final > e0 else (y[e0] != align.last_y):
-                still = None
-            else:
-                k = bisect.bisect_right(view.enc_changed, final) - 1
-                if k >= 0 and view.enc_changed[k] > e0:
-                    still = t[view.enc_changed[k]]
-                elif y[e0] != align.last_y:
-                    still = t[e0]
-                else:
-                    still = health.still_since
-                    still = last if still is None else still
-            health.accept_readings(last, gaps, view.enc_rx[final], still)
-            align.add_readings(t[e0:e1], y[e0:e1], gaps)
-            led.encoders += e1 - e0
-        self._tracking.stretch(
-            view.cmd_pos[c0:c1],
-            values,
-            self._comp.last_weight,
-            view.enc_pos[e0:e1],
-            view.enc_t[e0:e1],
-            view.enc_y[e0:e1],
-        )
+        align, health = self._align, self._health
         outputs: list[Output] = []
         last = end - 1
         for p in marks:  # before the clock moves past them (in order)
@@ -1017,7 +750,7 @@ class BacklashPipeline:
             self._clock.tick(int(view.times[i:last].max()))
         # the last message, as on_encoder_value / on_command_value end
         reading = e1 > e0 and view.enc_pos[e1 - 1] == last
-        if last == self._closing:  # its reading closes the rate window
+        if last == self._stretches.closing:  # its reading closes the rate window
             self._events(health.close_rate_window(view.enc_t[e1 - 1]))
         if reading and align.pending >= self._feed_at_count:
             self._feed()
