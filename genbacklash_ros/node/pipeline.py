@@ -186,7 +186,7 @@ from genbacklash_ros.node.identify import (
     Result,
     SyncWorker,
 )
-from genbacklash_ros.node.ledger import ENCODER_REJECTS, QUIET_DROPS, SHOWN_WHEN_ANY, Ledger
+from genbacklash_ros.node.ledger import ENCODER_REJECTS, QUIET_DROPS, Ledger
 from genbacklash_ros.node.messages import (
     CommandMessage,
     DiagnosticStatus,
@@ -195,9 +195,7 @@ from genbacklash_ros.node.messages import (
     JointState,
     MessageError,
     compensated_command,
-    diagnostic_array,
     estimate_message,
-    level_of,
     read_command,
     read_encoder,
 )
@@ -212,6 +210,7 @@ from genbacklash_ros.node.parameters import NodeParameters
 from genbacklash_ros.node.publish import DIAGNOSTICS_PERIOD_NS, Schedule
 from genbacklash_ros.node.screen import Screen
 from genbacklash_ros.node.silence import SilentStreams
+from genbacklash_ros.node.status_report import servo_summary, status_output
 from genbacklash_ros.node.stretch import QuietStretches
 from genbacklash_ros.node.tracking_stage import TrackingStage
 
@@ -495,19 +494,7 @@ class BacklashPipeline:
         """
         if self._params.servo() is None:
             return None
-        align = self._align
-        model, fit = align.servo, align.servo_fit
-        if align.servo_pending:
-            return {"state": "estimating", "window": self._params.servo_window}
-        assert model is not None
-        out: dict[str, object] = dict(model.to_dict())
-        if align.servo_note:
-            out.update(state="none", note=align.servo_note)
-        elif fit is not None:
-            out.update(state="estimated", misfit=fit.misfit, misfit_without=fit.none_misfit)
-        else:
-            out["state"] = "fixed"
-        return out
+        return servo_summary(self._align, self._params.servo_window)
 
     @property
     def using_checkpoint(self) -> bool:
@@ -903,112 +890,33 @@ class BacklashPipeline:
         per-report drop counts. ``stale`` reports level STALE (e.g. a transport's wall-clock
         watchdog when no data arrive)."""
         est = self.estimate
-        use = self._use
-        level = level_of(est.state)
-        parts = [f"{est.state.value}: {est.reason}" if est.reason else est.state.value]
-        if use.on_prior:
-            parts.insert(0, "using the checkpoint's estimate until the identifier converges")
-        elif use.using_checkpoint:
-            parts.insert(0, "continuing from the checkpoint's estimate")
+        params = self._params
+        # the reports that reset per-report counts, in this order
         health = self._health.report(stamp_ns)
-        passing = health.passing
-        level = max(level, health.level)
-        parts.extend(health.parts)
-        silent = self._silence.report(self._params.command_type, self._params.encoder_type)
-        if silent.parts:
-            level = max(level, silent.level)
-            parts.extend(silent.parts)
-        led = self._ledger
-        period = led.take_period()
-        loud = {k: n for k, n in period.drops.items() if k not in QUIET_DROPS}
-        if loud:
-            level = max(level, DiagnosticStatus.WARN)
-            listed = "; ".join(
-                f"{n} {k.replace('_', ' ')} (last: {period.reasons[k]})" for k, n in loud.items()
-            )
-            parts.append(f"dropped since the last report: {listed}")
-        if period.problems:
-            level = max(level, DiagnosticStatus.WARN)
-            parts.extend(period.problems)
+        silent = self._silence.report(params.command_type, params.encoder_type)
+        period = self._ledger.take_period()
         guard = self._guard.verdict
         measured = self._tracking.verdict
-        status = self._comp.status(est, health.active if passing else (), guard, measured)
-        if self._await_guard and est.available and self._params.compensate:
-            parts.append(
-                "compensation held off until the guard has judged the checkpoint's model on "
-                "this machine's samples"
-            )
-        if est.available and self._params.compensate and guard.state in ("faded", "off"):
-            parts.append(guard.reason)
-            if guard.state == "off":
-                level = max(level, DiagnosticStatus.WARN)
-        if est.available and self._params.compensate and measured.state in ("faded", "off"):
-            parts.append(measured.reason)
-            if measured.state == "off":
-                level = max(level, DiagnosticStatus.WARN)
-        if measured.state == "watching" and "compensation_in_loop true" in measured.reason:
-            parts.append(measured.reason)  # the compensated command drives the drivetrain
-            level = max(level, DiagnosticStatus.WARN)
-        if stale:
-            level = DiagnosticStatus.STALE
-            parts.insert(0, "no data")
-        source = "checkpoint" if use.using_checkpoint else "identifier"
-        own = use.own
-        extra = [
-            ("estimate_source", source if est.available else "none"),
-            ("identifier_state", own.state.value),
-            ("identifier_confidence", format(own.confidence, ".3g")),
-            ("compensation_weight", format(status.weight, ".3g")),
-            ("compensation_state", status.state),
-            ("compensation_reason", status.reason),
-            ("compensation_guard", guard.state),
-            ("compensation_trust", format(guard.trust, ".3g")),
-            ("guard_error_ratio", format(guard.ratio, ".3g") if guard.ratio < math.inf else "none"),
-            ("measured_tracking", measured.state),
-            (
-                "measured_tracking_baseline",
-                "offline baseline from the checkpoint"
-                if measured.baseline == "offline"
-                else "measured",
-            ),
-            (
-                "measured_tracking_ratio",
-                format(measured.ratio, ".3g") if math.isfinite(measured.ratio) else "none",
-            ),
-            ("faults", ",".join(health.active) or "none"),
-            ("commands", str(led.commands)),
-            ("encoder_messages", str(led.encoders)),
-            ("compensated_commands", str(led.compensated)),
-            ("identifier_samples", str(led.samples)),
-            ("checkpoints", str(led.checkpoints)),
-            ("checkpoint_errors", str(led.checkpoint_errors)),
-        ]
-        extra += [
-            (f"dropped_{k}", str(n)) for k, n in led.dropped.items() if n or k not in SHOWN_WHEN_ANY
-        ]
-        extra += silent.values
-        saved = led.last_checkpoint_ns
-        extra.append(("last_checkpoint_s", "none" if saved is None else f"{saved / 1e9:.3f}"))
-        if self.warm_start_note:
-            extra.append(("warm_start", self.warm_start_note))
-        servo = self.servo
-        if servo is not None:  # the servo model the identifier's input goes through
-            extra.append(("servo_state", str(servo["state"])))
-            for key in ("dead_time", "time_constant"):
-                if key in servo:
-                    extra.append((f"servo_{key}", format(float(servo[key]), ".6g")))  # type: ignore[arg-type]
-            if "note" in servo:
-                extra.append(("servo_note", str(servo["note"])))
-        message = diagnostic_array(
+        status = self._comp.status(est, health.active if health.passing else (), guard, measured)
+        return status_output(
             stamp_ns,
             est,
-            level=level,
-            message="; ".join(parts),
+            use=self._use,
+            health=health,
+            silent=silent,
+            period=period,
+            ledger=self._ledger,
+            guard=guard,
+            measured=measured,
+            status=status,
+            compensate=params.compensate,
+            await_guard=self._await_guard,
+            warm_start_note=self.warm_start_note,
+            servo=self.servo,
             name=self._status_name,
-            hardware_id=self._params.joint,
-            extra=extra,
+            hardware_id=params.joint,
+            stale=stale,
         )
-        return Output("diagnostics", message, stamp_ns, est)
 
     # ------------------------------------------------------------------ the stages
 
