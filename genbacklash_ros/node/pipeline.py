@@ -112,9 +112,10 @@ at construction (:func:`~genbacklash_ros.node.checkpoint.warm_start`). With
 ``compensation_in_loop``, a checkpoint taken once the judge has measured compensation helping
 carries the tracking without compensation for the next start's judge: the one measured live
 once it holds ``min_time`` seconds, else the one this start took from its checkpoint; else
-none (``BacklashPipeline._baseline`` says when and why). A checkpoint taken while the judge holds
-compensation off for harm carries that verdict, and the next start holds the model off
-until a new model or the retry (``BacklashPipeline._harm``).
+none (:meth:`~genbacklash_ros.node.tracking_stage.TrackingStage.baseline_to_store` says
+when and why). A checkpoint taken while the judge holds compensation off for harm carries
+that verdict, and the next start holds the model off until a new model or the retry
+(:meth:`~genbacklash_ros.node.tracking_stage.TrackingStage.harm_to_store`).
 
 Faults
 ------
@@ -153,7 +154,7 @@ import numpy as np
 
 from genbacklash_core import Cascade, Estimate, GenBacklashError, GeneralBacklash, OnlineIdentifier
 from genbacklash_core.guard import CompensationGuard, GuardVerdict
-from genbacklash_core.measured import HeldHarm, OfflineBaseline, TrackingVerdict
+from genbacklash_core.measured import TrackingVerdict
 from genbacklash_ros.node.align import Aligner
 from genbacklash_ros.node.batch import BlockView
 from genbacklash_ros.node.checkpoint import Checkpoint, CheckpointError, save_checkpoint, warm_start
@@ -212,6 +213,7 @@ from genbacklash_ros.node.screen import Screen
 from genbacklash_ros.node.silence import SilentStreams
 from genbacklash_ros.node.status_report import servo_summary, status_output
 from genbacklash_ros.node.stretch import QuietStretches
+from genbacklash_ros.node.tracking_stage import STORE_RATIO as STORE_RATIO
 from genbacklash_ros.node.tracking_stage import TrackingStage
 
 __all__ = [
@@ -235,9 +237,6 @@ WorkerFactory: TypeAlias = Callable[[OnlineIdentifier], IdentifierWorker]
 COMMAND_WAIT_NS = 100_000_000  # encoder time after which a sample's command counts as held
 BATCH_SAMPLES = 128  # encoder messages per identifier feed (at most)
 BATCH_NS = 100_000_000  # data time between identifier feeds at most
-STORE_RATIO = 0.5
-"""A checkpoint stores the tracking baseline only once compensating was measured to keep at
-most this share of the tracking error (``BacklashPipeline._baseline``)."""
 
 _COMMAND_CLASSES: dict[str, type] = {
     "float64": Float64,
@@ -1043,65 +1042,22 @@ class BacklashPipeline:
         self._built_estimate = (est, message)
         return message
 
-    def _baseline(self) -> OfflineBaseline | None:
-        """The tracking without compensation a checkpoint stores, for the next start's judge.
-
-        A stored baseline lets the next start compensate after the guard's first verdict
-        instead of after ``min_time`` of baseline. That shortcut is taken only where this
-        node measured compensation helping on this machine, so with ``compensation_in_loop``:
-
-        * when the judge has measured compensating keep at most :data:`STORE_RATIO` of the
-          tracking error over at least ``min_time`` of compensated readings (its state
-          ``"on"`` with a clear cut, or a probe after it): the judge's live baseline once it holds
-          ``min_time`` seconds of it
-          (:meth:`~genbacklash_core.measured.TrackingJudge.live_baseline`: the readings
-          while the command went out as it came, weight 0: before the first estimate,
-          while the guard or the judge held compensation off, in probes), else
-          the baseline this start took from its checkpoint, carried forward unchanged
-          (:attr:`~genbacklash_core.measured.TrackingJudge.offline`);
-        * else none: compensation not measured yet (``compensate`` false, the guard holding
-          it off, a trial), helping only a little, faded or judged harmful; the next start
-          measures its baseline first. Measured on physics restarts (BENCHMARKS.md, issue
-          23, ckpt-1): a baseline stored whenever one was measured let restarts on
-          compliant drivetrains, whose first node never compensated, try compensation on
-          the guard's first verdict and track 3 % worse than without it; stored whenever
-          compensation was "on" (ratio up to ``ratio_full``), 7.8 % worse on one whose
-          first node had cut 6 %. The shortcut is worth about a second of compensation,
-          which matters where compensation cuts most of the error.
-
-        Without ``compensation_in_loop`` the node cannot tell which readings went without
-        compensation on the machine (it only watches, and its weights are its own, not what
-        drove the drivetrain): it stores nothing it measured, and carries forward the
-        baseline its start took, if any.
-        """
-        judge = self._tracking.judge
-        if not self._in_loop:
-            return judge.offline
-        verdict, settings = judge.verdict, judge.settings
-        helped = verdict.on_time >= settings.min_time and verdict.ratio <= STORE_RATIO
-        if not helped:
-            return None
-        live = judge.live_baseline()
-        return live if live is not None else judge.offline
-
-    def _harm(self) -> HeldHarm | None:
-        """The judge's verdict of harm a checkpoint stores, for the next start to hold.
-
-        With ``compensation_in_loop``, while the judge holds compensation off because it
-        measured it tracking worse than without: the next start holds that model off too,
-        until a new model or the retry (counted on), instead of trying it again after its
-        baseline. Without it the judge never judges harm: none.
-        """
-        return self._tracking.judge.held_harm() if self._in_loop else None
-
     def _checkpoint(self, now: int) -> None:
         path = self._checkpoint_path
         est = self._use.own
         if path is None or not est.available:
             return
-        led = self._ledger
+        led, tracking, in_loop = self._ledger, self._tracking, self._in_loop
         try:
-            self._writer(path, Checkpoint(est, now, baseline=self._baseline(), harm=self._harm()))
+            self._writer(
+                path,
+                Checkpoint(
+                    est,
+                    now,
+                    baseline=tracking.baseline_to_store(in_loop=in_loop),
+                    harm=tracking.harm_to_store(in_loop=in_loop),
+                ),
+            )
         except (CheckpointError, OSError) as err:
             led.checkpoint_errors += 1
             self._problem(f"checkpoint not saved: {err}")
