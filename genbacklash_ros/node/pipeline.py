@@ -152,8 +152,8 @@ from typing import Literal, TypeAlias
 
 import numpy as np
 
-from genbacklash_core import Cascade, Estimate, GenBacklashError, GeneralBacklash, OnlineIdentifier
-from genbacklash_core.guard import CompensationGuard, GuardVerdict
+from genbacklash_core import Estimate, GenBacklashError, OnlineIdentifier
+from genbacklash_core.guard import GuardVerdict
 from genbacklash_core.measured import TrackingVerdict
 from genbacklash_ros.node.align import Aligner
 from genbacklash_ros.node.batch import BlockView
@@ -187,6 +187,7 @@ from genbacklash_ros.node.identify import (
     Result,
     SyncWorker,
 )
+from genbacklash_ros.node.judges import CompensationJudges
 from genbacklash_ros.node.ledger import ENCODER_REJECTS, QUIET_DROPS, Ledger
 from genbacklash_ros.node.messages import (
     CommandMessage,
@@ -214,7 +215,6 @@ from genbacklash_ros.node.silence import SilentStreams
 from genbacklash_ros.node.status_report import servo_summary, status_output
 from genbacklash_ros.node.stretch import QuietStretches
 from genbacklash_ros.node.tracking_stage import STORE_RATIO as STORE_RATIO
-from genbacklash_ros.node.tracking_stage import TrackingStage
 
 __all__ = [
     "COMMAND_WAIT_NS",
@@ -249,15 +249,6 @@ def _order_text(stream: str, stamp: int, last: int) -> str:
     """Why a message of ``stream`` at ``stamp`` is dropped after one at ``last``."""
     text = f"{stream} time {stamp} ns is not after the previous {last} ns"
     return text if stamp == last else f"{text} ({(last - stamp) / 1e9:.3f} s back)"
-
-
-def _play(model: object) -> float | None:
-    """``c_L + c_R`` of a model's backlash (None without a model)."""
-    if isinstance(model, Cascade):
-        model = model.backlash
-    if isinstance(model, GeneralBacklash):
-        return float(model.c_left + model.c_right)
-    return None
 
 
 class BacklashPipeline:
@@ -385,32 +376,12 @@ class BacklashPipeline:
         )
         self._screen = Screen(bridge=params.model == "backlash")
         self._comp = CompensateStage(params.compensator_options(), compensate=params.compensate)
-        self._guard = CompensationGuard(params.guard_settings())
-        self._tracking = TrackingStage(params.judge_settings())
+        judges = CompensationJudges(params, self._comp, start)
+        self._judges = judges
+        self._guard, self._tracking = judges.guard, judges.tracking  # (one look-up less)
         self._stretches.bind(
             self._align, self._comp, self._use, self._tracking, in_loop=self._in_loop
         )
-        # a checkpoint that holds its record's tracking without compensation: the judge
-        # starts from it, and the model waits for the guard's first verdict on live samples
-        # (min_samples of them): a load that coasts into the play or a coupling that rings
-        # is perturbed for the rest of a record by a trial of a second at a tenth of its
-        # weight (BENCHMARKS.md, issue 23, base-1), and the guard tells them apart first
-        self._await_guard = start.prior is not None and start.baseline is not None
-        self._guard_off = False  # the guard's last verdict was "off"
-        judge = self._tracking.judge
-        if self._await_guard:
-            assert start.baseline is not None
-            judge.start_from(start.baseline)
-        if start.prior is not None:
-            play = _play(start.prior.model)
-            if play is not None:  # the judge knows the play of the model it judges
-                judge.new_model(play)
-            if start.harm is not None:
-                # the model the last node measured tracking worse than without stays off
-                # until a new model or the retry, as in a running node (BENCHMARKS.md,
-                # issue 23: a restart that tried it again tracked 2.4 % worse)
-                judge.hold(start.harm)
-        self._set_trust()  # a checkpoint's model is judged from its first command
         self._feed_at_count = self._batch
         self._clock.restart()
 
@@ -434,9 +405,7 @@ class BacklashPipeline:
             )
             return
         self._comp.reconfigure(params.compensator_options(), compensate=params.compensate)
-        self._guard.configure(params.guard_settings())
-        self._tracking.judge.configure(params.judge_settings())
-        self._set_trust()
+        self._judges.configure(params)
         self._problems(self._comp.problems)
         self._clock.configure(
             publish_ns=params.publish_period_ns, checkpoint_ns=self._checkpoint_period()
@@ -909,7 +878,7 @@ class BacklashPipeline:
             measured=measured,
             status=status,
             compensate=params.compensate,
-            await_guard=self._await_guard,
+            await_guard=self._judges.await_guard,
             warm_start_note=self.warm_start_note,
             servo=self.servo,
             name=self._status_name,
@@ -950,9 +919,9 @@ class BacklashPipeline:
         if screened.size == 0:
             return
         # does compensating with the model in use help on these samples? (fades it if not)
-        self._guard.update(screened.us, screened.ys, screened.breaks, self._use.current.model)
-        self._tracking.flush()  # and the tracking measured on every reading since
-        self._set_trust()
+        self._judges.judge_samples(
+            screened.us, screened.ys, screened.breaks, self._use.current.model
+        )
         assert self._worker is not None
         self._worker.submit(screened.us, screened.ys, screened.breaks)
         self._take_results()
@@ -976,31 +945,10 @@ class BacklashPipeline:
                 self._drop("identifier_behind", result.reason, result.samples)
         if adopted is not None:
             # the new model judged at once on the samples the guard remembers
-            model = self._use.current.model
-            self._guard.adopt(model)
-            play = _play(model)
-            if play is not None:
-                self._tracking.judge.new_model(play)
-            self._set_trust()
+            self._judges.adopt(self._use.current.model)
             self._comp.adopt(self._use.current, self._align.last_y)
             if self._comp.problems:
                 self._problems(self._comp.problems)
-
-    def _set_trust(self) -> None:
-        """The compensator's trust (the guard's judgement of the model) and share (the
-        judge's of the tracking measured)."""
-        guard = self._guard.verdict
-        self._comp.trust = guard.trust
-        off = guard.state == "off"
-        if self._guard_off and not off:
-            # back after the guard held it off: measured afresh, with a trial (the judge)
-            self._tracking.judge.resume()
-        self._guard_off = off
-        if self._await_guard and (
-            guard.samples >= self._guard.settings.min_samples or not self._guard.settings.enabled
-        ):
-            self._await_guard = False
-        self._comp.share = 0.0 if self._await_guard else self._tracking.verdict.trust
 
     def _advance(self, stamp: int, outputs: list[Output], *, heavy: bool) -> None:
         """Move the data clock to ``stamp``; append the periodic outputs now due.

@@ -221,13 +221,13 @@ def test_compensation_back_after_the_guard_held_it_off_is_tried_again(tmp_path: 
     _loop(pipe, 0, 14.0)
     assert pipe.measured.state == "on" and pipe.measured.trust == 1.0
     verdict = pipe.guard
-    pipe._set_trust()  # the guard still on: nothing changes
+    pipe._judges.apply()  # the guard still on: nothing changes
     assert pipe.measured.state == "on"
     pipe._guard.verdict = dataclasses.replace(verdict, trust=0.0, state="off")
-    pipe._set_trust()
+    pipe._judges.apply()
     assert pipe.measured.state == "on"  # the judge's own verdict, the guard's trust apart
     pipe._guard.verdict = verdict
-    pipe._set_trust()
+    pipe._judges.apply()
     measured = pipe.measured
     assert measured.state == "judging" and "trial" in measured.reason
     assert measured.trust < 0.1 and measured.off_time > 3.0  # the baseline is kept
