@@ -25,9 +25,20 @@ previous stage's output and returns its own, and none calls back into the pipeli
   :class:`~genbacklash_ros.node.identify.ThreadWorker` for live transports: a refit never
   delays a compensated command) and the estimate in use;
 * :mod:`~genbacklash_ros.node.compensate` -- the inverse compensator;
+  :mod:`~genbacklash_ros.node.judges` -- the compensation guard and the measured tracking
+  (:mod:`~genbacklash_ros.node.tracking_stage`) over the model in use, which set how much
+  of the inverse it applies;
 * :mod:`~genbacklash_ros.node.publish`, :mod:`~genbacklash_ros.node.ledger` and
   :mod:`~genbacklash_ros.node.silence` -- the data clock, the counters and problems, and the
-  streams' silences that ``/diagnostics`` reports.
+  streams' silences that ``/diagnostics`` reports;
+  :mod:`~genbacklash_ros.node.status_report` -- the ``/diagnostics`` status built from them;
+* :mod:`~genbacklash_ros.node.outputs` -- what the pipeline returns (:class:`Output`, ...);
+* :mod:`~genbacklash_ros.node.batch` and :mod:`~genbacklash_ros.node.stretch` -- the batch
+  form (:meth:`BacklashPipeline.on_batch`): a block's facts worked out once, and its quiet
+  stretches found and taken in one step.
+
+:class:`BacklashPipeline` is the facade over them all: it owns the stages, routes each
+message through them in the order above, and is what every transport and the replay call.
 
 Alignment (integer nanoseconds throughout)
 -----------------------------------------
