@@ -102,31 +102,24 @@ def test_an_unmeasurable_judge_warns() -> None:
     assert level == DiagnosticStatus.WARN and message.endswith(measured.reason)
 
 
-def test_servo_summary_while_estimating_and_fixed() -> None:
-    auto = NodeParameters(servo_model="auto")
-    align = Aligner(
+def _aligner(params: NodeParameters) -> Aligner:
+    """The alignment a pipeline with ``params`` makes (its servo part only matters here)."""
+    return Aligner(
         use_header=True,
         grid_ns=0,
         wait_ns=0,
-        settle_ns=0,
-        servo=auto.servo(),
-        servo_window_ns=round(auto.servo_window * 1e9),
-        motor=False,
+        servo=params.servo(),
+        servo_window_ns=round(params.servo_window * 1e9),
     )
-    assert servo_summary(align, auto.servo_window) == {
+
+
+def test_servo_summary_while_estimating_and_fixed() -> None:
+    auto = NodeParameters(servo_model="auto")
+    assert servo_summary(_aligner(auto), auto.servo_window) == {
         "state": "estimating",
         "window": auto.servo_window,
     }
     fixed = NodeParameters(servo_model="fixed", servo_time_constant=0.02)
-    align = Aligner(
-        use_header=True,
-        grid_ns=0,
-        wait_ns=0,
-        settle_ns=0,
-        servo=fixed.servo(),
-        servo_window_ns=0,
-        motor=False,
-    )
-    summary = servo_summary(align, fixed.servo_window)
+    summary = servo_summary(_aligner(fixed), fixed.servo_window)
     assert summary["state"] == "fixed"
     assert np.isclose(float(summary["time_constant"]), 0.02)  # type: ignore[arg-type]
