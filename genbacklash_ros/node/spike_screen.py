@@ -178,6 +178,9 @@ class SpikeScreen:
     model_fits : bool
         The compensation guard's judgement: the model describes the drivetrain (a reading
         far from a prediction of a model that does not is no evidence of a spike).
+    scale : float or None
+        The residual scale of the one-step predictions (None until known). Read only: an
+        attribute, not a property, for the stuck check's per-reading look.
     """
 
     __slots__ = (
@@ -188,10 +191,10 @@ class SpikeScreen:
         "_fed_y",
         "_quantum",
         "_resync_since",
-        "_scale",
         "_shift",
         "_shift_model",
         "model_fits",
+        "scale",
     )
 
     def __init__(self) -> None:
@@ -200,7 +203,7 @@ class SpikeScreen:
         self._fed_t: int | None = None  # the last sample fed (spike prediction)
         self._fed_y: float | None = None
         self._fed_band: tuple[float, float] | None = None  # its band's edges (unshifted)
-        self._scale: float | None = None  # robust scale of the one-step prediction errors
+        self.scale: float | None = None  # robust scale of the one-step prediction errors
         # where the readings put the band's lower and upper edge, against the estimate's
         # band (the edges of the model self._shift_model; see screen)
         self._shift = (0.0, 0.0)
@@ -208,11 +211,6 @@ class SpikeScreen:
         self._quantum = math.inf  # the smallest change between consecutive readings fed
         self._resync_since: int | None = None  # time of the first sample after a gap
         self._converged = False  # the estimate has converged since the identifier started
-
-    @property
-    def scale(self) -> float | None:
-        """The residual scale of the one-step predictions (None until known)."""
-        return self._scale
 
     def forget_fed_time(self) -> None:
         """The time line restarted (a clock jump back): the next sample fed is not
@@ -349,7 +347,7 @@ class SpikeScreen:
         so that the rounding of two quantised readings' difference does not decide (the
         physics gravity record, seed 15: a load moving 2 counts inside the play, dropped at
         ``3.0679616e-3 > 3.0679615e-3``)."""
-        scale = self._scale
+        scale = self.scale
         if trusted and self.model_fits and scale is not None:
             return max(SPIKE_SIGMAS * scale, (SPIKE_COUNTS + 1e-6) * self._quantum)
         return math.inf
@@ -537,7 +535,7 @@ class SpikeScreen:
         elif state in (EstimatorState.WARMING_UP, EstimatorState.DIVERGED):
             self._converged = False
             self._shift = (0.0, 0.0)
-        return self._converged and self._scale is not None
+        return self._converged and self.scale is not None
 
     def _band_before(self) -> tuple[float, float]:
         """The band (shifted) of the last reading fed; unbounded when not known."""
@@ -621,5 +619,5 @@ class SpikeScreen:
         errors.partition(k)  # in place: ``errors`` is this step's own copy
         batch = max(float(errors[k]) / 1.15, floor, 1e-300)
         if batch < math.inf:
-            scale = self._scale
-            self._scale = batch if scale is None else scale + _SCALE_SMOOTHING * (batch - scale)
+            scale = self.scale
+            self.scale = batch if scale is None else scale + _SCALE_SMOOTHING * (batch - scale)
