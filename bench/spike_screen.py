@@ -127,7 +127,7 @@ def run_one(kind: str, seed: int, spiked: bool, duration: float) -> Outcome:
             out = original(self, times, *args, **kwargs)
             if out.keep is not None and any(e.key == "encoder_spike" for e in out.events):
                 dropped.extend(times[~out.keep].tolist())
-            if self._converged and self._scale is not None:
+            if self._spikes._converged and self._spikes.scale is not None:
                 judged.extend(times.tolist())
             return out
 

@@ -25,9 +25,20 @@ previous stage's output and returns its own, and none calls back into the pipeli
   :class:`~genbacklash_ros.node.identify.ThreadWorker` for live transports: a refit never
   delays a compensated command) and the estimate in use;
 * :mod:`~genbacklash_ros.node.compensate` -- the inverse compensator;
+  :mod:`~genbacklash_ros.node.judges` -- the compensation guard and the measured tracking
+  (:mod:`~genbacklash_ros.node.tracking_stage`) over the model in use, which set how much
+  of the inverse it applies;
 * :mod:`~genbacklash_ros.node.publish`, :mod:`~genbacklash_ros.node.ledger` and
   :mod:`~genbacklash_ros.node.silence` -- the data clock, the counters and problems, and the
-  streams' silences that ``/diagnostics`` reports.
+  streams' silences that ``/diagnostics`` reports;
+  :mod:`~genbacklash_ros.node.status_report` -- the ``/diagnostics`` status built from them;
+* :mod:`~genbacklash_ros.node.outputs` -- what the pipeline returns (:class:`Output`, ...);
+* :mod:`~genbacklash_ros.node.batch` and :mod:`~genbacklash_ros.node.stretch` -- the batch
+  form (:meth:`BacklashPipeline.on_batch`): a block's facts worked out once, and its quiet
+  stretches found and taken in one step.
+
+:class:`BacklashPipeline` is the facade over them all: it owns the stages, routes each
+message through them in the order above, and is what every transport and the replay call.
 
 Alignment (integer nanoseconds throughout)
 -----------------------------------------
@@ -112,9 +123,10 @@ at construction (:func:`~genbacklash_ros.node.checkpoint.warm_start`). With
 ``compensation_in_loop``, a checkpoint taken once the judge has measured compensation helping
 carries the tracking without compensation for the next start's judge: the one measured live
 once it holds ``min_time`` seconds, else the one this start took from its checkpoint; else
-none (``BacklashPipeline._baseline`` says when and why). A checkpoint taken while the judge holds
-compensation off for harm carries that verdict, and the next start holds the model off
-until a new model or the retry (``BacklashPipeline._harm``).
+none (:meth:`~genbacklash_ros.node.tracking_stage.TrackingStage.baseline_to_store` says
+when and why). A checkpoint taken while the judge holds compensation off for harm carries
+that verdict, and the next start holds the model off until a new model or the retry
+(:meth:`~genbacklash_ros.node.tracking_stage.TrackingStage.harm_to_store`).
 
 Faults
 ------
@@ -143,19 +155,17 @@ Float64(data=0.5)
 
 from __future__ import annotations
 
-import bisect
 import math
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
 from typing import Literal, TypeAlias
 
 import numpy as np
 
-from genbacklash_core import Cascade, Estimate, GenBacklashError, GeneralBacklash, OnlineIdentifier
-from genbacklash_core.guard import CompensationGuard, GuardVerdict
-from genbacklash_core.measured import HeldHarm, OfflineBaseline, TrackingVerdict
+from genbacklash_core import Estimate, GenBacklashError, OnlineIdentifier
+from genbacklash_core.guard import GuardVerdict
+from genbacklash_core.measured import TrackingVerdict
 from genbacklash_ros.node.align import Aligner
 from genbacklash_ros.node.batch import BlockView
 from genbacklash_ros.node.checkpoint import Checkpoint, CheckpointError, save_checkpoint, warm_start
@@ -177,9 +187,9 @@ from genbacklash_ros.node.health import SILENCE_UNKNOWN_NS as SILENCE_UNKNOWN_NS
 from genbacklash_ros.node.health import SPIKE_MAX_SHARE as SPIKE_MAX_SHARE
 from genbacklash_ros.node.health import SPIKE_SIGMAS as SPIKE_SIGMAS
 from genbacklash_ros.node.health import STILL_HOLD_NS as STILL_HOLD_NS
-from genbacklash_ros.node.health import STUCK_INPUT_NS, Drop, HealthEvent, StreamHealth
 from genbacklash_ros.node.health import STUCK_NS as STUCK_NS
 from genbacklash_ros.node.health import STUCK_SIGMAS as STUCK_SIGMAS
+from genbacklash_ros.node.health import Drop, HealthEvent, StreamHealth
 from genbacklash_ros.node.identify import (
     EstimateInUse,
     Identified,
@@ -188,27 +198,34 @@ from genbacklash_ros.node.identify import (
     Result,
     SyncWorker,
 )
-from genbacklash_ros.node.ledger import ENCODER_REJECTS, QUIET_DROPS, SHOWN_WHEN_ANY, Ledger
+from genbacklash_ros.node.judges import CompensationJudges
+from genbacklash_ros.node.ledger import ENCODER_REJECTS, QUIET_DROPS, Ledger
 from genbacklash_ros.node.messages import (
     CommandMessage,
-    DiagnosticArray,
     DiagnosticStatus,
     Float64,
     Float64MultiArray,
     JointState,
     MessageError,
     compensated_command,
-    diagnostic_array,
     estimate_message,
-    level_of,
     read_command,
     read_encoder,
+)
+from genbacklash_ros.node.outputs import (
+    BatchCollector,
+    BatchOutputs,
+    Output,
+    PipelineStats,
+    TopicKey,
 )
 from genbacklash_ros.node.parameters import NodeParameters
 from genbacklash_ros.node.publish import DIAGNOSTICS_PERIOD_NS, Schedule
 from genbacklash_ros.node.screen import Screen
 from genbacklash_ros.node.silence import SilentStreams
-from genbacklash_ros.node.tracking_stage import TrackingStage
+from genbacklash_ros.node.status_report import servo_summary, status_output
+from genbacklash_ros.node.stretch import QuietStretches
+from genbacklash_ros.node.tracking_stage import STORE_RATIO as STORE_RATIO
 
 __all__ = [
     "COMMAND_WAIT_NS",
@@ -224,7 +241,6 @@ __all__ = [
     "WorkerFactory",
 ]
 
-TopicKey: TypeAlias = Literal["compensated_command", "estimate", "diagnostics"]
 CheckpointWriter: TypeAlias = Callable[[Path, Checkpoint], object]
 WorkerFactory: TypeAlias = Callable[[OnlineIdentifier], IdentifierWorker]
 """Makes the identify stage's worker for an identifier (``SyncWorker``, ``ThreadWorker``)."""
@@ -232,9 +248,6 @@ WorkerFactory: TypeAlias = Callable[[OnlineIdentifier], IdentifierWorker]
 COMMAND_WAIT_NS = 100_000_000  # encoder time after which a sample's command counts as held
 BATCH_SAMPLES = 128  # encoder messages per identifier feed (at most)
 BATCH_NS = 100_000_000  # data time between identifier feeds at most
-STORE_RATIO = 0.5
-"""A checkpoint stores the tracking baseline only once compensating was measured to keep at
-most this share of the tracking error (``BacklashPipeline._baseline``)."""
 
 _COMMAND_CLASSES: dict[str, type] = {
     "float64": Float64,
@@ -243,153 +256,10 @@ _COMMAND_CLASSES: dict[str, type] = {
 }
 
 
-@dataclass(frozen=True, slots=True)
-class Output:
-    """One message to publish.
-
-    Attributes
-    ----------
-    topic : {"compensated_command", "estimate", "diagnostics"}
-        Which publisher (GUIDE §4: ``compensated_command``, ``~/estimate``, ``/diagnostics``).
-    message : Float64, Float64MultiArray, JointState or DiagnosticArray
-    stamp_ns : int
-        Data time of the message (a compensated command: its command's time), e.g. the log
-        time when writing a bag.
-    estimate : Estimate or None
-        The estimate behind an ``estimate`` or ``diagnostics`` output (with its covariance,
-        for reports); None for commands.
-    joint : str
-        With several joints in one node (:mod:`~genbacklash_ros.node.multijoint`): the joint
-        an ``estimate`` or ``diagnostics`` output is about (an estimate goes to
-        ``~/<joint>/estimate``); "" for a single joint's outputs and for the compensated
-        command.
-    """
-
-    topic: TopicKey
-    message: CommandMessage | Float64MultiArray | DiagnosticArray
-    stamp_ns: int
-    estimate: Estimate | None = None
-    joint: str = ""
-
-
-@dataclass(frozen=True)
-class PipelineStats:
-    """Counters since construction (a snapshot).
-
-    ``dropped`` maps each reason key (``command_invalid``, ``command_duplicate``,
-    ``command_out_of_order``, the same for ``encoder_``, ``identifier_error``,
-    ``before_first_command``, ``encoder_spike``, ``encoder_stuck``, ``encoder_after_gap``,
-    ``identifier_behind``) to a count; ``last_problem`` is the latest reason text.
-    """
-
-    commands: int
-    encoder_messages: int
-    samples: int
-    compensated: int
-    checkpoints: int
-    checkpoint_errors: int
-    dropped: MappingProxyType[str, int]
-    last_problem: str
-
-
-@dataclass(frozen=True, slots=True)
-class BatchOutputs:
-    """What :meth:`BacklashPipeline.on_batch` made of a batch of messages.
-
-    Attributes
-    ----------
-    accepted : numpy.ndarray of bool
-        Per message: a command the pipeline accepted (it has a compensated command).
-    stamps : numpy.ndarray of int64
-        Per message: an accepted command's time (0 for the others).
-    sent : numpy.ndarray of float
-        Per message: an accepted command's compensated value (NaN for the others).
-    outputs : list of (int, Output)
-        The periodic outputs (estimates, diagnostics), each with the index of the message
-        that made it due, in order; compensated commands are in ``sent`` instead.
-    """
-
-    accepted: np.ndarray
-    stamps: np.ndarray
-    sent: np.ndarray
-    outputs: list[tuple[int, Output]]
-
-
-class _BatchResult:
-    """What :meth:`BacklashPipeline.on_batch` fills in as it goes."""
-
-    __slots__ = ("_sent", "_stamps", "_where", "accepted", "outputs", "sent", "stamps")
-
-    def __init__(self, n: int) -> None:
-        self.accepted = np.zeros(n, dtype=bool)
-        self.stamps = np.zeros(n, dtype=np.int64)
-        self.sent = np.full(n, math.nan)
-        self.outputs: list[tuple[int, Output]] = []
-        # the stretches' accepted commands, put in the arrays once at the end
-        self._where: list[int] = []
-        self._stamps: list[int] = []
-        self._sent: list[float] = []
-
-    def commands(self, where: list[int], stamps: list[int], sent: list[float]) -> None:
-        """Accepted commands at the messages ``where``: their times and compensated values."""
-        self._where += where
-        self._stamps += stamps
-        self._sent += sent
-
-    def done(self) -> BatchOutputs:
-        """The batch's outputs."""
-        if self._where:
-            where = np.array(self._where, dtype=np.intp)
-            self.accepted[where] = True
-            self.stamps[where] = self._stamps
-            self.sent[where] = self._sent
-        return BatchOutputs(self.accepted, self.stamps, self.sent, self.outputs)
-
-
-def _seen(
-    view: BlockView, i: int, end: int, c0: int, c1: int, e0: int, e1: int, commands: bool
-) -> tuple[int, int, int] | None:
-    """What :meth:`SilentStreams.arrived_many` needs of one stream over ``i .. end - 1``."""
-    own_pos, own_count = (view.cmd_pos, c1 - c0) if commands else (view.enc_pos, e1 - e0)
-    other_pos, other_rx, o0, o1 = (
-        (view.enc_pos, view.enc_rx, e0, e1) if commands else (view.cmd_pos, view.cmd_rx, c0, c1)
-    )
-    own_rx = view.cmd_rx if commands else view.enc_rx
-    if own_count:
-        last_own = (c1 if commands else e1) - 1
-        after = bisect.bisect_right(other_pos, own_pos[last_own], o0, o1)
-        first = other_rx[after] if after < o1 else -1
-        return own_rx[last_own], o1 - after, first
-    if o1 > o0:
-        return -1, o1 - o0, other_rx[o0]
-    return None
-
-
-def _first_at(times: np.ndarray, due: int, start: int, end: int) -> int:
-    """The first message of ``start .. end - 1`` whose time is ``due`` or later (``end``:
-    none); the times need not be in order. Two array methods, not ``np.flatnonzero``'s
-    wrappers: it runs at every stretch."""
-    late = times[start:end] >= due
-    return start + int(late.argmax()) if late.any() else end
-
-
-_STRETCH_MAX = 8192  # messages looked at for one stretch at most
-_NOT_JUDGED = object()
-
-
 def _order_text(stream: str, stamp: int, last: int) -> str:
     """Why a message of ``stream`` at ``stamp`` is dropped after one at ``last``."""
     text = f"{stream} time {stamp} ns is not after the previous {last} ns"
     return text if stamp == last else f"{text} ({(last - stamp) / 1e9:.3f} s back)"
-
-
-def _play(model: object) -> float | None:
-    """``c_L + c_R`` of a model's backlash (None without a model)."""
-    if isinstance(model, Cascade):
-        model = model.backlash
-    if isinstance(model, GeneralBacklash):
-        return float(model.c_left + model.c_right)
-    return None
 
 
 class BacklashPipeline:
@@ -452,7 +322,6 @@ class BacklashPipeline:
         )
         self._wait = command_wait_ns
         self._batch = batch
-        self._closing = -1  # batch path: the message whose reading closes the rate window
         self._make_worker = worker
         self._ledger = Ledger()
         self._health = StreamHealth()
@@ -464,6 +333,8 @@ class BacklashPipeline:
             checkpoint_ns=self._checkpoint_period(),
             feed_ns=batch_ns,
         )
+        # the batch form's quiet stretches (bound to the stages at each start)
+        self._stretches = QuietStretches(self._clock, self._health, self._silence, self._ledger)
         self._worker: IdentifierWorker | None = None
         # the time of a command answered by answer_value whose periodic step has not run
         # yet (periodic() runs it), and periodic outputs made but not taken yet
@@ -516,29 +387,12 @@ class BacklashPipeline:
         )
         self._screen = Screen(bridge=params.model == "backlash")
         self._comp = CompensateStage(params.compensator_options(), compensate=params.compensate)
-        self._guard = CompensationGuard(params.guard_settings())
-        self._tracking = TrackingStage(params.judge_settings())
-        # a checkpoint that holds its record's tracking without compensation: the judge
-        # starts from it, and the model waits for the guard's first verdict on live samples
-        # (min_samples of them): a load that coasts into the play or a coupling that rings
-        # is perturbed for the rest of a record by a trial of a second at a tenth of its
-        # weight (BENCHMARKS.md, issue 23, base-1), and the guard tells them apart first
-        self._await_guard = start.prior is not None and start.baseline is not None
-        self._guard_off = False  # the guard's last verdict was "off"
-        judge = self._tracking.judge
-        if self._await_guard:
-            assert start.baseline is not None
-            judge.start_from(start.baseline)
-        if start.prior is not None:
-            play = _play(start.prior.model)
-            if play is not None:  # the judge knows the play of the model it judges
-                judge.new_model(play)
-            if start.harm is not None:
-                # the model the last node measured tracking worse than without stays off
-                # until a new model or the retry, as in a running node (BENCHMARKS.md,
-                # issue 23: a restart that tried it again tracked 2.4 % worse)
-                judge.hold(start.harm)
-        self._set_trust()  # a checkpoint's model is judged from its first command
+        judges = CompensationJudges(params, self._comp, start)
+        self._judges = judges
+        self._guard, self._tracking = judges.guard, judges.tracking  # (one look-up less)
+        self._stretches.bind(
+            self._align, self._comp, self._use, self._tracking, in_loop=self._in_loop
+        )
         self._feed_at_count = self._batch
         self._clock.restart()
 
@@ -562,9 +416,7 @@ class BacklashPipeline:
             )
             return
         self._comp.reconfigure(params.compensator_options(), compensate=params.compensate)
-        self._guard.configure(params.guard_settings())
-        self._tracking.judge.configure(params.judge_settings())
-        self._set_trust()
+        self._judges.configure(params)
         self._problems(self._comp.problems)
         self._clock.configure(
             publish_ns=params.publish_period_ns, checkpoint_ns=self._checkpoint_period()
@@ -621,19 +473,7 @@ class BacklashPipeline:
         """
         if self._params.servo() is None:
             return None
-        align = self._align
-        model, fit = align.servo, align.servo_fit
-        if align.servo_pending:
-            return {"state": "estimating", "window": self._params.servo_window}
-        assert model is not None
-        out: dict[str, object] = dict(model.to_dict())
-        if align.servo_note:
-            out.update(state="none", note=align.servo_note)
-        elif fit is not None:
-            out.update(state="estimated", misfit=fit.misfit, misfit_without=fit.none_misfit)
-        else:
-            out["state"] = "fixed"
-        return out
+        return servo_summary(self._align, self._params.servo_window)
 
     @property
     def using_checkpoint(self) -> bool:
@@ -816,7 +656,7 @@ class BacklashPipeline:
             self._params.stamp_source == "header",
         )
         n = view.n
-        out = _BatchResult(n)
+        out = BatchCollector(n)
         i = 0
         while i < n:
             end, ended = self._quiet(view, i, out)
@@ -841,269 +681,29 @@ class BacklashPipeline:
             i += 1
         return out.done()
 
-    def _quiet(self, view: BlockView, i: int, out: _BatchResult) -> tuple[int, bool]:
+    def _quiet(self, view: BlockView, i: int, out: BatchCollector) -> tuple[int, bool]:
         """Take the messages from ``i`` on that make nothing happen but bookkeeping in one
-        step (see :meth:`on_batch`): where they end, and whether the stretch ended by itself
-        (else the message there takes the per-message path)."""
+        step (see :meth:`on_batch` and :mod:`~genbacklash_ros.node.stretch`): where they
+        end, and whether the stretch ended by itself (else the message there takes the
+        per-message path)."""
         self._take_results()
-        clock = self._clock
-        due = clock.next_due
-        now = clock.now
-        if due is None or now is None or now >= due or self._align.motor:
-            return i, False  # (a motor encoder's input: every message by itself)
-        self._closing = -1
-        end = min(view.n, i + _STRETCH_MAX)
-        feeds = view.enc_before[i] + self._to_feed() - 1
-        if feeds < len(view.enc_pos):  # the reading that feeds ends it at the latest
-            end = min(end, view.enc_pos[feeds] + 1)
-        natural = end  # where the stretch ends by itself (its last message's steps made)
-        k = bisect.bisect_left(view.nonfinite, i)
-        if k < len(view.nonfinite):
-            end = min(end, view.nonfinite[k])
-        marks: list[int] = []  # commands at which an estimate (or nothing) comes due
-        if end > i:
-            late = _first_at(view.times, due, i, end)  # a periodic step is due
-            if late < end:
-                end = natural = self._periodic_end(view, late, end, marks)
+        stretches = self._stretches
+        end, natural, marks = stretches.find(view, i, self._feed_at_count)
         if end == i:
             return i, False
-        c0, e0 = view.cmd_before[i], view.enc_before[i]
-        if view.cmd_before[end] > c0:
-            end = self._commands_end(view, i, c0, end)
-        if view.enc_before[end] > e0:
-            end = self._readings_end(view, e0, c0, end)
-        if end > i:
-            self._take_stretch(view, i, end, out, marks)
-        return end, end == natural or end - 1 == self._closing
+        stretches.take(view, i, end, out)
+        self._stretch_steps(view, i, end, out, marks)
+        return end, end == natural or end - 1 == stretches.closing
 
-    def _to_feed(self) -> int:
-        """Encoder readings to accept until the identifier is fed (the last of them feeds)."""
-        return max(self._feed_at_count - self._align.pending, 1)
-
-    def _periodic_end(self, view: BlockView, p: int, end: int, marks: list[int]) -> int:
-        """Where a stretch whose message ``p`` is the first with a periodic step due ends
-        (at most ``end``); appends to ``marks`` the commands inside it where steps are due.
-
-        A command's message steps only the estimate (:meth:`_advance` with ``heavy``
-        False): while no diagnostics report is due either, the stretch goes on through it
-        and :meth:`_take_stretch` makes the step there. An encoder reading (it may feed) or
-        a report (it counts what came before) ends the stretch: the message is its last,
-        whose steps :meth:`_take_stretch` makes after all the stretch's bookkeeping, as the
-        per-message path makes them. What comes due next is worked out on a copy of the
-        schedule, with the steps the stretch would make.
-        """
-        clock = self._clock.copy()
-        times, cmd_before = view.times, view.cmd_before
-        while True:
-            if cmd_before[p + 1] == cmd_before[p]:  # an encoder reading
-                return p + 1
-            clock.tick(int(times[p]))
-            now = clock.now
-            assert now is not None
-            due = clock.due(now)
-            if due.diagnostics:
-                return p + 1
-            marks.append(p)
-            if due.estimate:
-                clock.estimate_done(now)
-            clock.settle()
-            after = clock.next_due
-            assert after is not None
-            p += 1
-            if after > now:  # else (a feed due) the next message has a step due
-                p = _first_at(times, after, p, end)
-            if p >= end:
-                return end
-
-    def _commands_end(self, view: BlockView, i: int, c0: int, end: int) -> int:
-        """Where the stretch from ``i`` ends for its commands (ordinals from ``c0``)."""
-        c1 = view.cmd_before[end]
-        first = view.cmd_pos[c0]
-        health = self._health
-        if self._in_loop or not self._comp.ready(self._use.current) or not health.commands_quiet():
-            return first
-        last = self._align.last_cmd_ns
-        if last is not None and view.cmd_t[c0] <= last:
-            return first
-        stop = min(c1, c0 + max(self._align.room, 0))
-        options = self._comp.options
-        for found, after in (
-            (view.cmd_disorder, c0 + 1),  # the first command was checked against the state
-            (view.saturated(options.u_min, options.u_max), c0),
-        ):
-            k = bisect.bisect_left(found, after)
-            if k < len(found) and found[k] < stop:
-                stop = found[k]
-        # late commands: more than the silence limit after the last reading
-        silence = health.silence_ns
-        known = health.last_encoder_receive
-        e0 = view.enc_before[i]
-        o = c0
-        while o < stop and view.cmd_prev_enc[o] < e0:  # no reading of this stretch before it
-            if known is not None and view.cmd_rx[o] - known > silence:
-                stop = o
-            o += 1
-        k = bisect.bisect_left(view.cmd_late, o)
-        while k < len(view.cmd_late) and view.cmd_late[k] < stop:
-            if view.cmd_gap[view.cmd_late[k]] > silence:
-                stop = view.cmd_late[k]
-                break
-            k += 1
-        return view.cmd_pos[stop] if stop < c1 else end
-
-    def _readings_end(self, view: BlockView, e0: int, c0: int, end: int) -> int:
-        """Where the stretch ends for its encoder readings (ordinals from ``e0``; the
-        stretch's commands from ordinal ``c0``)."""
-        e1 = view.enc_before[end]
-        first = view.enc_pos[e0]
-        align, health = self._align, self._health
-        last, previous = align.last_enc_ns, align.last_y
-        if last is None or previous is None or not health.readings_quiet():
-            return first
-        t = view.enc_t
-        silence = health.silence_ns
-        if t[e0] <= last or t[e0] - last > silence:
-            return first
-        stop = min(e1, e0 + self._to_feed())  # the last reading feeds
-        k = bisect.bisect_right(view.enc_disorder, e0)
-        if k < len(view.enc_disorder) and view.enc_disorder[k] < stop:
-            stop = view.enc_disorder[k]
-        k = bisect.bisect_right(view.enc_long, e0)
-        while k < len(view.enc_long) and view.enc_long[k] < stop:
-            if view.enc_step[view.enc_long[k] - 1] > silence:
-                stop = view.enc_long[k]
-                break
-            k += 1
-        start, count = health.rate_window
-        low = e0 + max(LOSS_WINDOW_READINGS - count - 1, 1 if start is None else 0)
-        closing = e1
-        if low < stop:  # the readings up to stop are in order: bisect their times
-            base = last if start is None else start
-            closing = bisect.bisect_left(t, base + LOSS_WINDOW_NS, low, stop)
-            if closing < stop:  # it closes the rate window: the stretch's last message
-                stop = closing + 1
-        if stop > e0:
-            stop = self._stuck_end(view, e0, c0, stop)
-        if stop == closing + 1:
-            self._closing = view.enc_pos[closing]
-            return self._closing + 1
-        return view.enc_pos[stop] if stop < e1 else end
-
-    def _stuck_end(self, view: BlockView, e0: int, c0: int, stop: int) -> int:
-        """Where the readings ``e0 .. stop - 1`` stop being quiet for the stuck-encoder
-        check: the first one :meth:`StreamHealth.check_reading` would find stuck (the
-        stretch's commands, from ordinal ``c0``, count from when they come).
-
-        The still run the stretch starts in (or that its first reading starts) is judged
-        here, once for each command it holds (:meth:`StreamHealth.stuck_reason`, the
-        per-message test itself); a later run that lasts ``STUCK_NS`` within the stretch
-        ends it (its reading goes the per-message way, and the next stretch starts in it).
-        """
-        t, y = view.enc_t, view.enc_y
-        align, health = self._align, self._health
-        k = bisect.bisect_right(view.enc_changed, e0)
-        run_end = min(view.enc_changed[k] if k < len(view.enc_changed) else stop, stop)
-        k = bisect.bisect_left(view.enc_still, run_end)
-        if k < len(view.enc_still) and view.enc_still[k] < stop:
-            stop = view.enc_still[k]  # a run that began in the stretch lasts STUCK_NS
-        run_end = min(run_end, stop)
-        if y[e0] == align.last_y:  # the run goes on from before the stretch
-            since, begin = health.still_since, e0
-            since = align.last_enc_ns if since is None else since
-        else:  # the run starts at e0
-            since, begin = t[e0], e0 + 1
-        assert since is not None
-        o = bisect.bisect_left(t, since + STUCK_NS, begin, run_end)
-        if o >= run_end:
-            return stop
-        # candidates o .. run_end - 1: judged at each command they hold (the command in
-        # force STUCK_INPUT_NS before the reading, among those that came before it)
-        est = self._use.current
-        value = y[o]
-        known_t, known_u = align.cmd_t, align.cmd_u  # the commands before the stretch
-        n_known = len(known_t)  # and the stretch's own from ordinal c0, as they come
-        c_end = view.cmd_before[view.enc_pos[run_end - 1]]
-        total = n_known + c_end - c0
-
-        def time_of(j: int) -> int:
-            return known_t[j] if j < n_known else view.cmd_t[c0 + j - n_known]
-
-        judged: object = _NOT_JUDGED  # the command judged last (a dwell repeats one)
-        while o < run_end:
-            at = t[o] - STUCK_INPUT_NS
-            count = bisect.bisect_right(known_t, at)
-            if count == n_known:
-                count += bisect.bisect_right(view.cmd_t, at, c0, c_end) - c0
-            came = n_known + view.cmd_before[view.enc_pos[o]] - c0
-            j = min(count, came) - 1
-            held = None if j < 0 else known_u[j] if j < n_known else view.cmd_u[c0 + j - n_known]
-            if held != judged:  # else the same reading, estimate and command: the same answer
-                if health.stuck_reason(value, held, est):
-                    return o
-                judged = held
-            if count > came:  # held back by a command not come yet: the next reading
-                o += 1
-            elif j + 1 < total:  # the next command holds from its time + STUCK_INPUT_NS
-                o = bisect.bisect_left(t, time_of(j + 1) + STUCK_INPUT_NS, o + 1, run_end)
-            else:
-                break
-        return stop
-
-    def _take_stretch(
-        self, view: BlockView, i: int, end: int, out: _BatchResult, marks: list[int]
+    def _stretch_steps(
+        self, view: BlockView, i: int, end: int, out: BatchCollector, marks: list[int]
     ) -> None:
-        """Accept the messages ``i .. end - 1`` (all quiet) in one step; at the commands of
-        ``marks`` the periodic steps due, and at the last message what the per-message path
-        does after its bookkeeping (the feed when its reading brings the pending readings to
-        the feed count, the periodic steps due), as that path does them."""
-        c0, c1 = view.cmd_before[i], view.cmd_before[end]
+        """After a stretch ``i .. end - 1`` was taken: at the commands of ``marks`` the
+        periodic steps due, and at the last message what the per-message path does after
+        its bookkeeping (the feed when its reading brings the pending readings to the feed
+        count, the periodic steps due), as that path does them."""
         e0, e1 = view.enc_before[i], view.enc_before[end]
-        align, health, led = self._align, self._health, self._ledger
-        self._silence.arrived_many(
-            _seen(view, i, end, c0, c1, e0, e1, True), _seen(view, i, end, c0, c1, e0, e1, False)
-        )
-        stamps: list[int] = []
-        values: list[float] = []
-        if c1 > c0:
-            est = self._use.current
-            comp = self._comp
-            last_y = align.last_y
-            values = view.cmd_u[c0:c1]
-            sent = comp.commands(values, est, last_y=last_y)  # no fault active in a stretch
-            health.accept_commands()
-            stamps = view.cmd_t[c0:c1]
-            align.add_commands(stamps, values)
-            led.commands += c1 - c0
-            led.compensated += c1 - c0
-            out.commands(view.cmd_pos[c0:c1], stamps, sent)
-        if e1 > e0:
-            last = align.last_enc_ns
-            assert last is not None
-            t, y = view.enc_t, view.enc_y
-            gaps = [t[e0] - last, *view.enc_step[e0 : e1 - 1]]
-            final = e1 - 1
-            if (y[final] != y[final - 1]) if final > e0 else (y[e0] != align.last_y):
-                still = None
-            else:
-                k = bisect.bisect_right(view.enc_changed, final) - 1
-                if k >= 0 and view.enc_changed[k] > e0:
-                    still = t[view.enc_changed[k]]
-                elif y[e0] != align.last_y:
-                    still = t[e0]
-                else:
-                    still = health.still_since
-                    still = last if still is None else still
-            health.accept_readings(last, gaps, view.enc_rx[final], still)
-            align.add_readings(t[e0:e1], y[e0:e1], gaps)
-            led.encoders += e1 - e0
-        self._tracking.stretch(
-            view.cmd_pos[c0:c1],
-            values,
-            self._comp.last_weight,
-            view.enc_pos[e0:e1],
-            view.enc_t[e0:e1],
-            view.enc_y[e0:e1],
-        )
+        align, health = self._align, self._health
         outputs: list[Output] = []
         last = end - 1
         for p in marks:  # before the clock moves past them (in order)
@@ -1116,7 +716,7 @@ class BacklashPipeline:
             self._clock.tick(int(view.times[i:last].max()))
         # the last message, as on_encoder_value / on_command_value end
         reading = e1 > e0 and view.enc_pos[e1 - 1] == last
-        if last == self._closing:  # its reading closes the rate window
+        if last == self._stretches.closing:  # its reading closes the rate window
             self._events(health.close_rate_window(view.enc_t[e1 - 1]))
         if reading and align.pending >= self._feed_at_count:
             self._feed()
@@ -1269,112 +869,33 @@ class BacklashPipeline:
         per-report drop counts. ``stale`` reports level STALE (e.g. a transport's wall-clock
         watchdog when no data arrive)."""
         est = self.estimate
-        use = self._use
-        level = level_of(est.state)
-        parts = [f"{est.state.value}: {est.reason}" if est.reason else est.state.value]
-        if use.on_prior:
-            parts.insert(0, "using the checkpoint's estimate until the identifier converges")
-        elif use.using_checkpoint:
-            parts.insert(0, "continuing from the checkpoint's estimate")
+        params = self._params
+        # the reports that reset per-report counts, in this order
         health = self._health.report(stamp_ns)
-        passing = health.passing
-        level = max(level, health.level)
-        parts.extend(health.parts)
-        silent = self._silence.report(self._params.command_type, self._params.encoder_type)
-        if silent.parts:
-            level = max(level, silent.level)
-            parts.extend(silent.parts)
-        led = self._ledger
-        period = led.take_period()
-        loud = {k: n for k, n in period.drops.items() if k not in QUIET_DROPS}
-        if loud:
-            level = max(level, DiagnosticStatus.WARN)
-            listed = "; ".join(
-                f"{n} {k.replace('_', ' ')} (last: {period.reasons[k]})" for k, n in loud.items()
-            )
-            parts.append(f"dropped since the last report: {listed}")
-        if period.problems:
-            level = max(level, DiagnosticStatus.WARN)
-            parts.extend(period.problems)
+        silent = self._silence.report(params.command_type, params.encoder_type)
+        period = self._ledger.take_period()
         guard = self._guard.verdict
         measured = self._tracking.verdict
-        status = self._comp.status(est, health.active if passing else (), guard, measured)
-        if self._await_guard and est.available and self._params.compensate:
-            parts.append(
-                "compensation held off until the guard has judged the checkpoint's model on "
-                "this machine's samples"
-            )
-        if est.available and self._params.compensate and guard.state in ("faded", "off"):
-            parts.append(guard.reason)
-            if guard.state == "off":
-                level = max(level, DiagnosticStatus.WARN)
-        if est.available and self._params.compensate and measured.state in ("faded", "off"):
-            parts.append(measured.reason)
-            if measured.state == "off":
-                level = max(level, DiagnosticStatus.WARN)
-        if measured.state == "watching" and "compensation_in_loop true" in measured.reason:
-            parts.append(measured.reason)  # the compensated command drives the drivetrain
-            level = max(level, DiagnosticStatus.WARN)
-        if stale:
-            level = DiagnosticStatus.STALE
-            parts.insert(0, "no data")
-        source = "checkpoint" if use.using_checkpoint else "identifier"
-        own = use.own
-        extra = [
-            ("estimate_source", source if est.available else "none"),
-            ("identifier_state", own.state.value),
-            ("identifier_confidence", format(own.confidence, ".3g")),
-            ("compensation_weight", format(status.weight, ".3g")),
-            ("compensation_state", status.state),
-            ("compensation_reason", status.reason),
-            ("compensation_guard", guard.state),
-            ("compensation_trust", format(guard.trust, ".3g")),
-            ("guard_error_ratio", format(guard.ratio, ".3g") if guard.ratio < math.inf else "none"),
-            ("measured_tracking", measured.state),
-            (
-                "measured_tracking_baseline",
-                "offline baseline from the checkpoint"
-                if measured.baseline == "offline"
-                else "measured",
-            ),
-            (
-                "measured_tracking_ratio",
-                format(measured.ratio, ".3g") if math.isfinite(measured.ratio) else "none",
-            ),
-            ("faults", ",".join(health.active) or "none"),
-            ("commands", str(led.commands)),
-            ("encoder_messages", str(led.encoders)),
-            ("compensated_commands", str(led.compensated)),
-            ("identifier_samples", str(led.samples)),
-            ("checkpoints", str(led.checkpoints)),
-            ("checkpoint_errors", str(led.checkpoint_errors)),
-        ]
-        extra += [
-            (f"dropped_{k}", str(n)) for k, n in led.dropped.items() if n or k not in SHOWN_WHEN_ANY
-        ]
-        extra += silent.values
-        saved = led.last_checkpoint_ns
-        extra.append(("last_checkpoint_s", "none" if saved is None else f"{saved / 1e9:.3f}"))
-        if self.warm_start_note:
-            extra.append(("warm_start", self.warm_start_note))
-        servo = self.servo
-        if servo is not None:  # the servo model the identifier's input goes through
-            extra.append(("servo_state", str(servo["state"])))
-            for key in ("dead_time", "time_constant"):
-                if key in servo:
-                    extra.append((f"servo_{key}", format(float(servo[key]), ".6g")))  # type: ignore[arg-type]
-            if "note" in servo:
-                extra.append(("servo_note", str(servo["note"])))
-        message = diagnostic_array(
+        status = self._comp.status(est, health.active if health.passing else (), guard, measured)
+        return status_output(
             stamp_ns,
             est,
-            level=level,
-            message="; ".join(parts),
+            use=self._use,
+            health=health,
+            silent=silent,
+            period=period,
+            ledger=self._ledger,
+            guard=guard,
+            measured=measured,
+            status=status,
+            compensate=params.compensate,
+            await_guard=self._judges.await_guard,
+            warm_start_note=self.warm_start_note,
+            servo=self.servo,
             name=self._status_name,
-            hardware_id=self._params.joint,
-            extra=extra,
+            hardware_id=params.joint,
+            stale=stale,
         )
-        return Output("diagnostics", message, stamp_ns, est)
 
     # ------------------------------------------------------------------ the stages
 
@@ -1409,9 +930,9 @@ class BacklashPipeline:
         if screened.size == 0:
             return
         # does compensating with the model in use help on these samples? (fades it if not)
-        self._guard.update(screened.us, screened.ys, screened.breaks, self._use.current.model)
-        self._tracking.flush()  # and the tracking measured on every reading since
-        self._set_trust()
+        self._judges.judge_samples(
+            screened.us, screened.ys, screened.breaks, self._use.current.model
+        )
         assert self._worker is not None
         self._worker.submit(screened.us, screened.ys, screened.breaks)
         self._take_results()
@@ -1435,31 +956,10 @@ class BacklashPipeline:
                 self._drop("identifier_behind", result.reason, result.samples)
         if adopted is not None:
             # the new model judged at once on the samples the guard remembers
-            model = self._use.current.model
-            self._guard.adopt(model)
-            play = _play(model)
-            if play is not None:
-                self._tracking.judge.new_model(play)
-            self._set_trust()
+            self._judges.adopt(self._use.current.model)
             self._comp.adopt(self._use.current, self._align.last_y)
             if self._comp.problems:
                 self._problems(self._comp.problems)
-
-    def _set_trust(self) -> None:
-        """The compensator's trust (the guard's judgement of the model) and share (the
-        judge's of the tracking measured)."""
-        guard = self._guard.verdict
-        self._comp.trust = guard.trust
-        off = guard.state == "off"
-        if self._guard_off and not off:
-            # back after the guard held it off: measured afresh, with a trial (the judge)
-            self._tracking.judge.resume()
-        self._guard_off = off
-        if self._await_guard and (
-            guard.samples >= self._guard.settings.min_samples or not self._guard.settings.enabled
-        ):
-            self._await_guard = False
-        self._comp.share = 0.0 if self._await_guard else self._tracking.verdict.trust
 
     def _advance(self, stamp: int, outputs: list[Output], *, heavy: bool) -> None:
         """Move the data clock to ``stamp``; append the periodic outputs now due.
@@ -1501,65 +1001,22 @@ class BacklashPipeline:
         self._built_estimate = (est, message)
         return message
 
-    def _baseline(self) -> OfflineBaseline | None:
-        """The tracking without compensation a checkpoint stores, for the next start's judge.
-
-        A stored baseline lets the next start compensate after the guard's first verdict
-        instead of after ``min_time`` of baseline. That shortcut is taken only where this
-        node measured compensation helping on this machine, so with ``compensation_in_loop``:
-
-        * when the judge has measured compensating keep at most :data:`STORE_RATIO` of the
-          tracking error over at least ``min_time`` of compensated readings (its state
-          ``"on"`` with a clear cut, or a probe after it): the judge's live baseline once it holds
-          ``min_time`` seconds of it
-          (:meth:`~genbacklash_core.measured.TrackingJudge.live_baseline`: the readings
-          while the command went out as it came, weight 0: before the first estimate,
-          while the guard or the judge held compensation off, in probes), else
-          the baseline this start took from its checkpoint, carried forward unchanged
-          (:attr:`~genbacklash_core.measured.TrackingJudge.offline`);
-        * else none: compensation not measured yet (``compensate`` false, the guard holding
-          it off, a trial), helping only a little, faded or judged harmful; the next start
-          measures its baseline first. Measured on physics restarts (BENCHMARKS.md, issue
-          23, ckpt-1): a baseline stored whenever one was measured let restarts on
-          compliant drivetrains, whose first node never compensated, try compensation on
-          the guard's first verdict and track 3 % worse than without it; stored whenever
-          compensation was "on" (ratio up to ``ratio_full``), 7.8 % worse on one whose
-          first node had cut 6 %. The shortcut is worth about a second of compensation,
-          which matters where compensation cuts most of the error.
-
-        Without ``compensation_in_loop`` the node cannot tell which readings went without
-        compensation on the machine (it only watches, and its weights are its own, not what
-        drove the drivetrain): it stores nothing it measured, and carries forward the
-        baseline its start took, if any.
-        """
-        judge = self._tracking.judge
-        if not self._in_loop:
-            return judge.offline
-        verdict, settings = judge.verdict, judge.settings
-        helped = verdict.on_time >= settings.min_time and verdict.ratio <= STORE_RATIO
-        if not helped:
-            return None
-        live = judge.live_baseline()
-        return live if live is not None else judge.offline
-
-    def _harm(self) -> HeldHarm | None:
-        """The judge's verdict of harm a checkpoint stores, for the next start to hold.
-
-        With ``compensation_in_loop``, while the judge holds compensation off because it
-        measured it tracking worse than without: the next start holds that model off too,
-        until a new model or the retry (counted on), instead of trying it again after its
-        baseline. Without it the judge never judges harm: none.
-        """
-        return self._tracking.judge.held_harm() if self._in_loop else None
-
     def _checkpoint(self, now: int) -> None:
         path = self._checkpoint_path
         est = self._use.own
         if path is None or not est.available:
             return
-        led = self._ledger
+        led, tracking, in_loop = self._ledger, self._tracking, self._in_loop
         try:
-            self._writer(path, Checkpoint(est, now, baseline=self._baseline(), harm=self._harm()))
+            self._writer(
+                path,
+                Checkpoint(
+                    est,
+                    now,
+                    baseline=tracking.baseline_to_store(in_loop=in_loop),
+                    harm=tracking.harm_to_store(in_loop=in_loop),
+                ),
+            )
         except (CheckpointError, OSError) as err:
             led.checkpoint_errors += 1
             self._problem(f"checkpoint not saved: {err}")

@@ -11,7 +11,9 @@ it (by the messages' order), so both forms judge the same pairs.
 :func:`record_baseline` runs a stage over a whole record without compensation in it (every
 command with weight 0): what the judge measures as its baseline, which ``identify`` and
 ``replay --checkpoint`` store in the checkpoint
-(:class:`~genbacklash_core.measured.OfflineBaseline`).
+(:class:`~genbacklash_core.measured.OfflineBaseline`). What a node's checkpoint carries of
+the judge for the next start -- the baseline, a verdict of harm -- is the stage's to say
+(:meth:`TrackingStage.baseline_to_store`, :meth:`TrackingStage.harm_to_store`).
 
 Examples
 --------
@@ -33,13 +35,18 @@ from collections.abc import Sequence
 import numpy as np
 
 from genbacklash_core.measured import (
+    HeldHarm,
     OfflineBaseline,
     TrackingJudge,
     TrackingJudgeSettings,
     TrackingVerdict,
 )
 
-__all__ = ["TrackingStage", "record_baseline"]
+__all__ = ["STORE_RATIO", "TrackingStage", "record_baseline"]
+
+STORE_RATIO = 0.5
+"""A checkpoint stores the tracking baseline only once compensating was measured to keep at
+most this share of the tracking error (:meth:`TrackingStage.baseline_to_store`)."""
 
 
 class TrackingStage:
@@ -107,6 +114,58 @@ class TrackingStage:
             self._y.extend(loads)
         if cmd_order:
             self._r, self._w = float(desired[-1]), float(weight)
+
+    def baseline_to_store(self, *, in_loop: bool) -> OfflineBaseline | None:
+        """The tracking without compensation a checkpoint stores, for the next start's judge.
+
+        A stored baseline lets the next start compensate after the guard's first verdict
+        instead of after ``min_time`` of baseline. That shortcut is taken only where this
+        node measured compensation helping on this machine, so with ``compensation_in_loop``
+        (``in_loop``):
+
+        * when the judge has measured compensating keep at most :data:`STORE_RATIO` of the
+          tracking error over at least ``min_time`` of compensated readings (its state
+          ``"on"`` with a clear cut, or a probe after it): the judge's live baseline once it holds
+          ``min_time`` seconds of it
+          (:meth:`~genbacklash_core.measured.TrackingJudge.live_baseline`: the readings
+          while the command went out as it came, weight 0: before the first estimate,
+          while the guard or the judge held compensation off, in probes), else
+          the baseline this start took from its checkpoint, carried forward unchanged
+          (:attr:`~genbacklash_core.measured.TrackingJudge.offline`);
+        * else none: compensation not measured yet (``compensate`` false, the guard holding
+          it off, a trial), helping only a little, faded or judged harmful; the next start
+          measures its baseline first. Measured on physics restarts (BENCHMARKS.md, issue
+          23, ckpt-1): a baseline stored whenever one was measured let restarts on
+          compliant drivetrains, whose first node never compensated, try compensation on
+          the guard's first verdict and track 3 % worse than without it; stored whenever
+          compensation was "on" (ratio up to ``ratio_full``), 7.8 % worse on one whose
+          first node had cut 6 %. The shortcut is worth about a second of compensation,
+          which matters where compensation cuts most of the error.
+
+        Without ``compensation_in_loop`` the node cannot tell which readings went without
+        compensation on the machine (it only watches, and its weights are its own, not what
+        drove the drivetrain): it stores nothing it measured, and carries forward the
+        baseline its start took, if any.
+        """
+        judge = self.judge
+        if not in_loop:
+            return judge.offline
+        verdict, settings = judge.verdict, judge.settings
+        helped = verdict.on_time >= settings.min_time and verdict.ratio <= STORE_RATIO
+        if not helped:
+            return None
+        live = judge.live_baseline()
+        return live if live is not None else judge.offline
+
+    def harm_to_store(self, *, in_loop: bool) -> HeldHarm | None:
+        """The judge's verdict of harm a checkpoint stores, for the next start to hold.
+
+        With ``compensation_in_loop``, while the judge holds compensation off because it
+        measured it tracking worse than without: the next start holds that model off too,
+        until a new model or the retry (counted on), instead of trying it again after its
+        baseline. Without it the judge never judges harm: none.
+        """
+        return self.judge.held_harm() if in_loop else None
 
     def flush(self) -> TrackingVerdict:
         """Judge the readings gathered; the new verdict."""

@@ -47,7 +47,7 @@ def _replay(
         out = original(self, times, *args)
         if out.keep is not None and any(e.key == "encoder_spike" for e in out.events):
             dropped.update(times[~out.keep].tolist())
-        if self._converged and self._scale is not None:
+        if self._spikes._converged and self._spikes.scale is not None:
             judged.update(times.tolist())
         return out
 

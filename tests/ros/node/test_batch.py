@@ -20,10 +20,11 @@ from hypothesis import strategies as st
 from genbacklash_core.scenarios import OperationSettings, operation_record
 from genbacklash_ros.node.messages import MessageError, read_command, read_encoder
 from genbacklash_ros.node.parameters import NodeParameters
-from genbacklash_ros.node.pipeline import BacklashPipeline, Output, _first_at
+from genbacklash_ros.node.pipeline import BacklashPipeline, Output
 from genbacklash_ros.node.publish import Schedule
 from genbacklash_ros.node.sample_rule import EncoderPeriod
 from genbacklash_ros.node.silence import SilentStreams
+from genbacklash_ros.node.stretch import first_at
 from tests.ros.node.test_faults import FAULTS, PARAMS, Event, Fault, Scenario, drivetrain
 
 # (message index, topic, message, stamp): what the node published, in order
@@ -203,7 +204,7 @@ def test_first_at_is_the_first_late_message(
     array = np.array(times, dtype=np.int64)
     end = min(end, array.size)
     late = np.flatnonzero(array[start:end] >= due)
-    assert _first_at(array, due, start, end) == (start + int(late[0]) if late.size else end)
+    assert first_at(array, due, start, end) == (start + int(late[0]) if late.size else end)
 
 
 def _frozen_encoder_after_a_jump(seed: int, hold_ms: int = 150) -> tuple[list[Event], int]:

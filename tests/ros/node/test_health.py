@@ -210,7 +210,7 @@ def test_a_feed_is_screened_in_steps_whatever_its_size() -> None:
         == [e.key for p in parts for e in p.events]
         == ["encoder_spike"]
     )
-    assert one._scale == many._scale  # the scale followed each step alike
+    assert one._spikes.scale == many._spikes.scale  # the scale followed each step alike
 
 
 COUNT = 2 * np.pi / 4096  # one count of a 4096 counts/rev encoder
@@ -264,7 +264,7 @@ def test_a_band_that_lags_the_wear_is_no_spike() -> None:
     times, u, y, resumed = _jogs(20, 4 * COUNT)
     health = StreamHealth()
     assert _screen_steps(health, times, u, y, resumed) == []
-    assert health._shift[0] < -2 * COUNT  # the screen learnt where the lower edge is
+    assert health._spikes._shift[0] < -2 * COUNT  # the screen learnt where the lower edge is
 
 
 def test_spikes_are_still_caught_on_a_lagging_band() -> None:

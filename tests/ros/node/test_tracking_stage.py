@@ -13,7 +13,7 @@ from genbacklash_core.measured import HeldHarm, OfflineBaseline, TrackingJudgeSe
 from genbacklash_ros.node.checkpoint import load_checkpoint, save_checkpoint
 from genbacklash_ros.node.parameters import NodeParameters
 from genbacklash_ros.node.pipeline import BacklashPipeline
-from genbacklash_ros.node.tracking_stage import record_baseline
+from genbacklash_ros.node.tracking_stage import TrackingStage, record_baseline
 
 MS = 1_000_000
 
@@ -156,8 +156,8 @@ def test_a_baseline_is_stored_only_where_compensation_clearly_helped(
     kept: float, stored: bool
 ) -> None:
     # the judge fed directly: 4 s without compensation, then 8 s keeping `kept` of the error
-    pipe = BacklashPipeline(NodeParameters(compensation_in_loop=True))
-    judge = pipe._tracking.judge
+    stage = TrackingStage(NodeParameters(compensation_in_loop=True).judge_settings())
+    judge = stage.judge
     rng = np.random.default_rng(0)
     last = 0
     for seconds, rms, weight in ((4.0, 0.04, 0.0), (8.0, 0.04 * kept, 1.0)):
@@ -168,7 +168,10 @@ def test_a_baseline_is_stored_only_where_compensation_clearly_helped(
     assert judge.verdict.state == "on"  # both: compensation kept on, ratio below 0.9
     assert judge.verdict.ratio == pytest.approx(kept, rel=0.15)
     expected = judge.live_baseline() if stored else None
-    assert pipe._baseline() == expected and (expected is not None) == stored
+    assert stage.baseline_to_store(in_loop=True) == expected and (expected is not None) == stored
+    # a node that only watches stores nothing it measured: its start's baseline (none here)
+    assert stage.baseline_to_store(in_loop=False) is None
+    assert stage.harm_to_store(in_loop=False) is None
 
 
 def _play_of(pipe: BacklashPipeline) -> float:
@@ -222,13 +225,13 @@ def test_compensation_back_after_the_guard_held_it_off_is_tried_again(tmp_path: 
     _loop(pipe, 0, 14.0)
     assert pipe.measured.state == "on" and pipe.measured.trust == 1.0
     verdict = pipe.guard
-    pipe._set_trust()  # the guard still on: nothing changes
+    pipe._judges.apply()  # the guard still on: nothing changes
     assert pipe.measured.state == "on"
     pipe._guard.verdict = dataclasses.replace(verdict, trust=0.0, state="off")
-    pipe._set_trust()
+    pipe._judges.apply()
     assert pipe.measured.state == "on"  # the judge's own verdict, the guard's trust apart
     pipe._guard.verdict = verdict
-    pipe._set_trust()
+    pipe._judges.apply()
     measured = pipe.measured
     assert measured.state == "judging" and "trial" in measured.reason
     assert measured.trust < 0.1 and measured.off_time > 3.0  # the baseline is kept
