@@ -21,16 +21,9 @@ recursion on the same bounds (all quantities per sample; the model has no clock)
     ``retention = 0`` is the play operator.
 ``load_torque``
     A torque on the load (gravity, a process force) that beats the load's friction over part
-    of the travel, ``region = (z_1, z_2)``: there the load falls onto one flank (``side`` -1:
-    the lower bound ``lo``, +1: ``hi``) whichever way the gear turns. The load has a velocity
-    ``w >= 0`` towards that flank, which the torque net of friction changes each sample by
-    ``fall (1 - s^2)``, ``s = (z - (z_1 + z_2) / 2) / ((z_2 - z_1) / 2)``: largest mid-region,
-    nothing at its ends, a brake beyond them. That is gravity's ``m g l cos q - F`` to second
-    order about the top of its arc, ``(m g l - F) - m g l q^2 / 2``, whose zeros are where the
-    torque stops beating the friction ``F``; far outside the region the load stops at once and
-    the play operator holds. Moving away from that flank (pushed by it) the load stops at once
-    (the torque and the friction both brake it); at a contact it takes the flank's velocity
-    over ``window`` samples, as a coasting load does.
+    of the travel, ``region = (z_1, z_2)``: there the load rests on one flank (``side`` -1:
+    the lower bound ``lo``, +1: ``hi``) whichever way the gear turns, falling towards it by at
+    most ``fall`` per sample. Outside the region the play operator holds.
 
 The recursions are sequential and nonlinear (a contact is a switch), so they run as plain
 loops over Python floats (about 2-4 microseconds a sample).
@@ -75,8 +68,7 @@ class LoadPhysics:
     friction : float
         Coulomb deceleration of the free load, output units per sample squared, ``>= 0``.
     window : int
-        Samples over which a flank's velocity is averaged (the command's hold length;
-        ``coasting_load``, ``compliant_coupling``'s free load and ``load_torque``).
+        Samples over which a flank's velocity is averaged (the command's hold length).
     stiffness : float
         ``compliant_coupling``: the spring's natural frequency, rad per sample, in ``(0, 1.8]``.
     damping : float
@@ -86,8 +78,7 @@ class LoadPhysics:
     region : tuple of float
         ``load_torque``: the load positions ``(z_1, z_2)`` where it does.
     fall : float
-        ``load_torque``: the load's acceleration towards that flank mid-region (the torque
-        net of friction), output units per sample squared, ``> 0``.
+        ``load_torque``: most the load moves towards that flank per sample, ``> 0``.
 
     Examples
     --------
@@ -167,15 +158,13 @@ class LoadPhysics:
                 x0,
                 (self.stiffness, self.damping, self.retention, self.friction),
             )
-        return _torque(lo, hi, x0, self.side, self.region, (self.fall, self.window))
+        return _torque(lo, hi, x0, self.side, self.region, self.fall)
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON form (only the parameters of its kind)."""
         out: dict[str, Any] = {"kind": self.kind}
         if self.kind in ("coasting_load", "compliant_coupling"):
             out.update(retention=self.retention, friction=self.friction, window=self.window)
-        if self.kind == "load_torque":
-            out.update(window=self.window)
         if self.kind == "compliant_coupling":
             out.update(stiffness=self.stiffness, damping=self.damping)
         if self.kind == "load_torque":
@@ -243,31 +232,20 @@ def _torque(
     x0: float,
     side: int,
     region: tuple[float, float],
-    motion: tuple[float, int],
+    fall: float,
 ) -> FloatArray:
-    """``load_torque`` (module notes); ``motion`` is ``(fall, window)``."""
-    fall, window = motion
+    """``load_torque`` (module notes)."""
     low, high = lo.tolist(), hi.tolist()
     z1, z2 = region
-    middle, half = 0.5 * (z1 + z2), 0.5 * (z2 - z1)
     n = len(low)
     out = [0.0] * n
-    x, w = x0, 0.0  # w: the load's velocity towards the held flank, >= 0
+    x = x0
     for t in range(n):
         bottom, top = low[t], high[t]
-        s = (x - middle) / half if half > 0.0 else math.inf
-        pull = 1.0 - s * s  # m g l cos q - F ~ (m g l - F)(1 - s^2), zero at the region's ends
-        if pull != 0.0:
-            w += fall * pull
-        w = max(w, 0.0)  # a brake stops the load, never turns it
-        free = x + side * w
-        if bottom == top:  # pinned to a reading (a restart): the load keeps its velocity
-            x = bottom
-        elif free < bottom or free > top:  # eq. (20)'s interval: a contact
-            x = bottom if free < bottom else top
-            flank = (x - (out[t - window] if t >= window else x0)) / window
-            w = max(side * flank, 0.0)  # pushed away from the held flank: no fall left
-        else:
-            x = free
+        x = bottom if x < bottom else top if x > top else x  # eq. (20)
+        if z1 <= x <= z2:
+            target = bottom if side < 0 else top
+            step = target - x
+            x = target if abs(step) <= fall else x + math.copysign(fall, step)
         out[t] = x
     return np.asarray(out, dtype=np.float64)

@@ -214,7 +214,7 @@ _PHYSICS_UNITS = {
     "stiffness": "rad per sample (natural frequency)",
     "damping": "damping ratio",
     "side": "-1: held on the lower flank, +1: the upper",
-    "fall": "per sample^2, mid-region (net of friction)",
+    "fall": "per sample, at most",
 }
 
 

@@ -121,46 +121,6 @@ def test_a_coasting_load_keeps_moving_and_a_torque_holds_its_flank() -> None:
     np.testing.assert_allclose(x, down)  # rides the lower flank down (the play never shows)
 
 
-def test_a_torque_accelerates_the_fall_from_rest() -> None:
-    # a torque accelerates the load towards its flank (gravity net of friction), it does not
-    # move it at a constant rate: from rest at the upper flank, mid-region, the load has
-    # fallen fall * (1 + 2 + ... + t) after t samples (the region is wide: its profile ~ 1)
-    n = 30
-    lo, hi = np.zeros(n), np.ones(n)
-    fall = 1e-4
-    x = LoadPhysics("load_torque", side=-1, region=(-1e3, 1e3), fall=fall).simulate(lo, hi, 1.0)
-    steps = np.arange(1, n + 1)
-    np.testing.assert_allclose(1.0 - x, fall * steps * (steps + 1) / 2, rtol=1e-5)
-
-
-def test_a_torque_pulls_most_mid_region_and_brakes_beyond_it() -> None:
-    # gravity's m g l cos q - F to second order: the pull vanishes at the region's ends (a
-    # load at rest there stays) and brakes the load beyond them (it stops past the end, short
-    # of the far flank); the same load released mid-region falls fastest
-    n = 400
-    lo, hi = np.full(n, -5.0), np.full(n, 5.0)
-    torque = LoadPhysics("load_torque", side=-1, region=(0.0, 1.0), fall=1e-3)
-    np.testing.assert_array_equal(torque.simulate(lo, hi, 1.0), np.ones(n))
-    x = torque.simulate(lo, hi, 0.5)
-    assert x[-1] == x[-2] and -1.0 < x[-1] < 0.0  # braked to rest beyond the region's end
-    early = torque.simulate(lo, hi, 0.9)
-    assert 0.5 - x[10] > 0.9 - early[10]  # mid-region the pull is strongest
-
-
-def test_a_torque_restarted_at_a_reading_keeps_its_fall() -> None:
-    # a reading pins the interval (lo = hi, :meth:`ModelSpec.simulate`'s anchors): the load
-    # takes it and falls on at its velocity, it does not take the jump onto the reading as
-    # a flank's velocity (nor stop)
-    n = 40
-    lo, hi = np.zeros(n), np.ones(n)
-    torque = LoadPhysics("load_torque", side=-1, region=(-1e3, 1e3), fall=1e-4)
-    free = torque.simulate(lo, hi, 1.0)
-    shift = 0.01
-    lo[20] = hi[20] = free[20] + shift
-    pinned = torque.simulate(lo, hi, 1.0)
-    np.testing.assert_allclose(pinned[20:], free[20:] + shift, atol=1e-12)
-
-
 def test_load_physics_is_validated() -> None:
     with pytest.raises(GenBacklashError, match="unknown load physics"):
         LoadPhysics("gravity")  # type: ignore[arg-type]

@@ -8,7 +8,7 @@ Where the torque beats the load's friction the play stops showing on reversals: 
 follows the same branch both ways.
 
 Signature: trial regions (the middle half, the middle 80% and all of the travel, each side)
-and fall accelerations (a few to a hundred samples across the play) change the simulated output on
+and fall rates (a few to a hundred samples across the play) change the simulated output on
 the reversals inside them; the best trial's F-test beyond the
 model's Jacobian, Bonferroni over the trials, must pass the screening thresholds.
 Augmentation: side and region on a grid of travel quantiles; the fall rate, both ends of the
@@ -26,19 +26,17 @@ from genbacklash_core.diagnose.model import AugmentedModel
 from genbacklash_core.diagnose.physics import LoadPhysics, PhysicsKind
 
 from ._base import Detection
-from ._physics import command_window, fit_physics, model_play, trial_tests
+from ._physics import fit_physics, model_play, trial_tests
 
 __all__ = ["EFFECT", "LoadTorque"]
 
 _TRIAL_REGIONS = ((0.25, 0.75), (0.1, 0.9), (0.0, 1.0))  # quantiles of the simulated load
 _GRID = (0.0, 0.2, 0.5, 0.8, 1.0)  # region ends tried by the fit (quantiles)
-# The fall's acceleration mid-region, as shares of the play per sample squared: from rest a
-# load crosses the play in sqrt(2 / share) samples. A torque that barely beats the friction
-# takes tens of samples (the gravity drivetrain: m g l 0.12 N m against 0.1 N m of friction,
-# 1e-3 kg m^2: 20 rad/s^2 mid-region, 2e-5 rad a sample squared at 1 kHz, 3e-4 of its 70 mrad
-# of play, ~80 samples across), a strong one a few.
-_TRIAL_FALLS = (3e-4, 3e-3, 0.03)
-_FALLS = (3e-4, 3e-3, 0.03)
+# Fall per sample, as shares of the play: a torque that barely beats the friction takes tens
+# of samples to carry the load across the play (the gravity drivetrain: m g l 0.12 N m against
+# 0.1 N m of friction, 1e-3 kg m^2, ~80 ms across 70 mrad at 1 kHz), a strong one a few.
+_TRIAL_FALLS = (0.01, 0.03, 0.3)
+_FALLS = (0.01, 0.03, 0.1)
 
 
 def _side_name(side: int) -> str:
@@ -61,11 +59,9 @@ class LoadTorque:
         """Trial regions and sides; the best one counts (Bonferroni)."""
         load = context.simulation.load
         play = model_play(context)
-        window = command_window(context.u)
         trials = [
             LoadPhysics(
                 _KIND,
-                window=window,
                 side=side,
                 region=(float(np.quantile(load, a)), float(np.quantile(load, b))),
                 fall=fall * play,
@@ -101,7 +97,6 @@ class LoadTorque:
         load = context.simulation.load
         levels = [float(np.quantile(load, q)) for q in _GRID]
         play = model_play(context)
-        window = command_window(context.u)
         best: ModelFit | None = None
         for side in (-1, 1):
 
@@ -109,7 +104,6 @@ class LoadTorque:
                 low, high = float(z[1]), float(z[2])
                 return LoadPhysics(
                     _KIND,
-                    window=window,
                     side=side,
                     region=(min(low, high), max(low, high)),
                     fall=float(z[0]),
