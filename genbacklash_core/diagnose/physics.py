@@ -23,11 +23,7 @@ recursion on the same bounds (all quantities per sample; the model has no clock)
     A torque on the load (gravity, a process force) that beats the load's friction over part
     of the travel, ``region = (z_1, z_2)``: there the load rests on one flank (``side`` -1:
     the lower bound ``lo``, +1: ``hi``) whichever way the gear turns, falling towards it by at
-    most ``fall (1 - s^2)`` per sample, ``s = (z - (z_1 + z_2) / 2) / ((z_2 - z_1) / 2)``: most
-    mid-region, nothing at its ends, in proportion to gravity's torque net of friction,
-    ``m g l cos q - F``, to second order about the top of its arc, ``(m g l - F) - m g l q^2 /
-    2``, whose zeros are where the torque stops beating the friction ``F``. Outside the region
-    the play operator holds.
+    most ``fall`` per sample. Outside the region the play operator holds.
 
 The recursions are sequential and nonlinear (a contact is a switch), so they run as plain
 loops over Python floats (about 2-4 microseconds a sample).
@@ -82,8 +78,7 @@ class LoadPhysics:
     region : tuple of float
         ``load_torque``: the load positions ``(z_1, z_2)`` where it does.
     fall : float
-        ``load_torque``: most the load moves towards that flank per sample mid-region (the
-        rate falls to nothing at the region's ends), ``> 0``.
+        ``load_torque``: most the load moves towards that flank per sample, ``> 0``.
 
     Examples
     --------
@@ -242,19 +237,15 @@ def _torque(
     """``load_torque`` (module notes)."""
     low, high = lo.tolist(), hi.tolist()
     z1, z2 = region
-    middle, half = 0.5 * (z1 + z2), 0.5 * (z2 - z1)
     n = len(low)
     out = [0.0] * n
     x = x0
     for t in range(n):
         bottom, top = low[t], high[t]
         x = bottom if x < bottom else top if x > top else x  # eq. (20)
-        if z1 <= x <= z2 and half > 0.0:
-            s = (x - middle) / half
-            # gravity's m g l cos q - F ~ (m g l - F)(1 - s^2): zero at the region's ends
-            rate = fall * (1.0 - s * s) if math.isfinite(fall) else fall
+        if z1 <= x <= z2:
             target = bottom if side < 0 else top
             step = target - x
-            x = target if abs(step) <= rate else x + math.copysign(rate, step)
+            x = target if abs(step) <= fall else x + math.copysign(fall, step)
         out[t] = x
     return np.asarray(out, dtype=np.float64)

@@ -121,19 +121,6 @@ def test_a_coasting_load_keeps_moving_and_a_torque_holds_its_flank() -> None:
     np.testing.assert_allclose(x, down)  # rides the lower flank down (the play never shows)
 
 
-def test_a_torque_pulls_most_mid_region_and_not_at_its_ends() -> None:
-    # the fall rate follows gravity's m g l cos q - F to second order: fall mid-region,
-    # nothing at the region's ends -- a load at rest on an end stays there, and a load
-    # released mid-region moves by fall at once, then ever slower towards the end, never past
-    n = 400
-    lo, hi = np.full(n, -5.0), np.full(n, 5.0)
-    torque = LoadPhysics("load_torque", side=-1, region=(0.0, 1.0), fall=0.01)
-    np.testing.assert_array_equal(torque.simulate(lo, hi, 1.0), np.ones(n))
-    x = torque.simulate(lo, hi, 0.5)
-    assert x[0] == pytest.approx(0.49)
-    assert np.all(np.diff(x) < 0.0) and np.all(x > 0.0) and x[-1] < 0.01
-
-
 def test_load_physics_is_validated() -> None:
     with pytest.raises(GenBacklashError, match="unknown load physics"):
         LoadPhysics("gravity")  # type: ignore[arg-type]

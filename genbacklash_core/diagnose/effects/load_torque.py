@@ -3,9 +3,7 @@ part of the travel, whichever way the gear turns.
 
 The model (:mod:`genbacklash_core.diagnose.physics`): where the load position lies in a
 region ``(z_1, z_2)`` the load falls towards one flank (the lower bound of the play's interval
-or the upper), by at most a fall rate per sample, largest mid-region and nothing at its ends
-(gravity's ``cos q`` net of friction, to second order); elsewhere the play operator (eq. 20)
-holds.
+or the upper), by at most a fall rate per sample; elsewhere the play operator (eq. 20) holds.
 Where the torque beats the load's friction the play stops showing on reversals: the load
 follows the same branch both ways.
 
