@@ -41,8 +41,8 @@ that is measured, unless the live one, still shorter than ``min_time``, agrees w
 :data:`OFFLINE_AGREE` (it then confirms it: a short probe reads the motion of its own
 seconds): after :data:`OFFLINE_CHECK` of ``min_time`` of compensating the judge
 probes for it (compensation off), unless readings without compensation gave it before. No
-verdict rests on the offline baseline but the trial's first weights; until the live one is
-there the verdict's ``baseline`` says ``"offline"``. That trial, judged against the live
+verdict rests on an offline baseline the live probe has not confirmed but the trial's first
+weights; while the offline one is in use the verdict's ``baseline`` says ``"offline"``. That trial, judged against the live
 baseline after :data:`HARM_SHARE` of ``min_time`` of compensating, passes at once to full
 weight when it clearly helps (``q`` at most ``ratio_full``; at full weight it is measured
 afresh, as any), else it runs its course. The node holds a checkpoint's model until its
@@ -122,7 +122,8 @@ after which the baseline is probed live (module notes)."""
 
 OFFLINE_PROBE = HARM_SHARE / 2.0
 """On a start from an :class:`OfflineBaseline`: the share of ``min_time`` the live probe
-lasts; a live baseline that long replaces the offline one (module notes)."""
+lasts; a live baseline that long replaces the offline one unless it agrees with it
+(:data:`OFFLINE_AGREE`; module notes)."""
 
 OFFLINE_AGREE = 1.35
 """A live baseline shorter than ``min_time`` within this factor of the offline one confirms
