@@ -34,22 +34,22 @@ before a verdict can switch it off (the harm of a jump grows with its size).
 
 A start whose baseline was measured offline (:meth:`TrackingJudge.start_from`, a
 :class:`OfflineBaseline`: the tracking without compensation of the record a checkpoint was
-identified on) needs no ``min_time`` of baseline first: its trial may begin at once, the
-weight growing as above. Such a baseline may be stale or of other work than the machine's
-now, so it is replaced by the live one as soon as :data:`OFFLINE_PROBE` of ``min_time`` of
-that is measured, unless the live one, still shorter than ``min_time``, agrees with it within
-:data:`OFFLINE_AGREE` (it then confirms it: a short probe reads the motion of its own
-seconds): after :data:`OFFLINE_CHECK` of ``min_time`` of compensating the judge
-probes for it (compensation off), unless readings without compensation gave it before. No
-verdict rests on an offline baseline the live probe has not confirmed but the trial's first
-weights; while the offline one is in use the verdict's ``baseline`` says ``"offline"``. That trial, judged against the live
-baseline after :data:`HARM_SHARE` of ``min_time`` of compensating, passes at once to full
-weight when it clearly helps (``q`` at most ``ratio_full``; at full weight it is measured
-afresh, as any), else it runs its course. The node holds a checkpoint's model until its
-guard has judged it on the machine's own samples, so there the live baseline always comes
+identified on) needs no ``min_time`` of baseline first: its trial may begin at once, the weight
+growing as above. Such a baseline may be stale or of other work than the machine's now, so it
+is replaced by the live one as soon as :data:`OFFLINE_PROBE` of ``min_time`` of that is
+measured, unless the live one, still shorter than ``min_time``, agrees with it within
+:data:`OFFLINE_AGREE` (it then confirms it: a short probe reads the motion of its own seconds):
+after :data:`OFFLINE_CHECK` of ``min_time`` of compensating the judge probes for it
+(compensation off), unless readings without compensation gave it before. No verdict rests on an
+offline baseline the live probe has not confirmed but the trial's first weights; while the
+offline one is in use the verdict's ``baseline`` says ``"offline"``. That trial, judged once
+the live probe is done, after :data:`HARM_SHARE` of ``min_time`` of compensating, passes at
+once to full weight when it clearly helps (``q`` at most ``ratio_full``; at full weight it is
+measured afresh, as any), else it runs its course. The node holds a checkpoint's model until
+its guard has judged it on the machine's own samples, so there the live probe always comes
 first (:mod:`genbacklash_ros.node.pipeline`; measured in BENCHMARKS.md, issue 23, branch
-base-1: a trial from the first command judged on the offline baseline perturbed a load
-coasting into the play for the rest of a record, 8.9 % worse than no compensation).
+base-1: a trial from the first command judged on the offline baseline perturbed a load coasting
+into the play for the rest of a record, 8.9 % worse than no compensation).
 
 Once every ``probe_every`` seconds of compensating the judge asks for a *probe*:
 ``min_time`` seconds with compensation off, to measure the baseline again. After a verdict
