@@ -39,7 +39,6 @@ Examples
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import struct
 from collections.abc import Sequence
@@ -48,6 +47,7 @@ from typing import Any, Literal, cast
 
 import numpy as np
 
+from genbacklash_ros.bags.cdr_layout import learn_layout
 from genbacklash_ros.bags.rosbags_types import from_rosbags, jazzy_typestore, to_rosbags
 from genbacklash_ros.node.messages import (
     NS_PER_S,
@@ -71,21 +71,10 @@ _KINDS: dict[str, str] = {
     Float64MultiArray.ros_type: "float64_multi_array",
     JointState.ros_type: "joint_state",
 }
-_ARRAYS: dict[str, tuple[str, ...]] = {  # the float arrays of each type
-    Float64.ros_type: (),
-    Float64MultiArray.ros_type: ("data",),
-    JointState.ros_type: ("position", "velocity", "effort"),
-}
-_STAMP_SEC = 0x5EC5A17D  # sentinels: values no real message field holds
-_STAMP_NSEC = 0x3C0FFEE7
 _MAX_LAYOUTS = 8  # learnt layouts kept per reader (a topic rarely has more than one)
 _unpack_d = struct.Struct("<d").unpack_from
 _unpack_stamp = struct.Struct("<iI").unpack_from
 _pack_d = struct.Struct("<d").pack
-
-
-def _sentinels(n: int, base: float) -> np.ndarray:
-    return base * (1.0 + np.arange(1, n + 1) * 2.0**-20)
 
 
 class UndecodableMessage(MessageError):
@@ -273,65 +262,21 @@ class RawValueReader:
 
     def _learn(self, raw: bytes, obj: Any, msg: object) -> _Layout | None:
         """The layout of ``raw``, from rosbags' serializer (None: read it slowly always)."""
-        try:
-            if self._serialize(obj) != raw:
-                return None  # not written back byte for byte (endianness, padding bytes)
-            probe = obj
-            variable: list[tuple[int, int]] = []
-            stamp_at = -1
-            if hasattr(obj, "header"):
-                stamp = dataclasses.replace(obj.header.stamp, sec=_STAMP_SEC, nanosec=_STAMP_NSEC)
-                probe = dataclasses.replace(
-                    probe, header=dataclasses.replace(obj.header, stamp=stamp)
-                )
-            arrays: dict[str, tuple[int, int]] = {}
-            for k, name in enumerate(_ARRAYS[self.msgtype]):
-                n = len(getattr(obj, name))
-                if n:
-                    values = _sentinels(n, 1.5e300 * (k + 1))
-                    probe = dataclasses.replace(probe, **{name: values})
-            if self.kind == "float64":
-                probe = dataclasses.replace(probe, data=_sentinels(1, 1.5e300)[0])
-            seen = self._serialize(probe)
-            if len(seen) != len(raw):
-                return None
-            if hasattr(obj, "header"):
-                found = seen.find(struct.pack("<iI", _STAMP_SEC, _STAMP_NSEC))
-                if found < 0:
-                    return None
-                stamp_at = found
-                variable.append((found, found + 8))
-            names = _ARRAYS[self.msgtype] or ("data",)
-            for k, name in enumerate(names):
-                n = 1 if self.kind == "float64" else len(getattr(obj, name))
-                if not n:
-                    continue
-                block = _sentinels(n, 1.5e300 * (k + 1)).astype("<f8").tobytes()
-                found = seen.find(block)
-                if found < 0 or seen.find(block, found + 1) >= 0:
-                    return None
-                arrays[name] = (found, n)
-                variable.append((found, found + 8 * n))
-        except (AttributeError, TypeError, ValueError, struct.error):
+        learnt = learn_layout(self._store, self.msgtype, raw, obj)
+        if learnt is None:
             return None
-        variable.sort()
-        constant: list[tuple[int, bytes]] = []
-        pos = 0
-        for start, end in variable:
-            if start > pos:
-                constant.append((pos, raw[pos:start]))
-            pos = max(pos, end)
-        if pos < len(raw):
-            constant.append((pos, raw[pos:]))
-        main = "data" if self.kind != "joint_state" else "position"
-        offset, count = arrays[main]
+        main = learnt.array("data" if self.kind != "joint_state" else "position")
+        if main is None:
+            return None
+        offset, count = main
         index = self._value_index(msg)
         if not 0 <= index < count:
             return None
         checked: tuple[tuple[int, int], ...] = ()
         if self.role == "command" and self.kind != "float64":
-            checked = tuple(arrays.values())  # the adapters want every element finite
-        return _Layout(tuple(constant), offset + 8 * index, stamp_at, checked)
+            # the adapters want every element finite
+            checked = tuple((at, n) for _, at, n in learnt.arrays)
+        return _Layout(learnt.constant, offset + 8 * index, learnt.stamp_at, checked)
 
     # ------------------------------------------------------------------ writing
 

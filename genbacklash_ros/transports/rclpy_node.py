@@ -42,6 +42,12 @@ what it returns. All logic is in the pipeline.
   is pending, refits, writes its final checkpoint and shuts rclpy down, and, when run as a
   program, until the process has exited;
 * checkpoints are written on a background thread (atomic file writes);
+* the ``command``, ``encoder`` and ``motor_encoder`` subscriptions take raw CDR bytes
+  (``raw=True``), which a :class:`~genbacklash_ros.bags.raw_messages.RawMessageCodec` per
+  topic decodes by the byte layout learnt from the first message of each length (rclpy's
+  deserializer for any other), and the compensated command is published as the command's
+  bytes with its floats replaced: rclpy's conversions to and from Python objects cost more than
+  the pipeline's answer at 1 kHz;
 * the loop (:class:`WaitLoop`): one thread waits on an rcl wait set of its own holding the
   ``command`` and ``encoder`` subscriptions, the parameter services and the 1 Hz timer; at each
   wake-up it takes every message pending on the two subscriptions straight from their handles
@@ -93,6 +99,7 @@ from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
+from rclpy.serialization import deserialize_message
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState as RosJointState
 from std_msgs.msg import Float64 as RosFloat64
@@ -100,6 +107,7 @@ from std_msgs.msg import Float64MultiArray as RosFloat64MultiArray
 from std_msgs.msg import MultiArrayDimension as RosMultiArrayDimension
 
 from genbacklash_core import GenBacklashError
+from genbacklash_ros.bags.raw_messages import RawMessageCodec
 from genbacklash_ros.blas_threads import one_blas_thread
 from genbacklash_ros.gc_pauses import few_collections
 from genbacklash_ros.node.checkpoint_writer import BackgroundCheckpointWriter
@@ -230,6 +238,28 @@ def from_ros(msg: Any) -> Message:
     raise MessageError(f"no conversion from {type(msg).__name__}")
 
 
+def raw_codec(ros_class: Any) -> RawMessageCodec:
+    """The codec of a raw subscription of ``ros_class``: our message from its CDR bytes
+    (rclpy's deserializer and :func:`from_ros` for a layout it has not learnt)."""
+
+    def slow(raw: bytes) -> Message:
+        try:
+            msg = deserialize_message(raw, ros_class)
+        except Exception as err:  # rclpy's C deserializer: corrupt or cut bytes
+            text = " ".join(str(err).split()) or type(err).__name__
+            raise MessageError(f"a {ros_class.__name__} message does not decode: {text}") from err
+        return from_ros(msg)
+
+    ros_type = "/".join((*ros_class.__module__.split(".")[:2], ros_class.__name__))
+    return RawMessageCodec(ros_type, slow)
+
+
+def _decoded(codec: RawMessageCodec, msg: Any) -> Message:
+    """Our message for what a subscription gave: raw bytes, or an rclpy message (a node
+    whose subscriptions someone else drives with objects)."""
+    return codec.decode(msg) if isinstance(msg, bytes) else from_ros(msg)
+
+
 def _header_to(ros: Any, header: Header) -> None:
     ros.stamp.sec = header.stamp.sec
     ros.stamp.nanosec = header.stamp.nanosec
@@ -333,12 +363,17 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
         # deep histories: the same QoS as ROS 2's defaults for matching, more room while busy
         # the two hot subscriptions: taken by a WaitLoop while one runs (any executor otherwise)
         self._hot_group = _LoopGroup()
+        # raw: the messages as CDR bytes, decoded (and the answer encoded) by these codecs
+        self._command_codec = raw_codec(command_type)
+        self._encoder_codec = raw_codec(encoder_type)
+        self._motor_codec = raw_codec(_ROS_ENCODER[self._params.motor_encoder_type])
         self._command_sub = self.create_subscription(
             command_type,
             "command",
             self._on_command,
             QoSProfile(depth=READER_DEPTH),
             callback_group=self._hot_group,
+            raw=True,
         )
         sensor_qos = QoSProfile(
             history=qos_profile_sensor_data.history,
@@ -347,7 +382,12 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
             durability=qos_profile_sensor_data.durability,
         )
         self._encoder_sub = self.create_subscription(
-            encoder_type, "encoder", self._on_encoder, sensor_qos, callback_group=self._hot_group
+            encoder_type,
+            "encoder",
+            self._on_encoder,
+            sensor_qos,
+            callback_group=self._hot_group,
+            raw=True,
         )
         # a motor encoder (gear_input motor_encoder, dual encoders): the gear's input
         self._motor_sub = (
@@ -356,6 +396,7 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
                 "motor_encoder",
                 self._on_motor,
                 sensor_qos,
+                raw=True,
             )
             if self._params.motor_input
             else None
@@ -494,20 +535,26 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
         # (two arguments: rclpy then passes the message info with the source timestamp)
         self._data_since_tick = True
         try:
-            ours = from_ros(msg)
+            ours = _decoded(self._command_codec, msg)
         except MessageError as err:
             self.get_logger().warning(f"command: {err}", throttle_duration_sec=5.0)
             return
         pipeline = self._pipeline
         answer = pipeline.answer(ours, self._receive_ns(info))  # type: ignore[arg-type]
         if answer is not None:  # published before the estimate and diagnostics are made
-            self._publish([answer])
+            raw = None
+            if isinstance(msg, bytes):  # the command's own bytes with the compensated floats
+                raw = self._command_codec.encode(msg, ours, answer.message)
+            if raw is None:
+                self._publish([answer])
+            else:
+                self._outputs["compensated_command"].publish(raw)
         self._publish(pipeline.periodic())
 
     def _on_encoder(self, msg: Any, info: Any) -> None:
         self._data_since_tick = True
         try:
-            ours = from_ros(msg)
+            ours = _decoded(self._encoder_codec, msg)
         except MessageError as err:
             self.get_logger().warning(f"encoder: {err}", throttle_duration_sec=5.0)
             return
@@ -516,7 +563,7 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
     def _on_motor(self, msg: Any, info: Any) -> None:
         self._data_since_tick = True
         try:
-            ours = from_ros(msg)
+            ours = _decoded(self._motor_codec, msg)
         except MessageError as err:
             self.get_logger().warning(f"motor encoder: {err}", throttle_duration_sec=5.0)
             return

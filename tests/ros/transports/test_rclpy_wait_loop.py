@@ -49,6 +49,19 @@ def _reading(value: float, stamp_ns: int) -> Any:
     return msg
 
 
+def _first(raw: bytes, kind: str) -> float:
+    """The first command element or reading of a message the node's raw subscriptions took
+    (CDR bytes: ``raw=True``)."""
+    from rclpy.serialization import deserialize_message
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray
+
+    assert isinstance(raw, bytes)
+    if kind == "command":
+        return float(deserialize_message(raw, Float64MultiArray).data[0])
+    return float(deserialize_message(raw, JointState).position[0])
+
+
 @dataclass
 class _Wired:
     node: Any  # the BacklashIdentifierNode
@@ -108,8 +121,8 @@ def test_the_loop_takes_both_topics_in_source_order_and_executors_do_not(
     with _node_and_peer(
         "wait_loop_peer",
         lambda _: (
-            lambda msg, info: seen.append(("command", msg.data[0])),
-            lambda msg, info: seen.append(("encoder", msg.position[0])),
+            lambda msg, info: seen.append(("command", _first(msg, "command"))),
+            lambda msg, info: seen.append(("encoder", _first(msg, "encoder"))),
         ),
     ) as w:
         # a reading first, then two commands, then a reading: taken in one wake-up, the
@@ -144,11 +157,11 @@ def test_a_reading_that_comes_while_a_command_is_handled_is_taken_in_the_same_wa
 
     def callbacks(encoder: Any) -> tuple[Callable[..., None], Callable[..., None]]:
         def on_command(msg: Any, info: Any) -> None:
-            seen.append(("command", msg.data[0]))
+            seen.append(("command", _first(msg, "command")))
             encoder.publish(_reading(0.25, 2))  # comes while the command is being handled
             time.sleep(0.05)
 
-        return on_command, lambda msg, info: seen.append(("encoder", msg.position[0]))
+        return on_command, lambda msg, info: seen.append(("encoder", _first(msg, "encoder")))
 
     with _node_and_peer("wait_loop_drain_peer", callbacks) as w:
         w.command.publish(Float64MultiArray(data=[1.0]))
