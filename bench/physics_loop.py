@@ -68,6 +68,7 @@ from _common import (
 
 from genbacklash_core import compensate
 from genbacklash_core.scenarios import OperationSettings
+from genbacklash_ros.blas_threads import one_blas_thread
 from genbacklash_ros.node.checkpoint import load_checkpoint, save_checkpoint, warm_start
 from genbacklash_ros.node.parameters import NodeParameters
 from genbacklash_ros.physics.bag import write_physics_bag
@@ -185,7 +186,9 @@ def main(argv: Sequence[str] | None = None) -> None:
         "physics_loop",
         "### Compensation in closed loop, driven by the node's own compensated command",
     ):
-        with tempfile.TemporaryDirectory() as tmp:
+        # one BLAS thread, as the node and replay run (genbacklash_ros.blas_threads): the fits'
+        # last bits, and so the loop's path, do not then depend on the machine's core count
+        with tempfile.TemporaryDirectory() as tmp, one_blas_thread():
             if args.restart is not None:
                 _restart_tables(args, Path(tmp))
             else:

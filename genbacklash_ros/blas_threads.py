@@ -1,5 +1,5 @@
-"""One BLAS thread while the node or a replay runs (process-wide, undone when the last user
-ends).
+"""One BLAS thread while the node, a replay or any ``genbacklash`` command runs (process-wide,
+undone when the last user ends).
 
 numpy's OpenBLAS starts a thread per core and hands vectors above a few thousand elements,
 and the identifiers' larger least-squares problems, to all of them. Here that buys nothing and
@@ -15,9 +15,14 @@ identification in line took 0.43-0.50 of a core with numpy's default threads aga
 The limit is :mod:`threadpoolctl`'s (a dependency of the package), set when the first user of
 the process enters :func:`one_blas_thread` and restored when the last one leaves (the fleet
 runs several replays on threads at once). Without threadpoolctl (a ROS 2 install built with
-colcon has no rosdep key for it) the BLAS keeps its default threads: the same results, only
-slower. Benchmarks and tests that start many processes set ``OPENBLAS_NUM_THREADS=1``
-themselves for the same reason (``bench/diagnose.py``, ``tests/ros/fleet/conftest.py``).
+colcon has no rosdep key for it) the BLAS keeps its default threads: slower, and the fits'
+last bits may differ (a multi-threaded BLAS sums in another order), which a nonlinear fit
+can carry far: ``genbacklash diagnose`` on one physics bag (gravity, 20 Hz servo) ended at a
+validation misfit of 0.0292 with one thread and 0.0288 with two, on the same path of effects.
+Every ``genbacklash`` command therefore runs with one thread, so that a command's answer on a
+bag does not depend on the machine's core count. Benchmarks and tests that start many
+processes set ``OPENBLAS_NUM_THREADS=1`` themselves for the same reason
+(``bench/diagnose.py``, ``tests/ros/fleet/conftest.py``).
 """
 
 from __future__ import annotations

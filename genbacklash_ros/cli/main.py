@@ -30,6 +30,7 @@ from genbacklash_core import (
 from genbacklash_core.data import NonFinitePolicy
 from genbacklash_core.uncertainty import batch_uncertainty, play_std
 from genbacklash_ros.bags.csvio import Series, write_series_csv
+from genbacklash_ros.blas_threads import one_blas_thread
 from genbacklash_ros.cli import replay as replay_cli
 from genbacklash_ros.cli.joints import per_joint
 from genbacklash_ros.cli.paths import check_paths
@@ -568,7 +569,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     args.entry_point = argv is None  # the console script's own call (see `node`)
     try:
         check_paths(args)  # before any work: no output may destroy an input
-        code: int = args.func(args)
+        # one BLAS thread for every command, as the node and replay run: the batch fits'
+        # last bits (and so a diagnosis's path) then do not depend on the machine's cores
+        with one_blas_thread():
+            code: int = args.func(args)
         sys.stdout.flush()  # a buffered stdout (no PYTHONUNBUFFERED) fails here, not at exit
     except GenBacklashError as err:
         print(f"genbacklash {args.command}: error: {err}", file=sys.stderr)

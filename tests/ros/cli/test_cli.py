@@ -244,3 +244,35 @@ def test_a_command_imports_only_its_own_module() -> None:
     commands = ("identify", "diagnose", "replay", "node", "excite", "fleet", "fleet-report")
     for command in (*commands, "export", "readings"):
         assert command in listed
+
+
+def test_every_command_runs_with_one_blas_thread(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The batch fits' last bits depend on how many threads the BLAS sums with, and a
+    diagnosis can carry that far (genbacklash_ros.blas_threads): every command runs with one,
+    as the node and replay do, whatever the machine's cores. Run under a limit of two, the
+    command sees one, and two again after it."""
+    threadpoolctl = pytest.importorskip("threadpoolctl")
+    from genbacklash_ros.cli import main as cli_main
+
+    def blas_threads() -> int:
+        infos = [i for i in threadpoolctl.threadpool_info() if i["user_api"] == "blas"]
+        assert infos, "numpy's BLAS is not seen by threadpoolctl"
+        return max(int(i["num_threads"]) for i in infos)
+
+    data = _simulate(tmp_path, 1)
+    seen: list[int] = []
+    real_check = cli_main.check_paths
+
+    def check_then_probe(args: object) -> None:
+        real_check(args)
+        args.func = lambda _args: seen.append(blas_threads()) or 0  # type: ignore[attr-defined]
+
+    monkeypatch.setattr(cli_main, "check_paths", check_then_probe)
+    with threadpoolctl.threadpool_limits(limits=2, user_api="blas"):
+        assert blas_threads() == 2
+        for words in (["identify", str(data)], ["diagnose", str(data)]):
+            assert main(words) == 0
+        assert blas_threads() == 2
+    assert seen == [1, 1]
