@@ -45,6 +45,7 @@ from _common import PHYSICS_TOPICS, cli_json, printed_section, rms
 from genbacklash_core import compensate, simulate_backlash
 from genbacklash_core.scenarios import OPERATION_BACKLASH, OperationSettings
 from genbacklash_ros.bags.simbags import write_operation_bag
+from genbacklash_ros.blas_threads import one_blas_thread
 from genbacklash_ros.node.checkpoint import load_checkpoint, save_checkpoint
 from genbacklash_ros.node.parameters import NodeParameters
 from genbacklash_ros.node.pipeline import BacklashPipeline
@@ -118,9 +119,12 @@ def main(argv: Sequence[str] | None = None) -> None:
     if args.quick:
         args.seeds, args.duration = [0], 10.0
     seeded = args.seeded_start is not None
-    with printed_section(
-        "operation_loop",
-        "### The node's pipeline in the loop on operation-shaped data (not physics)",
+    with (
+        printed_section(
+            "operation_loop",
+            "### The node's pipeline in the loop on operation-shaped data (not physics)",
+        ),
+        one_blas_thread(),  # as the node runs
     ):
         print(
             "| seed | rms none (mrad) | cut true (%) | cut node (%) | 2nd half: true / node (%) "
