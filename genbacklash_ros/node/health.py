@@ -140,7 +140,7 @@ from genbacklash_ros.node.spike_screen import SPIKE_COUNTS as SPIKE_COUNTS
 from genbacklash_ros.node.spike_screen import SPIKE_MAX_SHARE as SPIKE_MAX_SHARE
 from genbacklash_ros.node.spike_screen import SPIKE_SIGMAS as SPIKE_SIGMAS
 from genbacklash_ros.node.spike_screen import Screening as Screening
-from genbacklash_ros.node.spike_screen import SpikeScreen, _median
+from genbacklash_ros.node.spike_screen import SpikeScreen, exact_median
 
 __all__ = [
     "FAULT_HOLD_NS",
@@ -633,7 +633,7 @@ class StreamHealth:
         gaps = np.array(self._gaps, dtype=np.float64)
         self._gaps = []
         self._gaps_from = stamp
-        median = _median(gaps)
+        median = exact_median(gaps)
         regular = np.count_nonzero(np.abs(gaps - median) <= 0.25 * median)
         if regular / gaps.size >= 0.9:
             self._enc_period = median

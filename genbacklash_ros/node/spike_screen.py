@@ -31,6 +31,7 @@ __all__ = [
     "SPIKE_SIGMAS",
     "Screening",
     "SpikeScreen",
+    "exact_median",
 ]
 
 SPIKE_SIGMAS = 8.0  # a reading this many residual scales from its prediction is a spike
@@ -61,9 +62,13 @@ class Screening(NamedTuple):
     events: list[HealthEvent]
 
 
-def _median(values: np.ndarray) -> float:
+def exact_median(values: np.ndarray) -> float:
     """``np.median`` of a non-empty 1-D array, to the bit (the middle value, or the mean of
-    the two middle ones), from one partition and without its generic machinery."""
+    the two middle ones), from one partition and without its generic machinery.
+
+    >>> exact_median(np.array([3.0, 1.0, 2.0, 10.0]))
+    2.5
+    """
     n = values.size
     half = n // 2
     if n % 2:
@@ -583,7 +588,7 @@ class SpikeScreen:
                 continue
             offsets = offsets[np.isfinite(offsets)]
             if offsets.size >= _SHIFT_MIN_READINGS:
-                shift[side] += _SHIFT_SMOOTHING * (_median(offsets) - shift[side])
+                shift[side] += _SHIFT_SMOOTHING * (exact_median(offsets) - shift[side])
         self._shift = self._bounded((shift[0], shift[1]), model)
 
     @staticmethod

@@ -6,11 +6,13 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from genbacklash_core import Estimate, EstimatorState, GeneralBacklash
 from genbacklash_core.structure import Structure
 from genbacklash_ros.node.health_events import Drop
-from genbacklash_ros.node.spike_screen import SCREEN_SAMPLES, SpikeScreen
+from genbacklash_ros.node.spike_screen import SCREEN_SAMPLES, SpikeScreen, exact_median
 from tests.ros.node.test_health import _converged as converged
 from tests.ros.node.test_health import _moving as moving  # (seed, n): times, u, y
 
@@ -61,3 +63,14 @@ def test_without_a_backlash_model_everything_is_fed() -> None:
     times, u, y = moving(1, 64)
     found = SpikeScreen().screen(times, u, y, Estimate.empty(Structure(3)), silence_ns=SILENCE_NS)
     assert found.keep is None and found.events == []
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.lists(st.floats(-1e6, 1e6, allow_nan=False, allow_infinity=False), min_size=1, max_size=40)
+)
+def test_exact_median_is_numpys_to_the_bit(values: list[float]) -> None:
+    """The screen's and the rate window's median (one partition) is ``np.median``'s."""
+    array = np.array(values)
+    assert exact_median(array) == float(np.median(array))
+    assert list(array) == values  # the input is not reordered
