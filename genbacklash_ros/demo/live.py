@@ -92,6 +92,8 @@ class _Inbox:
         self.answered = 0
         self.play: dict[str, float] = {j: math.nan for j in joints}
         self.state: dict[str, str] = {j: "?" for j in joints}
+        self.reason: dict[str, str] = {j: "" for j in joints}
+        self.shown: dict[str, str] = {j: "?" for j in joints}  # the state the last line gave
 
 
 def _estimate_callback(inbox: _Inbox, joint: str) -> Callable[[Any], None]:
@@ -118,6 +120,7 @@ def _diagnostics_callback(inbox: _Inbox, joints: tuple[str, ...]) -> Callable[[A
             if joint is not None:
                 with inbox.lock:
                     inbox.state[joint] = state
+                    inbox.reason[joint] = values.get("compensation_reason", "")
 
     return take
 
@@ -345,12 +348,17 @@ def _line(arm: SimulatedArm, inbox: _Inbox, now: int, log: Callable[[str], None]
     with inbox.lock:
         play = dict(inbox.play)
         state = dict(inbox.state)
+        reason = dict(inbox.reason)
+        changed = {j for j in state if state[j] != inbox.shown[j]}
+        inbox.shown.update(state)
     parts = []
     for joint, (obeyed, twin) in zip(arm.settings.joints, arm.window(), strict=True):
+        said = reason[joint] not in ("", f"compensation {state[joint]}")
+        why = f" ({reason[joint]})" if joint in changed and said else ""
         parts.append(
             f"{joint}: play {_mrad(play[joint])} mrad | RMS error last s "
             f"{_mrad(obeyed)} compensated, {_mrad(twin)} uncompensated | "
-            f"compensation {state[joint]}"
+            f"compensation {state[joint]}{why}"
         )
     log(f"{now / 1e9:5.0f} s  " + "\n         ".join(parts))
 

@@ -78,3 +78,5 @@ def test_live_demo_runs_the_node_beside_a_simulated_arm() -> None:
     assert row, out[-2000:]
     assert row[1] != "n/a", out[-3000:]  # the node estimated the play
     assert 0.5 < float(row[1]) / float(row[2]) < 2.0, out[-3000:]
+    # a change of the compensation's state is printed with the node's reason
+    assert re.search(r"^\s+\d+ s .*compensation off \(no estimate yet\)$", out, re.M), out[:2000]
