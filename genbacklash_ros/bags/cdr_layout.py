@@ -6,8 +6,10 @@ for one message, where its header stamp and each float array lie in its bytes, b
 re-serializing it with rosbags (the message's bytes must come back byte for byte) with
 sentinel values in those fields and looking where they land. Every other byte is
 *constant*: a later message of the same length that holds the same constant bytes (names,
-lengths, counts, padding) has its numbers at the same offsets (:meth:`CdrLayout.matches`).
-A message that does not serialize back byte for byte (big-endian, non-zero padding) has no
+lengths, counts) has its numbers at the same offsets (:meth:`CdrLayout.matches`). Padding
+bytes where rosbags writes zeros but the message holds something else (a middleware may
+leave what its buffer held) are neither constant nor read. A message that rosbags does not
+write back at the same length and encapsulation (big-endian, bytes after its end) has no
 layout, and its readers take rosbags' (or the middleware's) full decoder instead.
 
 Used by :class:`~genbacklash_ros.bags.raw_values.RawValueReader` (bag replay: one value per
@@ -93,7 +95,8 @@ class CdrLayout:
 
 def learn_layout(store: Any, msgtype: str, raw: bytes, obj: Any) -> CdrLayout | None:
     """The layout of ``raw``, a message of ``msgtype`` that rosbags' ``store`` decoded to
-    ``obj``; None when rosbags does not write it back byte for byte (read it fully always)."""
+    ``obj``; None when rosbags does not write it back at the same length and encapsulation,
+    or differs from it in more than padding (read it fully always)."""
 
     def serialize(message: Any) -> bytes:
         return bytes(store.serialize_cdr(message, msgtype))
@@ -103,8 +106,12 @@ def learn_layout(store: Any, msgtype: str, raw: bytes, obj: Any) -> CdrLayout | 
         return None
     scalar = msgtype == _SCALAR
     try:
-        if serialize(obj) != raw:
-            return None  # not written back byte for byte (endianness, padding bytes)
+        canonical = serialize(obj)
+        if len(canonical) != len(raw) or canonical[:4] != raw[:4]:
+            return None  # another length or encapsulation (big-endian, trailing bytes)
+        # where rosbags writes another byte than ``raw`` holds, ``raw`` has junk in padding
+        # (rosbags writes zeros; a middleware may leave what its buffer held): not constant
+        junk = [k for k in range(len(raw)) if raw[k] != canonical[k]] if canonical != raw else []
         probe = obj
         if hasattr(obj, "header"):
             stamp = dataclasses.replace(obj.header.stamp, sec=_STAMP_SEC, nanosec=_STAMP_NSEC)
@@ -137,6 +144,9 @@ def learn_layout(store: Any, msgtype: str, raw: bytes, obj: Any) -> CdrLayout | 
             variable.append((found, found + 8 * n))
     except (AttributeError, TypeError, ValueError, struct.error):
         return None
+    if any(start <= k < end for k in junk for start, end in variable):
+        return None  # a number's own bytes differ: not padding
+    variable += [(k, k + 1) for k in junk]
     variable.sort()
     constant: list[tuple[int, bytes]] = []
     pos = 0

@@ -121,27 +121,44 @@ def test_a_steady_topic_is_decoded_by_its_learnt_layout() -> None:
     assert calls[0] == 2
 
 
-def test_big_endian_and_non_zero_padding_take_the_full_decoder_always() -> None:
+def test_big_endian_messages_take_the_full_decoder_always() -> None:
     codec, calls = codec_for(Float64MultiArray.ros_type)
     msg = Float64MultiArray(MultiArrayLayout((MultiArrayDimension("x", 2, 2),)), (0.5, 0.25))
     big = cdr(msg, little_endian=False)
     for _ in range(3):
         assert codec.decode(big) == msg
     assert (codec.fast, calls[0]) == (0, 3)
-    # the label "x" (2 bytes with its NUL) is padded by 2 bytes to the next uint32: junk there
-    # (as a middleware may leave) decodes the same but is not rosbags' own bytes
-    raw = bytearray(cdr(msg))
-    assert raw[14:16] == b"\0\0"
-    raw[14:16] = b"\x7f\x13"
+    assert codec.encode(big, msg, msg) is None
+
+
+def test_junk_in_the_padding_is_neither_constant_nor_read() -> None:
+    """rosbags writes zeros where CDR pads; a middleware may leave what its buffer held.
+    The label "x" (2 bytes with its NUL) is padded by 2 bytes to the next uint32."""
+    msg = Float64MultiArray(MultiArrayLayout((MultiArrayDimension("x", 2, 2),)), (0.5, 0.25))
+
+    def junk(m: Float64MultiArray, pad: bytes) -> bytes:
+        raw = bytearray(cdr(m))
+        assert raw[14:16] == b"\0\0"
+        raw[14:16] = pad
+        return bytes(raw)
+
     codec, calls = codec_for(Float64MultiArray.ros_type)
-    for _ in range(3):
-        assert codec.decode(bytes(raw)) == msg
-    assert (codec.fast, calls[0]) == (0, 3)
-    assert codec.encode(bytes(raw), msg, msg) is None
-    assert (
-        learn_layout(STORE, msg.ros_type, bytes(raw), STORE.deserialize_cdr(raw, msg.ros_type))
-        is None
-    )
+    first = junk(msg, b"\x7f\x13")
+    assert codec.decode(first) == msg
+    later = Float64MultiArray(msg.layout, (0.75, -1.0))
+    for pad in (b"\x7f\x13", b"\0\0", b"\xff\xfe"):  # whatever the padding holds
+        assert codec.decode(junk(later, pad)) == later
+    assert (codec.fast, calls[0]) == (3, 1)
+    out = Float64MultiArray(msg.layout, (0.75, 2.0))
+    written = codec.encode(junk(later, b"\x01\x02"), later, out)
+    assert written is not None and written[14:16] == b"\x01\x02"
+    assert from_rosbags(STORE.deserialize_cdr(written, msg.ros_type)) == out
+    layout = learn_layout(STORE, msg.ros_type, first, STORE.deserialize_cdr(first, msg.ros_type))
+    assert layout is not None and layout.matches(junk(later, b"\0\0"))
+    # another label of the same length is not junk: its bytes are constant
+    other = Float64MultiArray(MultiArrayLayout((MultiArrayDimension("y", 2, 2),)), (0.5, 0.25))
+    assert not layout.matches(cdr(other))
+    assert codec.decode(cdr(other)) == other
 
 
 def test_bytes_that_do_not_decode_are_a_message_error() -> None:
