@@ -138,8 +138,8 @@ class CompensateStage:
         if guard.state != "judging" and (guard.trust < 1.0 or state == "on"):
             parts.append(guard.reason)
         if measured is not None and (
-            measured.state in ("faded", "off", "probing") or measured.trust <= 0.0
-        ):
+            measured.state in ("faded", "off", "probing") or measured.trust < 1.0
+        ):  # (trust below 1 while judging: a trial's weight, or held off until measured)
             parts.append(measured.reason)
         return CompensationStatus(weight, state, "; ".join(parts) or f"compensation {state}")
 
