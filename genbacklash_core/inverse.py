@@ -1192,7 +1192,12 @@ class InverseBacklash:
             settled = (target, trust, u) if after == memory else None
             memory = after
             out.append(u)
-        state = CompensatorState(*memory)
-        self._snapshot, self._memory = state, _memory_of(state)
-        self._repeat = None if settled is None else (self._memory, *settled)
+        if _plain(memory):  # a valid state as it is: built only when asked for (as step)
+            self._snapshot = None
+            memory = (*memory,)  # a new state object, as a snapshot's would be
+        else:  # what CompensatorState makes of it (converted, or why not raised)
+            state = CompensatorState(*memory)
+            self._snapshot, memory = state, _memory_of(state)
+        self._memory = memory
+        self._repeat = None if settled is None else (memory, *settled)
         return out

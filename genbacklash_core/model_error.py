@@ -120,10 +120,18 @@ def correlated_misfit(residual: FloatArray, breaks: BoolArray | None = None) -> 
     return Misfit(rms, lag_one, rms * rms / math.sqrt(pairs), pairs)
 
 
-def model_error_covariance(jacobian: FloatArray, misfit: Misfit) -> FloatArray:
+def model_error_covariance(
+    jacobian: FloatArray,
+    misfit: Misfit,
+    *,
+    gram: tuple[BoolArray, FloatArray] | None = None,
+) -> FloatArray:
     """``C_model = (N e^2 / 3) (J^T J)^+`` (see the module notes): ``e`` the misfit's
     :attr:`Misfit.rms_model`, ``N`` the rows of ``jacobian``. A parameter the data do not
     inform (a zero column) gets an infinite variance when ``e > 0``, else zero.
+
+    ``gram``: the informed columns (``np.any(J != 0, axis=0)``) and ``(J_i^T J_i)^+`` over
+    them, where the caller has worked them out on this ``jacobian`` already.
 
     >>> jac = np.ones((100, 1))
     >>> m = Misfit(rms=0.5, lag_one=0.12, noise=0.001, pairs=99)
@@ -136,8 +144,12 @@ def model_error_covariance(jacobian: FloatArray, misfit: Misfit) -> FloatArray:
     cov = np.zeros((size, size))
     if e == 0.0:
         return cov
-    informed = np.any(jac != 0.0, axis=0)
-    sub = jac[:, informed]
-    cov[np.ix_(informed, informed)] = jac.shape[0] * e * e / 3.0 * np.linalg.pinv(sub.T @ sub)
+    if gram is None:
+        informed = np.any(jac != 0.0, axis=0)
+        sub = jac[:, informed]
+        gram_inverse = np.linalg.pinv(sub.T @ sub)
+    else:
+        informed, gram_inverse = gram
+    cov[np.ix_(informed, informed)] = jac.shape[0] * e * e / 3.0 * gram_inverse
     cov[~informed, ~informed] = np.inf
     return cov

@@ -434,16 +434,18 @@ def dead_zone_drift(
     names = structure.names()
     dead = [names.index("c_left"), names.index("c_right")]
     engaged = np.any(sens != 0.0, axis=1) & np.isfinite(residual)
-    if not np.all(np.any(sens[engaged][:, dead], axis=0)):
+    sens = sens[engaged]  # the rows that engage a branch (taken once: ~1,000 x P)
+    dead_columns = sens[:, dead]
+    if not np.all(np.any(dead_columns, axis=0)):
         return None
-    dead_columns = sens[engaged][:, dead]
     ageing = -np.asarray(age, dtype=np.float64)[engaged][:, None] * dead_columns
     target = residual[engaged]
-    drift = _solve(np.hstack([sens[engaged], ageing]), target)
+    design = np.hstack([sens, ageing])
+    drift = _solve(design, target)
     if drift is None:
         return None
     coef, cov = drift
-    left = target - np.hstack([sens[engaged], ageing]) @ coef
+    left = target - design @ coef
     size = p.size
     rate, rate_std = coef[size:], np.sqrt(np.maximum(np.diag(cov)[size:], 0.0))
     drifting = bool(np.any(np.abs(rate) > DRIFT_Z * rate_std))
@@ -451,11 +453,11 @@ def dead_zone_drift(
     lag, lag_std = np.zeros(2), np.zeros(2)
     rest, rest_cov = None, None
     speed = np.abs(u1 - u0)[engaged][:, None]
-    columns = [sens[engaged], *([ageing] if drifting else []), speed * dead_columns]
-    lagged = _solve(np.hstack(columns), target)
+    lagged_design = np.hstack([sens, *([ageing] if drifting else []), speed * dead_columns])
+    lagged = _solve(lagged_design, target)
     if lagged is not None:
         lag_coef, lag_cov = lagged
-        left = target - np.hstack(columns) @ lag_coef
+        left = target - lagged_design @ lag_coef
         lag = lag_coef[-2:]
         lag_std = np.sqrt(np.maximum(np.diag(lag_cov)[-2:], 0.0))
         rest, rest_cov = lag_coef[:size], lag_cov[:size, :size]
@@ -474,7 +476,7 @@ def dead_zone_drift(
         None if rest is None else np.asarray(rest, dtype=np.float64),
         None if rest_cov is None else np.asarray(rest_cov, dtype=np.float64),
         misfit,
-        model_error_covariance(sens[engaged], misfit),
+        model_error_covariance(sens, misfit),
         None if free is None else free.misfit,
         None if free is None else free.covariance,
         None if free is None else free.offset,
@@ -545,7 +547,7 @@ def free_run_model(
     step_size = resolution(y)
     rounding = step_size**2 / 12.0  # a uniform rounding error's variance
     misfit = dataclasses.replace(found, lag_one=found.lag_one - rounding)
-    cov = model_error_covariance(jac, misfit)
+    cov = model_error_covariance(jac, misfit, gram=(informed, gram_inv))
     if not np.all(np.isfinite(cov)):
         return None
     offset = np.zeros(p.size)

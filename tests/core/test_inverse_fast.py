@@ -205,6 +205,24 @@ def test_steps_forget_a_settled_step_when_the_model_or_state_changes() -> None:
     assert comp.steps([1.0]) == [ref.step(1.0)] == [0.8]
 
 
+def test_steps_build_the_state_only_when_asked() -> None:
+    """``steps`` keeps the state as plain numbers and builds the frozen snapshot only when
+    :attr:`~InverseBacklash.state` is read (as ``step`` does): the same commands and state as
+    ``step`` one by one, a dwell's repeats across calls and a ``step`` after them included."""
+    model = GeneralBacklash.ideal(1.0, 0.5, 0.5)
+    options = CompensatorOptions(smoothing=3, max_rate=0.05)
+    comp, ref = InverseBacklash(model, options), InverseBacklash(model, options)
+    targets = [0.2, 0.9, 0.9, 0.9, -0.4, -0.4, 0.1]
+    got = comp.steps(targets[:4]) + comp.steps(targets[4:])
+    assert comp._snapshot is None  # not built by the runs
+    assert got == [ref.step(x) for x in targets]
+    state = comp.state
+    assert state == ref.state and comp.state is state  # built once, then kept
+    assert comp.steps([0.1, 0.1]) == [ref.step(0.1), ref.step(0.1)]
+    assert comp.step(0.1) == ref.step(0.1) and comp.step(0.7) == ref.step(0.7)
+    assert comp.state == ref.state
+
+
 def test_a_branch_with_no_usable_node_gives_an_empty_table() -> None:
     # found by hypothesis (test_fuzz::test_inverse_backlash): a branch whose values all
     # overflow left no node, and the table's rising filter raised an IndexError

@@ -163,3 +163,28 @@ def test_an_uninformed_parameter_is_unknown_not_certain() -> None:
     assert cov[1, 1] == math.inf and cov[0, 0] > 0.0
     quiet = Misfit(rms=1.0, lag_one=0.0, noise=0.01, pairs=99)
     assert np.all(model_error_covariance(jac, quiet) == 0.0)
+
+
+def test_a_gram_worked_out_by_the_caller_gives_the_same_covariance() -> None:
+    """The bands' free-run term hands over the informed columns and ``pinv(J^T J)`` it has
+    worked out on the same Jacobian: the covariance is the one worked out here, to the bit
+    (an uninformed column included), and a gram from another Jacobian would show."""
+    rng = np.random.default_rng(3)
+    jac = rng.normal(size=(500, 4))
+    jac[:, 2] = 0.0  # a parameter no reading informs
+    jac[:40, 0] = 0.0
+    misfit = Misfit(rms=0.02, lag_one=2e-4, noise=1e-6, pairs=499)
+    informed = np.any(jac != 0.0, axis=0)
+    sub = jac[:, informed]
+    gram = (informed, np.linalg.pinv(sub.T @ sub))
+    own = model_error_covariance(jac, misfit)
+    given = model_error_covariance(jac, misfit, gram=gram)
+    assert own.tobytes() == given.tobytes()
+    assert own[2, 2] == math.inf and np.isfinite(own[np.ix_(informed, informed)]).all()
+    other = jac.copy()
+    other[:, 1] *= 2.0
+    sub_other = other[:, informed]
+    moved = model_error_covariance(
+        jac, misfit, gram=(informed, np.linalg.pinv(sub_other.T @ sub_other))
+    )
+    assert not np.array_equal(moved, own)

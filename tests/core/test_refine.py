@@ -15,7 +15,13 @@ from genbacklash_core import (
     simulate_backlash,
     simulate_cascade,
 )
-from genbacklash_core.refine import _jacobian, simulate_parameters
+from genbacklash_core.refine import (
+    _engaged,
+    _jacobian,
+    restart_points,
+    simulate_parameters,
+    simulation_jacobian,
+)
 from genbacklash_core.structure import Structure
 
 
@@ -165,6 +171,36 @@ def test_jacobian_zero_before_first_engagement() -> None:
     np.testing.assert_allclose(jac[4], jac[3])
     # u = -1 engages L: dL/dm_L1 = u + c_L, dL/dc_L = m_L1
     np.testing.assert_allclose(jac[5], [-0.5, 1.0, 0.0, 0.0])
+
+
+def test_jacobian_on_the_simulations_branches_is_the_jacobian_to_the_bit() -> None:
+    """The refinement and the free run hand the Jacobian the branches the simulation ran on
+    (not evaluated again): the same Jacobian, bit for bit, with restarts at breaks too; and
+    the columns are zero exactly up to the first engagement (a prefix, zeroed by a slice)."""
+    model = MODELS["degree2"]
+    structure = Structure.of(model)
+    rng = np.random.default_rng(7)
+    p = model.parameters() + rng.normal(0.0, 0.01, structure.n_parameters)
+    # a long hold before the first engagement, then back and forth with a few breaks
+    u = np.concatenate([np.full(300, 0.01), 0.8 * np.sin(np.linspace(0.0, 12 * np.pi, 3000))])
+    y = simulate_parameters(structure, p, u, 0.0)[0] + rng.normal(0.0, 1e-3, u.size)
+    breaks = np.zeros(u.size, dtype=bool)
+    breaks[[10, 700, 1900]] = True
+    anchors = restart_points(breaks)
+    branches = structure.branches(p, u)
+    x, y_sim = simulate_parameters(structure, p, u, 0.0, anchors, y, branches=branches)
+    x_own, y_own = simulate_parameters(structure, p, u, 0.0, anchors, y)
+    assert x.tobytes() == x_own.tobytes() and y_sim.tobytes() == y_own.tobytes()
+    fresh = _jacobian(structure, p, u, x, y_sim, 0.0, anchors)
+    given = _jacobian(structure, p, u, x, y_sim, 0.0, anchors, branches)
+    assert fresh.tobytes() == given.tobytes()
+    y_j, jac = simulation_jacobian(structure, p, u, y, 0.0, breaks)
+    assert y_j.tobytes() == y_sim.tobytes() and jac.tobytes() == fresh.tobytes()
+    f1, f2 = _engaged(structure, p, u, x, 0.0, anchors)
+    first = int(np.flatnonzero(f1 | f2 | anchors)[0])
+    assert first > 0  # the hold: no sensitivity before the first engagement
+    np.testing.assert_array_equal(jac[:first], 0.0)
+    assert np.all(np.any(jac[first:] != 0.0, axis=0))
 
 
 # --------------------------------------------------------------------------- statistics
