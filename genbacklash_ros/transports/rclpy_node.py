@@ -536,8 +536,9 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
         self._data_since_tick = True
         try:
             ours = _decoded(self._command_codec, msg)
-        except MessageError as err:
+        except MessageError as err:  # bytes that do not decode: counted, as replay counts them
             self.get_logger().warning(f"command: {err}", throttle_duration_sec=5.0)
+            self._pipeline.reject("command", str(err))
             return
         pipeline = self._pipeline
         answer = pipeline.answer(ours, self._receive_ns(info))  # type: ignore[arg-type]
@@ -555,8 +556,9 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
         self._data_since_tick = True
         try:
             ours = _decoded(self._encoder_codec, msg)
-        except MessageError as err:
+        except MessageError as err:  # bytes that do not decode: counted, as replay counts them
             self.get_logger().warning(f"encoder: {err}", throttle_duration_sec=5.0)
+            self._pipeline.reject("encoder", str(err))
             return
         self._publish(self._pipeline.on_encoder(ours, self._receive_ns(info)))
 
@@ -564,8 +566,9 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
         self._data_since_tick = True
         try:
             ours = _decoded(self._motor_codec, msg)
-        except MessageError as err:
+        except MessageError as err:  # bytes that do not decode: counted, as replay counts them
             self.get_logger().warning(f"motor encoder: {err}", throttle_duration_sec=5.0)
+            self._pipeline.reject("motor", str(err))  # type: ignore[arg-type]
             return
         self._publish(self._pipeline.on_motor(ours, self._receive_ns(info)))
 

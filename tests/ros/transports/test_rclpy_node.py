@@ -209,6 +209,11 @@ def test_a_raw_command_is_answered_with_its_own_bytes_compensated(ros_args: list
         assert events[-1] == ("published", "compensated_command")
         with pytest.raises(Exception, match="does not decode"):
             node._command_codec.decode(raw[:7])
+        # bytes that do not decode at all: counted as an invalid command, nothing published
+        published = len(events)
+        node._on_command(raw[:7], {"source_timestamp": 1_350_000_000})
+        assert node._pipeline.stats.dropped.get("command_invalid") == 1
+        assert ("published", "compensated_command") not in events[published:]
     finally:
         node.finish()
         node.destroy_node()
