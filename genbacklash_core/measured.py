@@ -299,12 +299,17 @@ class TrackingVerdict:
     on_rms, off_rms : float
         The measured tracking errors, compensated and not (rad).
     on_time, off_time : float
-        Seconds of readings of each kind judged so far.
+        Seconds of readings of each kind judged so far (``off_time``: the offline
+        baseline's seconds while it is in use).
     reason : str
         One sentence, with the numbers.
     baseline : str
         What ``off_rms`` is: ``"measured"`` (on the machine) or ``"offline"`` (the
-        :class:`OfflineBaseline` of a checkpoint start, until the live one is probed).
+        :class:`OfflineBaseline` of a checkpoint start, until the live one is probed, and
+        after while the live one is shorter than ``min_time`` and agrees with it).
+    live_time : float
+        Seconds of readings without compensation measured on the machine, whichever
+        baseline is in use.
     """
 
     trust: float
@@ -316,6 +321,7 @@ class TrackingVerdict:
     off_time: float
     reason: str
     baseline: str = "measured"
+    live_time: float = 0.0
 
 
 class _Mean:
@@ -632,7 +638,16 @@ class TrackingJudge:
             f"{without})"
         )
         return TrackingVerdict(
-            trust, state, ratio, on_rms, off_rms, on.time, off_time, f"{why} {numbers}", baseline
+            trust,
+            state,
+            ratio,
+            on_rms,
+            off_rms,
+            on.time,
+            off_time,
+            f"{why} {numbers}",
+            baseline,
+            off.time,
         )
 
     def _judge(self) -> TrackingVerdict:

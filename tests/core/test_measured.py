@@ -438,4 +438,6 @@ def test_a_calm_live_probe_that_agrees_does_not_replace_the_offline_baseline() -
     feed.run(0.7, 0.055, 1.0)
     v = judge.verdict
     assert v.baseline == "offline" and v.state == "judging" and v.trust > 0.0
+    probed = OFFLINE_PROBE * judge.settings.min_time
+    assert probed <= v.live_time < probed + 0.2 and v.off_time == 40.0
     assert v.ratio == pytest.approx(0.055 / 0.048, rel=0.1)  # not 1.38 against the probe
