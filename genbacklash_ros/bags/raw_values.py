@@ -47,7 +47,7 @@ from typing import Any, Literal, cast
 
 import numpy as np
 
-from genbacklash_ros.bags.cdr_layout import learn_layout
+from genbacklash_ros.bags.cdr_layout import CdrLayout, learn_layout
 from genbacklash_ros.bags.rosbags_types import from_rosbags, jazzy_typestore, to_rosbags
 from genbacklash_ros.node.messages import (
     NS_PER_S,
@@ -83,11 +83,10 @@ class UndecodableMessage(MessageError):
 
 @dataclass(frozen=True, slots=True)
 class _Layout:
-    """Where one byte layout keeps its numbers."""
+    """Where one byte layout keeps the value this reader reads."""
 
-    constant: tuple[tuple[int, bytes], ...]  # (offset, bytes) every message must hold
+    learnt: CdrLayout  # the layout's constant bytes, stamp and float arrays
     value_at: int  # offset of the value read
-    stamp_at: int  # offset of header.stamp (sec, nanosec); -1: no header
     checked: tuple[tuple[int, int], ...]  # (offset, count) of floats that must be finite
 
 
@@ -99,7 +98,7 @@ def _rows_of(
     joined = b"".join([raws[k] for k in index.tolist()])
     rows = np.frombuffer(joined, dtype=np.uint8).reshape(index.size, length)
     good = np.ones(index.size, dtype=bool)
-    for start, expected in layout.constant:
+    for start, expected in layout.learnt.constant:
         same = rows[:, start : start + len(expected)] == np.frombuffer(expected, np.uint8)
         good &= same.all(axis=1)
     return rows, good
@@ -148,12 +147,8 @@ class RawValueReader:
         the message does not decode or the adapters reject it (as they would the decoded
         message)."""
         layout = self._layouts.get(len(raw))
-        if layout is not None:
-            for start, expected in layout.constant:
-                if not raw.startswith(expected, start):
-                    break
-            else:
-                return self._read_fast(raw, layout)
+        if layout is not None and layout.learnt.matches(raw):
+            return self._read_fast(raw, layout)
         return self._read_slow(raw)
 
     def read_many(self, raws: Sequence[bytes]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -190,8 +185,8 @@ class RawValueReader:
             for offset, count in layout.checked:
                 floats = rows[:, offset : offset + 8 * count].copy().view("<f8")
                 good &= np.isfinite(floats).all(axis=1)
-            if layout.stamp_at >= 0:
-                at = layout.stamp_at
+            if layout.learnt.stamp_at >= 0:
+                at = layout.learnt.stamp_at
                 sec = rows[:, at : at + 4].copy().view("<i4")[:, 0].astype(np.int64)
                 nanosec = rows[:, at + 4 : at + 8].copy().view("<u4")[:, 0].astype(np.int64)
                 stamps[index] = np.where(good, sec * NS_PER_S + nanosec, 0)
@@ -221,8 +216,8 @@ class RawValueReader:
         if not math.isfinite(value):
             return self._read_slow(raw)
         stamp = 0
-        if layout.stamp_at >= 0:
-            sec, nanosec = _unpack_stamp(raw, layout.stamp_at)
+        if layout.learnt.stamp_at >= 0:
+            sec, nanosec = _unpack_stamp(raw, layout.learnt.stamp_at)
             stamp = sec * NS_PER_S + nanosec
         self.fast += 1
         return stamp, value
@@ -276,7 +271,7 @@ class RawValueReader:
         if self.role == "command" and self.kind != "float64":
             # the adapters want every element finite
             checked = tuple((at, n) for _, at, n in learnt.arrays)
-        return _Layout(learnt.constant, offset + 8 * index, learnt.stamp_at, checked)
+        return _Layout(learnt, offset + 8 * index, checked)
 
     # ------------------------------------------------------------------ writing
 
@@ -315,7 +310,7 @@ class RawValueReader:
         if not math.isfinite(value):
             raise MessageError(f"the compensated command is not finite ({value})")
         layout = self._layouts.get(len(raw))
-        if layout is not None and all(raw.startswith(b, at) for at, b in layout.constant):
+        if layout is not None and layout.learnt.matches(raw):
             at = layout.value_at
             return raw[:at] + _pack_d(float(value)) + raw[at + 8 :]
         _obj, msg = self._decode(raw)
