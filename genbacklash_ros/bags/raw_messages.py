@@ -99,10 +99,16 @@ class RawMessageCodec:
         self._slow = slow
         self._store = jazzy_typestore()
         self._learnt: dict[int, _Learnt | None] = {}
+        # the bytes decode last read by a layout, and it: encode of the answer to them
+        # (the command just decoded) does not compare their constant bytes again
+        self._last: tuple[bytes, _Learnt] | None = None
         self.fast = 0
         self.slow = 0
 
     def _layout_of(self, raw: bytes) -> _Learnt | None:
+        last = self._last
+        if last is not None and last[0] is raw:
+            return last[1]
         learnt = self._learnt.get(len(raw))
         if learnt is None or not learnt.layout.matches(raw):
             return None
@@ -113,6 +119,7 @@ class RawMessageCodec:
         learnt = self._layout_of(raw)
         if learnt is None:
             return self._decode_slow(raw)
+        self._last = (raw, learnt)
         self.fast += 1
         template = learnt.template
         values = {name: unpack.unpack_from(raw, at) for name, at, unpack in learnt.fields}
