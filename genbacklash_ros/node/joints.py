@@ -56,7 +56,9 @@ __all__ = [
 ]
 
 #: Parameters that cannot be set per joint (one subscription each, the joint's own place).
-NOT_PER_JOINT = frozenset({"joint", "command_index", "command_type", "encoder_type"})
+NOT_PER_JOINT = frozenset(
+    {"joint", "command_index", "command_type", "encoder_type", "thread_priority"}
+)
 _SPEC_NAMES = frozenset(spec.name for spec in PARAMETER_SPECS)
 _NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]*")
 _JOINT_TOKEN = "{joint}"

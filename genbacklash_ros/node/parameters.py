@@ -435,6 +435,18 @@ PARAMETER_SPECS: tuple[ParameterSpec, ...] = (
         choices=("header", "receive"),
         restarts=True,
     ),
+    ParameterSpec(
+        "thread_priority",
+        "integer",
+        0,
+        "Real-time priority (SCHED_FIFO) of the thread that takes the messages and answers "
+        "the commands, as ros2_control's thread_priority; 0: the default scheduler. Above 0 "
+        "identification runs in a child process of its own, so that the message thread never "
+        "waits for the interpreter lock of a thread it preempts. Needs CAP_SYS_NICE or an "
+        "rtprio limit; without them the node warns and runs on the default scheduler. Read-only.",
+        0,
+        99,
+    ),
 )
 
 _SPECS: dict[str, ParameterSpec] = {spec.name: spec for spec in PARAMETER_SPECS}
@@ -504,6 +516,7 @@ class NodeParameters:
     servo_window: float = 5.0
     sample_period: float = 0.0
     stamp_source: Literal["header", "receive"] = "header"
+    thread_priority: int = 0
 
     def __post_init__(self) -> None:
         for spec in PARAMETER_SPECS:

@@ -75,7 +75,6 @@ from cyclonedds.util import duration
 
 from genbacklash_core import GenBacklashError
 from genbacklash_ros.node.checkpoint_writer import BackgroundCheckpointWriter
-from genbacklash_ros.node.identify import live_worker
 from genbacklash_ros.node.joints import JointSet
 from genbacklash_ros.node.messages import (
     DiagnosticArray,
@@ -102,6 +101,7 @@ from genbacklash_ros.transports.ros_graph import (
     await_discovery,
     endpoint_qos,
 )
+from genbacklash_ros.transports.thread_priority import apply_thread_priority, worker_for
 
 __all__ = [
     "DEFAULT_QOS",
@@ -319,7 +319,9 @@ class DdsNode:
         self._stop = threading.Event()
         self._checkpoints = BackgroundCheckpointWriter()
         self.pipeline = make_pipeline(
-            joints, checkpoint_writer=self._checkpoints, worker=live_worker
+            joints,
+            checkpoint_writer=self._checkpoints,
+            worker=worker_for(params.thread_priority),
         )
         self._last_receive: dict[_Kind, int] = {"command": -1, "encoder": -1, "motor_encoder": -1}
         self._seq = 0
@@ -441,6 +443,9 @@ class DdsNode:
             self.topics["estimate"],
             self.topics["diagnostics"],
         )
+        problem = apply_thread_priority(self.params.thread_priority)  # this thread takes them
+        if problem:
+            _LOG.warning(problem)
         try:
             while not self._stop.is_set():
                 now = self._clock()

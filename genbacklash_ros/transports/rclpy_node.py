@@ -31,7 +31,8 @@ what it returns. All logic is in the pipeline.
   set keeps running on its last consistent values until the other set comes, and the
   diagnostics say so under ``parameters_pending``). ``command_type``, ``encoder_type``,
   ``gear_input`` and ``motor_encoder_type`` are read-only (they fix the subscriptions: set
-  them in the params file);
+  them in the params file), and so is ``thread_priority`` (the message thread's scheduler and
+  the identify stage are chosen at start: :mod:`~genbacklash_ros.transports.thread_priority`);
 * wiring: once a second the node asks discovery which types are published on its
   ``command`` and ``encoder`` topics; a publisher of another type is named in
   ``/diagnostics`` (WARN, key ``wiring``) with the parameter that selects the type;
@@ -111,7 +112,6 @@ from genbacklash_ros.bags.raw_messages import RawMessageCodec
 from genbacklash_ros.blas_threads import one_blas_thread
 from genbacklash_ros.gc_pauses import few_collections
 from genbacklash_ros.node.checkpoint_writer import BackgroundCheckpointWriter
-from genbacklash_ros.node.identify import live_worker
 from genbacklash_ros.node.joints import JointSet, is_joint_parameter, load_joint_set
 from genbacklash_ros.node.messages import (
     DiagnosticArray,
@@ -129,6 +129,7 @@ from genbacklash_ros.node.multijoint import MultiJointPipeline, make_pipeline
 from genbacklash_ros.node.parameters import (
     NODE_NAME,
     PARAMETER_SPECS,
+    NodeParameters,
     ParameterSpec,
     parse_ros_arguments,
     resolve_requested,
@@ -142,6 +143,7 @@ from genbacklash_ros.node.wiring import (
     type_mismatches,
 )
 from genbacklash_ros.transports.stop_signals import StopSignals
+from genbacklash_ros.transports.thread_priority import apply_thread_priority, worker_for
 
 __all__ = ["BacklashIdentifierNode", "WaitLoop", "descriptor", "from_ros", "main", "to_ros"]
 
@@ -154,6 +156,7 @@ READ_ONLY = frozenset(
         "motor_encoder_type",
         "joints",
         "command_indices",
+        "thread_priority",  # the message thread's scheduler and the identify process: at start
     }
 )
 _ROS_COMMAND = {
@@ -333,7 +336,9 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
             on_error=lambda reason: self.get_logger().warning(reason)
         )
         self._pipeline = make_pipeline(
-            self._joints, checkpoint_writer=self._checkpoints, worker=live_worker
+            self._joints,
+            checkpoint_writer=self._checkpoints,
+            worker=worker_for(self._params.thread_priority),
         )
         if self._pipeline.warm_start_note:
             self.get_logger().info(self._pipeline.warm_start_note)
@@ -407,6 +412,11 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
         self._finished = False
 
     # ------------------------------------------------------------------ parameters
+
+    @property
+    def params(self) -> NodeParameters:
+        """The parameters in use (the base set with several joints)."""
+        return self._params
 
     def _declare_joint_parameters(self) -> None:
         """With ``joints``: ``joints``, ``command_indices`` (read-only) and each
@@ -888,6 +898,11 @@ def _run(argv: list[str], stop: StopSignals) -> int:
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         loop = WaitLoop(node, executor)
+        # this thread takes the messages (the node's other threads, Fast DDS's included, were
+        # started with the default scheduler and keep it)
+        problem = apply_thread_priority(node.params.thread_priority)
+        if problem:
+            node.get_logger().warning(problem)
         try:
             with few_collections():  # the node built: its objects out of the collector's scans
                 while not stop.requested:

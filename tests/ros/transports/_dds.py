@@ -119,6 +119,7 @@ class Played:
     summary: dict[str, Any]
     returncode: int
     log: str
+    inspected: Any = None  # what ``inspect`` found in the running node, if asked
 
 
 def play_against_node(
@@ -128,9 +129,11 @@ def play_against_node(
     player: str,
     player_args: list[str],
     timeout: float,
+    inspect: Callable[[int], Any] | None = None,
 ) -> Played:
     """Start the node (``transport``, the params file ``params_yaml``), run ``player`` (a
-    script beside this module) on a domain of their own, then stop the node with SIGINT."""
+    script beside this module) on a domain of their own, then (``inspect(pid)`` on the
+    node still running, when given) stop the node with SIGINT."""
     from ._ros2 import domain_id
 
     domain = domain_id()
@@ -149,12 +152,13 @@ def play_against_node(
         )
         assert ran.returncode == 0, ran.stdout + ran.stderr + log.read_text()
         summary = json.loads(ran.stdout.strip().splitlines()[-1])
+        inspected = None if inspect is None else inspect(node.pid)
         returncode = stop_node(node, log)
     finally:
         if node.poll() is None:
             node.kill()
             node.wait(10)
-    return Played(summary, returncode, log.read_text())
+    return Played(summary, returncode, log.read_text(), inspected)
 
 
 def diagnostic_values(diag: Any) -> dict[str, str]:

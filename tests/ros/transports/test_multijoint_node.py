@@ -5,13 +5,17 @@ a player publishing a simulated arm over rclpy (``arm_player.py``: a three-joint
 Checked per transport: every command answered with one compensated array (the free element
 unchanged, every joint's element compensated), each joint's estimate on
 ``/backlash_identifier/<joint>/estimate`` near its own truth (three different drivetrains), one
-``/diagnostics`` status per joint named after it, and a clean exit on SIGINT.
+``/diagnostics`` status per joint named after it, and a clean exit on SIGINT. The rclpy node
+and the DDS node run twice each: with the default scheduler, and with ``thread_priority``
+(the message thread under ``SCHED_FIFO``, identification in a child process of its own).
 """
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -38,21 +42,42 @@ PARAMS = (
 )
 
 
-@pytest.fixture(scope="module", params=["rclpy", "dds"])
+PRIORITY = 10
+
+
+def _threads_and_children(pid: int) -> dict[str, Any]:
+    """The node's main thread's scheduling policy, and its child processes (Linux)."""
+    children = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            children.append(int(stat.parent.name))
+    return {"policy": os.sched_getscheduler(pid), "children": children}
+
+
+@pytest.fixture(scope="module", params=["rclpy", "dds", "rclpy-priority", "dds-priority"])
 def played(
     request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
 ) -> Iterator[Played]:
-    transport = str(request.param)
+    variant = str(request.param)
+    transport = variant.split("-")[0]
     if transport == "dds":
         pytest.importorskip("cyclonedds", reason="cyclonedds is not installed (pip install .[dds])")
-    tmp = tmp_path_factory.mktemp(f"arm_{transport}")
+    params = PARAMS
+    if variant.endswith("priority"):
+        params += f"    thread_priority: {PRIORITY}\n"
+    tmp = tmp_path_factory.mktemp(f"arm_{variant}")
     yield play_against_node(
         tmp,
         transport,
-        PARAMS,
+        params,
         "arm_player.py",
         ["--seconds", str(SECONDS), "--settle", "0.5"],
         timeout=120,
+        inspect=_threads_and_children,
     )
 
 
@@ -91,3 +116,19 @@ def test_one_diagnostics_status_per_joint(played: Played) -> None:
 def test_the_node_exits_cleanly(played: Played) -> None:
     assert played.returncode == 0, played.log
     assert "Traceback" not in played.log
+
+
+def test_a_thread_priority_moves_identification_to_a_child(
+    played: Played, request: pytest.FixtureRequest
+) -> None:
+    """With ``thread_priority`` the node identifies in one child process (its estimates are
+    checked above) and its message thread runs under SCHED_FIFO, or the log says why not;
+    without, it has no child and the default scheduler."""
+    seen = played.inspected
+    if not request.node.callspec.params["played"].endswith("priority"):
+        assert seen["children"] == [] and seen["policy"] == os.SCHED_OTHER
+        return
+    assert len(seen["children"]) == 1, seen
+    if seen["policy"] != os.SCHED_FIFO:  # not permitted here: said, and the default kept
+        assert "thread_priority 10 not applied" in played.log, played.log
+        assert seen["policy"] == os.SCHED_OTHER

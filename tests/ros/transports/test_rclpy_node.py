@@ -62,6 +62,7 @@ def test_descriptors_carry_ranges_and_descriptions() -> None:
     gate = rclpy_node.descriptor(by_name["gate_low"])
     assert gate.floating_point_range[0].to_value == 1.0
     assert rclpy_node.descriptor(by_name["command_type"]).read_only
+    assert rclpy_node.descriptor(by_name["thread_priority"]).read_only  # chosen at start
     assert all(rclpy_node.descriptor(s).description for s in PARAMETER_SPECS)
 
 
