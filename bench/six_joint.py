@@ -1,7 +1,7 @@
 """Six joints at 1 kHz through one node under rclpy, next to a plain rclpy echo (issue 24).
 
     python bench/six_joint.py [--seconds S] [--transport rclpy|dds] [--seed N] [--quick]
-                              [--domain ID]
+                              [--domain ID] [--thread-priority P]
 
 Three processes share a DDS domain of their own (``--domain``, else an id in 201-231 at
 random, apart from the tests'):
@@ -27,6 +27,10 @@ player's monotonic clock) of the compensated command and of the pong in the same
 node's CPU fraction (``utime + stime`` from ``/proc/<pid>/stat`` from the first command to
 the last reply, divided by that wall time; the echo's and the player's over the same time)
 and each joint's largest |parameter error| of its last estimate against its truth.
+``--thread-priority P`` (1-99) runs the node with ``thread_priority: P`` (its message thread
+under ``SCHED_FIFO``, identification in a child process, whose CPU is counted with the
+node's) and the echo's one thread under ``SCHED_FIFO`` at the same priority, so that the
+reference has the same privilege; the player keeps the default scheduler.
 Targets (issue 24): every estimate within 0.05, 100 % answered with all six compensated, at
 most 0.6 of a core, median and p99 within 1.5x the echo's.
 
@@ -63,8 +67,9 @@ PING, PONG = "/six_joint/ping", "/six_joint/pong"
 TICK_NS = 1_000_000
 
 
-def echo(lifetime_s: float) -> int:
-    """The reference: ping -> pong, nothing else."""
+def echo(lifetime_s: float, thread_priority: int = 0) -> int:
+    """The reference: ping -> pong, nothing else (its thread under ``SCHED_FIFO`` at
+    ``thread_priority`` when above 0, as the node's message thread)."""
     import rclpy
     from rclpy.executors import ExternalShutdownException
     from std_msgs.msg import Float64MultiArray
@@ -73,6 +78,8 @@ def echo(lifetime_s: float) -> int:
     node = rclpy.create_node("six_joint_echo")
     pong = node.create_publisher(Float64MultiArray, PONG, 10)
     node.create_subscription(Float64MultiArray, PING, pong.publish, 2000)
+    if thread_priority > 0:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(thread_priority))
     end = time.monotonic() + lifetime_s
     try:
         while rclpy.ok() and time.monotonic() < end:
@@ -104,9 +111,17 @@ class Played:
 
 
 def cpu_seconds(pid: int) -> float:
-    """``utime + stime`` of a process, seconds (Linux ``/proc``)."""
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    """``utime + stime`` of a process and of its live children (the node's identify
+    process, ``identify_process``), seconds (Linux ``/proc``)."""
+    total = 0
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:  # ended meanwhile
+            continue
+        if stat.parent.name == str(pid) or int(fields[1]) == pid:  # the process, a child
+            total += int(fields[11]) + int(fields[12])
+    return total / os.sysconf("SC_CLK_TCK")
 
 
 class Replies:
@@ -428,7 +443,13 @@ def latency(sent: np.ndarray, back: np.ndarray) -> tuple[int, float, float, floa
     return int(ok.sum()), float(np.median(ms)), float(np.percentile(ms, 99)), float(ms.max())
 
 
-def run(seconds: float, seed: int, transport: str, domain_id: int | None = None) -> str:
+def run(
+    seconds: float,
+    seed: int,
+    transport: str,
+    domain_id: int | None = None,
+    thread_priority: int = 0,
+) -> str:
     models = [worn(OPERATION_BACKLASH, f) for f in FACTORS]
     u, y = arm_data(models, seconds, seed)
     domain = str(random.randint(201, 231) if domain_id is None else domain_id)
@@ -440,6 +461,7 @@ def run(seconds: float, seed: int, transport: str, domain_id: int | None = None)
             "    command_type: float64_multi_array\n"
             f"    joints: [{', '.join(JOINTS)}]\n"
             f"    command_indices: [{', '.join(str(i) for i in range(len(JOINTS)))}]\n"
+            f"    thread_priority: {thread_priority}\n"
         )
         log = Path(tmp) / "node.log"
         node = subprocess.Popen(
@@ -452,7 +474,11 @@ def run(seconds: float, seed: int, transport: str, domain_id: int | None = None)
             stderr=log.open("wb"),
         )
         echo_proc = subprocess.Popen(
-            [sys.executable, __file__, "--role", "echo", "--lifetime", f"{seconds + 120:.0f}"],
+            [
+                *(sys.executable, __file__, "--role", "echo"),
+                *("--lifetime", f"{seconds + 120:.0f}"),
+                *("--thread-priority", str(thread_priority)),
+            ],
             env=env,
         )
         os.environ["ROS_DOMAIN_ID"] = domain
@@ -577,6 +603,15 @@ def main(argv: list[str] | None = None) -> int:
         help="ROS_DOMAIN_ID of the three processes (default: one at random in 201-231)",
     )
     parser.add_argument(
+        "--thread-priority",
+        type=int,
+        default=0,
+        choices=range(100),
+        metavar="P",
+        help="the node's thread_priority (SCHED_FIFO 1-99), and the echo's thread at the same "
+        "priority (default 0: the default scheduler for both)",
+    )
+    parser.add_argument(
         "--blas",
         type=int,
         metavar="ROUNDS",
@@ -588,11 +623,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.quick:
         args.seconds = 5.0
     if args.role == "echo":
-        return echo(args.lifetime)
+        return echo(args.lifetime, args.thread_priority)
     if args.blas:
         print(blas_comparison(args.seconds, args.seed, args.blas))
         return 0
-    text = run(args.seconds, args.seed, args.transport, args.domain)
+    text = run(args.seconds, args.seed, args.transport, args.domain, args.thread_priority)
     print(text)
     write_section(f"six_joint_{args.transport}", text)
     return 0
