@@ -59,6 +59,7 @@ from genbacklash_ros.node.identify import (
     IdentifyThread,
     Refused,
     Result,
+    Skipped,
     ThreadWorker,
 )
 
@@ -70,6 +71,10 @@ POLL_NS = 1_000_000
 """The socket is read at most once per this much time while results are awaited: polling
 is asked on every message of every joint (thousands a second) and a result a millisecond
 later changes nothing."""
+MAX_OUTBOX = 64 << 20
+"""Bytes kept waiting for a child that takes nothing (stopped, hung); batches beyond are
+let go (:class:`~genbacklash_ros.node.identify.Skipped`) and the next one sent breaks the
+chain."""
 START_TIMEOUT_S = 30.0  # a synchronous request waits at most this long for the child's reply
 
 
@@ -157,6 +162,16 @@ class IdentifyProcess:
             if self._dead is not None:
                 worker._results.append(Refused(n, f"identifier: {self._dead}"))
                 return
+            if len(self._out) > MAX_OUTBOX:  # the child takes nothing: let this batch go
+                worker._results.append(
+                    Skipped(n, f"identify process behind by more than {MAX_OUTBOX} bytes")
+                )
+                worker._broken = True
+                return
+            if worker._broken and b.size:  # the batch no longer follows the last one sent
+                b = b.copy()
+                b[0] = True
+                worker._broken = False
             worker._awaited += n
             self._send(("batch", worker._key, us, ys, b))
 
@@ -301,6 +316,7 @@ class ProcessWorker:
         self._process = shared_process() if process is None else process
         self._results: deque[Result] = deque()
         self._awaited = 0
+        self._broken = False  # a batch was let go: the next one sent breaks the chain
         self._initial = identifier
         self._closed = False
         self._key = self._process.register(self, identifier)

@@ -18,7 +18,8 @@ import pytest
 
 from genbacklash_core import WindowedIdentifier, paper_example
 from genbacklash_ros.blas_threads import one_blas_thread
-from genbacklash_ros.node.identify import Identified, Refused, SyncWorker
+from genbacklash_ros.node import identify_process
+from genbacklash_ros.node.identify import Identified, Refused, Skipped, SyncWorker
 from genbacklash_ros.node.identify_process import IdentifyProcess, ProcessWorker
 
 pytestmark = pytest.mark.skipif(
@@ -119,6 +120,33 @@ def test_submit_never_waits_for_a_stopped_child(process: IdentifyProcess) -> Non
     results = worker.poll()
     assert sum(r.samples for r in results) == 200 * 4096  # identified or skipped, none lost
     worker.close()
+
+
+def test_a_child_that_takes_nothing_costs_a_bounded_outbox(
+    process: IdentifyProcess, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Past MAX_OUTBOX the batches are let go (Skipped), and the next one sent breaks the
+    chain; every sample is accounted for."""
+    monkeypatch.setattr(identify_process, "MAX_OUTBOX", 1 << 20)
+    worker = ProcessWorker(WindowedIdentifier(3), process=process)
+    worker.flush()
+    u, y, breaks = _example(4096)
+    follows = np.zeros_like(breaks)
+    os.kill(process.pid, signal.SIGSTOP)
+    try:
+        for _ in range(400):  # ~28 MB: past the socket buffers and the 1 MB outbox
+            worker.submit(u, y, follows)
+        skipped = [r for r in worker.poll() if isinstance(r, Skipped)]
+        assert skipped and "identify process behind" in skipped[0].reason
+        assert worker._broken
+    finally:
+        os.kill(process.pid, signal.SIGCONT)
+    worker.flush()  # the outbox drained
+    worker.submit(u, y, follows)  # sent, with its first sample breaking the chain
+    assert not worker._broken
+    worker.flush()
+    results = skipped + worker.poll()
+    assert sum(r.samples for r in results) == 401 * 4096
 
 
 def test_a_child_that_dies_refuses_what_was_handed_over(process: IdentifyProcess) -> None:
