@@ -50,8 +50,10 @@ what it returns. All logic is in the pipeline.
   bytes with its floats replaced: rclpy's conversions to and from Python objects cost more than
   the pipeline's answer at 1 kHz;
 * the loop (:class:`WaitLoop`): one thread waits on an rcl wait set of its own holding the
-  ``command`` and ``encoder`` subscriptions, the parameter services and the 1 Hz timer; at each
-  wake-up it takes every message pending on the two subscriptions straight from their handles
+  ``command`` subscription, the parameter services and the 1 Hz timer (not the ``encoder``:
+  a reading needs no answer, so readings are taken at the next wake-up, at most
+  :data:`WAKE_S` later); at each wake-up it takes every message pending on the two
+  subscriptions straight from their handles
   (no executor, no task per message), orders them by source timestamp (as the DDS
   transport does) and hands them to the pipeline. A ``SingleThreadedExecutor`` still serves
   everything else (parameter services, the timer, QoS events, a ``/clock`` subscription with
@@ -176,6 +178,12 @@ TAKE_BATCH = READER_DEPTH
 # cost 25-35 us of CPU with Fast DDS (wait set filled, rcl_wait with nothing ready) where a
 # take that finds nothing costs about 1 us: 2,000 wake-ups a second were 0.07 of a core
 DRAIN_ROUNDS = 4
+# The encoder's subscription is not waited on: a reading needs no answer, and waking for each
+# of 1,000 a second cost the message thread a wake-up each (2,000 to 4,800 a second with the
+# commands; a real-time thread, thread_priority, wakes for every one). Its readings are
+# taken at every wake-up (a command, a service, the timer, or WAKE_S at most: its reader
+# holds READER_DEPTH of them, 2 s at 1 kHz), in source order with the commands taken then,
+# so a command is still handled after every reading that came before it.
 PENDING_KEY = "parameters_pending"  # diagnostics key: pairs held at their last consistent values
 
 
@@ -661,8 +669,9 @@ class WaitLoop:
     """The node's own wait loop: the hot subscriptions taken without an executor.
 
     On construction it claims the node's ``command`` and ``encoder`` subscriptions (executors
-    no longer wait on them) and builds one rcl wait set holding them, the node's other
-    subscriptions, its timers, clients and services. :meth:`run_once` waits on it (at most
+    no longer wait on them) and builds one rcl wait set holding the command's, the node's
+    other subscriptions, its timers, clients and services (not the encoder's: a reading needs
+    no answer, see :data:`DRAIN_ROUNDS`'s note). :meth:`run_once` waits on it (at most
     ``timeout_s``), then
 
     1. takes every message pending on the two subscriptions (``take_message`` on their
@@ -698,6 +707,7 @@ class WaitLoop:
         self._wait_set: Any = None
         self._signature: tuple[int, ...] = ()
         self._subs: list[Any] = []
+        self._waited: list[Any] = []  # the subscriptions in the wait set
         self._timers: list[Any] = []
         self._clients: list[Any] = []
         self._services: list[Any] = []
@@ -722,6 +732,8 @@ class WaitLoop:
         node = self._node
         hot = [sub for sub, _ in self._hot]
         self._subs = hot + [s for s in node.subscriptions if id(s) not in self._hot_ids]
+        # waited on: the command's and the other subscriptions, not the encoder's (above)
+        self._waited = [hot[0], *self._subs[len(hot) :]]
         self._timers = list(node.timers)
         self._clients = list(node.clients)
         self._services = list(node.services)
@@ -729,7 +741,7 @@ class WaitLoop:
             self._stack.enter_context(entity.handle)
         self._stack.enter_context(self._context.handle)
         self._wait_set = _rclpy.WaitSet(
-            len(self._subs),
+            len(self._waited),
             0,
             len(self._timers),
             len(self._clients),
@@ -749,7 +761,7 @@ class WaitLoop:
         """One wait (at most ``timeout_s``) and what it found; the messages taken."""
         ws = self._wait_set
         ws.clear_entities()
-        for sub in self._subs:
+        for sub in self._waited:
             ws.add_subscription(sub.handle)
         for tmr in self._timers:
             ws.add_timer(tmr.handle)
@@ -761,12 +773,12 @@ class WaitLoop:
         woke = time.monotonic()
         if not self._context.ok():
             raise ExternalShutdownException()
-        ready = [ws.is_ready("subscription", i) for i in range(len(self._hot))]
-        taken = self.take_pending(ready) if any(ready) else 0
+        # the command's if it is ready, and the encoder's whatever woke the wait (see above)
+        taken = self.take_pending((ws.is_ready("subscription", 0), True))
         if taken:
             taken += self._drain(woke)
         others = (
-            any(ws.is_ready("subscription", i) for i in range(len(self._hot), len(self._subs)))
+            any(ws.is_ready("subscription", i) for i in range(1, len(self._waited)))
             or ws.get_ready_entities("timer")
             or ws.get_ready_entities("service")
             or ws.get_ready_entities("client")

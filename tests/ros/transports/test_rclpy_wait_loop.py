@@ -1,7 +1,8 @@
 """The rclpy node's own wait loop (:class:`~genbacklash_ros.transports.rclpy_node.WaitLoop`),
 against the real rclpy (the ROS 2 wheels, Fast DDS).
 
-In process: the loop takes ``command`` and ``encoder`` itself, in source-timestamp order, while
+In process: the loop takes ``command`` and ``encoder`` itself, in source-timestamp order (a
+reading at the next wake-up: it does not wake the loop), while
 executors no longer see them (and see them again once it is closed); it still serves the
 parameter services, the 1 Hz timer and a ``/clock`` subscription made at run time through the
 executor; it ends on an external shutdown. As processes (mirroring ``test_multijoint_node.py``):
@@ -169,6 +170,42 @@ def test_a_reading_that_comes_while_a_command_is_handled_is_taken_in_the_same_wa
         assert w.loop.run_once(1.0) == 2
         assert seen == [("command", 1.0), ("encoder", 0.25)]
         assert w.loop.taken == 2
+
+
+def test_a_reading_does_not_wake_the_loop_the_next_command_takes_it(
+    ros_init: Callable[..., Any],
+) -> None:
+    """The encoder's subscription is not in the wait set (a reading needs no answer): a
+    reading alone waits for the wait's timeout, and a command then takes it with itself, the
+    reading first (it came first)."""
+    from std_msgs.msg import Float64MultiArray
+
+    ros_init()
+    seen: list[tuple[str, float]] = []
+    with _node_and_peer(
+        "wait_loop_lazy_peer",
+        lambda _: (
+            lambda msg, info: seen.append(("command", _first(msg, "command"))),
+            lambda msg, info: seen.append(("encoder", _first(msg, "encoder"))),
+        ),
+    ) as w:
+        assert w.node._encoder_sub not in w.loop._waited
+        for timer in w.node.timers:  # the 1 Hz tick would wake the wait too
+            timer.cancel()
+        w.encoder.publish(_reading(0.5, 1))
+        time.sleep(0.2)  # delivered
+        start = time.monotonic()
+        assert w.loop.run_once(0.6) == 1  # taken when the wait timed out, not before
+        assert time.monotonic() - start >= 0.55
+        assert seen == [("encoder", 0.5)]
+        w.encoder.publish(_reading(0.25, 2))
+        time.sleep(0.2)
+        w.command.publish(Float64MultiArray(data=[1.0]))
+        time.sleep(0.2)
+        start = time.monotonic()
+        assert w.loop.run_once(5.0) == 2  # the command woke it, the reading came along
+        assert time.monotonic() - start < 2.0
+        assert seen[1:] == [("encoder", 0.25), ("command", 1.0)]
 
 
 def test_services_timer_and_a_clock_made_at_run_time_are_served(
