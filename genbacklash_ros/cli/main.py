@@ -552,6 +552,15 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
         default="rclpy",
         help="the identifier node's transport (default rclpy)",
     )
+    live.add_argument(
+        "--thread-priority",
+        type=int,
+        choices=range(100),
+        default=0,
+        metavar="P",
+        help="the node's thread_priority: its message thread under SCHED_FIFO at P (1-99; "
+        "needs CAP_SYS_NICE), identification in a child process (default 0: neither)",
+    )
     demo.set_defaults(func=_cmd_demo)
     wanted = (
         [_COMMAND_MODULES[command]] if command in _COMMAND_MODULES else _COMMAND_MODULES.values()

@@ -64,8 +64,13 @@ class LiveResult:
     behind_s: float
 
 
-def node_params_yaml(joints: tuple[str, ...]) -> str:
-    """The identifier node's parameters for the arm: its JointState and command array."""
+def node_params_yaml(joints: tuple[str, ...], thread_priority: int = 0) -> str:
+    """The identifier node's parameters for the arm: its JointState and command array (and
+    ``thread_priority`` when above 0).
+
+    >>> "thread_priority: 20" in node_params_yaml(("a",), thread_priority=20)
+    True
+    """
     lines = [
         f"/**/{NODE_NAME}:",
         "  ros__parameters:",
@@ -80,6 +85,8 @@ def node_params_yaml(joints: tuple[str, ...]) -> str:
         names = ", ".join(joints)
         indices = ", ".join(str(k) for k in range(len(joints)))
         lines += [f"    joints: [{names}]", f"    command_indices: [{indices}]"]
+    if thread_priority > 0:
+        lines.append(f"    thread_priority: {thread_priority}")
     return "\n".join(lines) + "\n"
 
 
@@ -134,8 +141,10 @@ def run_live(
     *,
     transport: str = "rclpy",
     log: Callable[[str], None] = print,
+    thread_priority: int = 0,
 ) -> LiveResult:
-    """Start the identifier node, run the arm for ``settings.duration`` s, stop the node.
+    """Start the identifier node (``thread_priority``: the node's parameter), run the arm for
+    ``settings.duration`` s, stop the node.
 
     Raises
     ------
@@ -164,7 +173,7 @@ def run_live(
     joints = settings.joints
     workdir = Path(tempfile.mkdtemp(prefix="genbacklash-demo-"))
     params = workdir / "params.yaml"
-    params.write_text(node_params_yaml(joints), encoding="utf-8")
+    params.write_text(node_params_yaml(joints, thread_priority), encoding="utf-8")
     node_log = workdir / "node.log"
     command = [
         sys.executable,
@@ -412,7 +421,11 @@ def main_live(args: Any) -> int:
             encoder_rate=args.encoder_rate,
             seed=args.seed,
         )
-        run_live(settings, transport=args.transport)
+        run_live(
+            settings,
+            transport=args.transport,
+            thread_priority=getattr(args, "thread_priority", 0),
+        )
     except GenBacklashError as err:
         print(f"genbacklash demo: {err}", file=sys.stderr)
         return 2
