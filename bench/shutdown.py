@@ -1,6 +1,7 @@
 """Shutdown: SIGINT/SIGTERM at random moments while the node is fed at 1 kHz (issue 24).
 
     python bench/shutdown.py [--quick] [--trials N] [--transport rclpy|dds] [--seed S]
+                             [--thread-priority P]
 
 A feeder process (rclpy, Fast DDS) publishes a command and a reading at 1 kHz; for each trial
 ``genbacklash node`` is started as its own process, and once the feeder sees it subscribed it
@@ -9,6 +10,9 @@ then a SIGINT 0-500 ms apart. A trial is clean when the node exits 0 with no "Tr
 stderr. Prints the counts per kind (and each unclean trial's stderr tail) and writes
 ``bench/output/shutdown.md`` (``shutdown_dds.md`` for ``--transport dds``). ``--trials`` per
 kind (default 50; ``--quick`` 5). About 2 s a trial: 7 minutes for 50 of each kind.
+``--thread-priority P`` runs the node with ``thread_priority: P`` (identification in a child
+process); a trial is then clean only if that child has ended too, within 5 s of the node
+(``bench/output/shutdown_priority.md``).
 """
 
 from __future__ import annotations
@@ -34,6 +38,7 @@ def main() -> None:
     parser.add_argument("--trials", type=int, default=50, help="trials of each kind")
     parser.add_argument("--transport", choices=("rclpy", "dds"), default="rclpy")
     parser.add_argument("--seed", type=int, default=24)
+    parser.add_argument("--thread-priority", type=int, default=0, choices=range(100), metavar="P")
     args = parser.parse_args()
     trials = 5 if args.quick else args.trials
     rng = random.Random(args.seed)
@@ -46,7 +51,7 @@ def main() -> None:
     feeder = Feeder(domain_id())
     try:
         with tempfile.TemporaryDirectory() as tmp:
-            params = write_params(Path(tmp))
+            params = write_params(Path(tmp), args.thread_priority)
             for i, (kind, delay, gap) in enumerate(plan):
                 outcome = trial(feeder, args.transport, params, kind, delay, gap)
                 codes[kind][outcome.returncode] += 1
@@ -67,9 +72,14 @@ def main() -> None:
     ]
     table = md_table(["signals", "exit 0, no traceback", "exit codes"], rows)
     print(table)
+    name = "shutdown" if args.transport == "rclpy" else f"shutdown_{args.transport}"
+    title = args.transport
+    if args.thread_priority:
+        name += "_priority"
+        title += f", thread_priority {args.thread_priority} (no child process left)"
     write_section(
-        "shutdown" if args.transport == "rclpy" else f"shutdown_{args.transport}",
-        f"""## Shutdown, {args.transport} (issue 24)
+        name,
+        f"""## Shutdown, {title} (issue 24)
 
 `{command_line()}`. Machine: {machine_description()}. Run time {seconds:.0f} s.
 

@@ -77,16 +77,20 @@ class Outcome:
     gap_s: float  # between the two signals (0 for one)
     returncode: int
     stderr: str
+    left: tuple[int, ...] = ()  # the node's child processes still running 5 s after it ended
+    children: int = 0  # the node's child processes when the first signal was sent
 
     @property
     def clean(self) -> bool:
-        return self.returncode == 0 and "Traceback" not in self.stderr
+        return self.returncode == 0 and "Traceback" not in self.stderr and not self.left
 
     def describe(self) -> str:
         return (
             f"{self.kind} {self.delay_s * 1e3:.0f} ms after listening"
             + (f", second after {self.gap_s * 1e3:.0f} ms" if "+" in self.kind else "")
-            + f": exit {self.returncode}\n{self.stderr[-2000:]}"
+            + f": exit {self.returncode}"
+            + (f", child processes left running: {self.left}" if self.left else "")
+            + f"\n{self.stderr[-2000:]}"
         )
 
 
@@ -106,6 +110,7 @@ def trial(
             if not feeder.wait_for_new(before, 30.0):
                 raise RuntimeError(f"the node did not subscribe within 30 s (exit {proc.poll()})")
             time.sleep(delay_s)
+            kids = children(proc.pid)  # an identify process (thread_priority) must end too
             first, _, second = kind.partition("+")
             proc.send_signal(signal.Signals[first])
             if second:
@@ -116,11 +121,41 @@ def trial(
             if proc.poll() is None:
                 proc.kill()
                 proc.wait()
+        deadline = time.monotonic() + 5.0
+        while any(_alive(k) for k in kids) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        left = tuple(k for k in kids if _alive(k))
         err.seek(0)
-        return Outcome(kind, delay_s, gap_s if second else 0.0, returncode, err.read())
+        return Outcome(
+            kind, delay_s, gap_s if second else 0.0, returncode, err.read(), left, len(kids)
+        )
 
 
-def write_params(directory: Path) -> Path:
-    path = directory / "shutdown_params.yaml"
-    path.write_text(PARAMS)
+def write_params(directory: Path, thread_priority: int = 0) -> Path:
+    """The node's params file (``thread_priority`` above 0: its message thread real-time,
+    identification in a child process)."""
+    path = directory / f"shutdown_params_{thread_priority}.yaml"
+    extra = f"    thread_priority: {thread_priority}\n" if thread_priority else ""
+    path.write_text(PARAMS + extra)
     return path
+
+
+def children(pid: int) -> tuple[int, ...]:
+    """The processes whose parent is ``pid`` (Linux ``/proc``)."""
+    found = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            found.append(int(stat.parent.name))
+    return tuple(found)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"

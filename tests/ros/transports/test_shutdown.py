@@ -6,7 +6,8 @@ at a seeded-random moment, a SIGINT, a SIGTERM, two SIGINTs or a SIGTERM and a S
 apart. Before the fix a second SIGINT 5-250 ms after the first ended the process by SIGINT (the
 handlers were restored before the interpreter's shutdown), and a SIGINT landing in rclpy's message
 take ended in ``RuntimeError: Unable to convert call argument '0' to Python object`` and exit 1.
-``bench/shutdown.py`` runs 50 trials of each kind.
+``bench/shutdown.py`` runs 50 trials of each kind. The rclpy node also runs with
+``thread_priority`` (identification in a child process): the child must end with it.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from ._shutdown import KINDS, Feeder, trial, write_params
 pytestmark = pytest.mark.skipif(bool(rclpy_missing()), reason=rclpy_missing() or "-")
 
 # trials of each kind per transport: ~2 s each (start-up, feed, finish)
-TRIALS = {"rclpy": 3, "dds": 2}
+TRIALS = {"rclpy": 3, "dds": 2, "rclpy-priority": 2}
 
 
 @pytest.fixture(scope="module")
@@ -35,22 +36,25 @@ def feeder() -> Iterator[Feeder]:
         fed.close()
 
 
-@pytest.mark.parametrize("transport", ["rclpy", "dds"])
+@pytest.mark.parametrize("variant", ["rclpy", "dds", "rclpy-priority"])
 def test_signals_at_random_moments_end_the_fed_node_cleanly(
-    feeder: Feeder, transport: str, tmp_path: Path
+    feeder: Feeder, variant: str, tmp_path: Path
 ) -> None:
+    transport = variant.split("-")[0]
     if transport == "dds":
         pytest.importorskip("cyclonedds", reason="the dds transport needs cyclonedds (dds extra)")
-    rng = random.Random(f"shutdown-{transport}")
-    params = write_params(tmp_path)
+    rng = random.Random(f"shutdown-{variant}")
+    params = write_params(tmp_path, thread_priority=10 if variant.endswith("priority") else 0)
     plan = [
         (kind, rng.uniform(0.0, 1.5), rng.uniform(0.0, 0.5))
-        for _ in range(TRIALS[transport])
+        for _ in range(TRIALS[variant])
         for kind in KINDS
     ]
     unclean = []
     for kind, delay, gap in plan:
         outcome = trial(feeder, transport, params, kind, delay, gap)
+        # the identify process exists with thread_priority only (and must end: clean)
+        assert outcome.children == (1 if variant.endswith("priority") else 0), outcome
         if not outcome.clean:
             unclean.append(outcome.describe())
     assert not unclean, f"{len(unclean)} of {len(plan)} unclean:\n" + "\n".join(unclean)
