@@ -56,10 +56,13 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from _common import command_line, machine_description, md_table, write_section
+from _common import ROOT, command_line, machine_description, md_table, write_section
 
 from genbacklash_core.scenarios import OPERATION_BACKLASH, OperationSettings, arm_records, worn
 from genbacklash_ros.blas_threads import one_blas_thread
+
+sys.path.insert(0, str(ROOT))
+from tests.ros._proc import children
 
 JOINTS = tuple(f"joint_{i + 1}" for i in range(6))
 FACTORS = (0.6, 0.8, 1.0, 1.2, 1.5, 2.0)
@@ -112,15 +115,14 @@ class Played:
 
 def cpu_seconds(pid: int) -> float:
     """``utime + stime`` of a process and of its live children (the node's identify
-    process, ``identify_process``), seconds (Linux ``/proc``)."""
+    process, ``thread_priority``), seconds (Linux ``/proc``)."""
     total = 0
-    for stat in Path("/proc").glob("[0-9]*/stat"):
+    for each in (pid, *children(pid)):
         try:
-            fields = stat.read_text().rsplit(")", 1)[1].split()
-        except OSError:  # ended meanwhile
+            fields = Path(f"/proc/{each}/stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:  # a child that ended meanwhile
             continue
-        if stat.parent.name == str(pid) or int(fields[1]) == pid:  # the process, a child
-            total += int(fields[11]) + int(fields[12])
+        total += int(fields[11]) + int(fields[12])
     return total / os.sysconf("SC_CLK_TCK")
 
 

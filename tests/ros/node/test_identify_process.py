@@ -21,6 +21,7 @@ from genbacklash_ros.blas_threads import one_blas_thread
 from genbacklash_ros.node import identify_process
 from genbacklash_ros.node.identify import Identified, Refused, Skipped, SyncWorker
 from genbacklash_ros.node.identify_process import IdentifyProcess, ProcessWorker
+from tests.ros._proc import alive
 
 pytestmark = pytest.mark.skipif(
     not sys.platform.startswith("linux"), reason="the child's checks read Linux /proc"
@@ -41,14 +42,6 @@ def _example(n: int = 3000, seed: int = 7) -> tuple[np.ndarray, np.ndarray, np.n
     breaks = np.zeros(n, dtype=bool)
     breaks[0] = True
     return data.u, data.y, breaks
-
-
-def _alive(pid: int) -> bool:
-    try:
-        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-    except OSError:
-        return False
-    return state != "Z"
 
 
 def test_the_child_identifies_what_the_synchronous_worker_does(process: IdentifyProcess) -> None:
@@ -190,7 +183,7 @@ def test_closing_ends_the_child_cleanly() -> None:
     pid = proc.pid
     proc.close()
     assert proc._proc.returncode == 0
-    assert not _alive(pid)
+    assert not alive(pid)
     assert proc.dead is not None
 
 
@@ -216,7 +209,7 @@ def test_the_child_ends_with_its_node(how: str, tmp_path: Path) -> None:
     )
     child = int(out.stdout.split()[0])
     deadline = time.monotonic() + 10
-    while _alive(child) and time.monotonic() < deadline:
+    while alive(child) and time.monotonic() < deadline:
         time.sleep(0.05)
-    assert not _alive(child), f"the identify process {child} outlived its node ({how})"
+    assert not alive(child), f"the identify process {child} outlived its node ({how})"
     assert "Traceback" not in out.stderr

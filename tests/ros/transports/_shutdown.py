@@ -18,6 +18,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from tests.ros._proc import alive, children
+
 HERE = Path(__file__).resolve().parent
 
 KINDS = ("SIGINT", "SIGTERM", "SIGINT+SIGINT", "SIGTERM+SIGINT")
@@ -122,9 +124,9 @@ def trial(
                 proc.kill()
                 proc.wait()
         deadline = time.monotonic() + 5.0
-        while any(_alive(k) for k in kids) and time.monotonic() < deadline:
+        while any(alive(k) for k in kids) and time.monotonic() < deadline:
             time.sleep(0.05)
-        left = tuple(k for k in kids if _alive(k))
+        left = tuple(k for k in kids if alive(k))
         err.seek(0)
         return Outcome(
             kind, delay_s, gap_s if second else 0.0, returncode, err.read(), left, len(kids)
@@ -138,24 +140,3 @@ def write_params(directory: Path, thread_priority: int = 0) -> Path:
     extra = f"    thread_priority: {thread_priority}\n" if thread_priority else ""
     path.write_text(PARAMS + extra)
     return path
-
-
-def children(pid: int) -> tuple[int, ...]:
-    """The processes whose parent is ``pid`` (Linux ``/proc``)."""
-    found = []
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            fields = stat.read_text().rsplit(")", 1)[1].split()
-        except OSError:
-            continue
-        if int(fields[1]) == pid:
-            found.append(int(stat.parent.name))
-    return tuple(found)
-
-
-def _alive(pid: int) -> bool:
-    try:
-        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-    except OSError:
-        return False
-    return state != "Z"

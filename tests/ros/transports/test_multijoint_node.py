@@ -20,6 +20,8 @@ from typing import Any
 import numpy as np
 import pytest
 
+from tests.ros._proc import children
+
 from ._dds import Played, play_against_node
 from ._ros2 import rclpy_missing
 
@@ -47,15 +49,7 @@ PRIORITY = 10
 
 def _threads_and_children(pid: int) -> dict[str, Any]:
     """The node's main thread's scheduling policy, and its child processes (Linux)."""
-    children = []
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            fields = stat.read_text().rsplit(")", 1)[1].split()
-        except OSError:
-            continue
-        if int(fields[1]) == pid:
-            children.append(int(stat.parent.name))
-    return {"policy": os.sched_getscheduler(pid), "children": children}
+    return {"policy": os.sched_getscheduler(pid), "children": list(children(pid))}
 
 
 @pytest.fixture(scope="module", params=["rclpy", "dds", "rclpy-priority", "dds-priority"])
