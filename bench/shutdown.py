@@ -38,7 +38,7 @@ def main() -> None:
     parser.add_argument("--trials", type=int, default=50, help="trials of each kind")
     parser.add_argument("--transport", choices=("rclpy", "dds"), default="rclpy")
     parser.add_argument("--seed", type=int, default=24)
-    parser.add_argument("--thread-priority", type=int, default=0, choices=range(100), metavar="P")
+    parser.add_argument("--thread-priority", type=int, default=0, metavar="P", help="0-99")
     args = parser.parse_args()
     trials = 5 if args.quick else args.trials
     rng = random.Random(args.seed)

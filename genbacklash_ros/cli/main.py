@@ -346,6 +346,16 @@ def _joint_count(text: str) -> int:
     return value
 
 
+def _thread_priority(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a whole number, got {text!r}") from None
+    if not 0 <= value <= 99:
+        raise argparse.ArgumentTypeError(f"must lie in 0..99 (0: no real-time), got {value}")
+    return value
+
+
 _BATCH_USES = (
     "{command} uses model, degree, na, nb, settle_time and servo_model, servo_dead_time, "
     "servo_time_constant (a bag, or a CSV with t: the same row rules; servo_model=auto "
@@ -554,8 +564,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     )
     live.add_argument(
         "--thread-priority",
-        type=int,
-        choices=range(100),
+        type=_thread_priority,
         default=0,
         metavar="P",
         help="the node's thread_priority: its message thread under SCHED_FIFO at P (1-99; "

@@ -57,6 +57,33 @@ def test_the_node_params_select_the_arm_joint() -> None:
     assert (params.command_type, params.encoder_type) == ("float64_multi_array", "joint_state")
 
 
+def test_a_thread_priority_reaches_the_node_params() -> None:
+    import yaml
+
+    text = node_params_yaml(("joint_1", "joint_2"), thread_priority=30)
+    values = yaml.safe_load(text)["/**/backlash_identifier"]["ros__parameters"]
+    assert (
+        NodeParameters.from_mapping(
+            {k: v for k, v in values.items() if k not in ("joints", "command_indices")}
+        ).thread_priority
+        == 30
+    )
+    assert "thread_priority" not in node_params_yaml(("joint_1",))  # 0: the default
+
+
+@pytest.mark.parametrize("value", ["100", "-1", "high"])
+def test_a_bad_thread_priority_is_one_line_and_exit_2(
+    value: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from genbacklash_ros.cli.main import main
+
+    with pytest.raises(SystemExit) as ended:
+        main(["demo", "--live", "--thread-priority", value])
+    assert ended.value.code == 2
+    last = capsys.readouterr().err.strip().splitlines()[-1]
+    assert last.startswith("genbacklash demo: error: argument --thread-priority: must")
+
+
 def test_live_demo_runs_the_node_beside_a_simulated_arm() -> None:
     """The whole demo under the rclpy wheels: the node answers the arm's commands, publishes
     an estimate of the play, and the run ends with exit 0 and its table."""

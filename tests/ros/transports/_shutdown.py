@@ -30,7 +30,7 @@ PARAMS = "backlash_identifier:\n  ros__parameters:\n    joint: j\n    publish_ra
 def node_command(transport: str, params: Path) -> list[str]:
     """``genbacklash node`` of this environment (the console script, else ``-m``)."""
     script = Path(sys.executable).with_name("genbacklash")
-    head = [str(script)] if script.is_file() else [sys.executable, "-m", "genbacklash_ros.cli"]
+    head = [str(script)] if script.is_file() else [sys.executable, "-m", "genbacklash_ros.cli.main"]
     return [*head, "node", "--transport", transport, "--params-file", str(params)]
 
 
