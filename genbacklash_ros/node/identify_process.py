@@ -75,7 +75,7 @@ MAX_OUTBOX = 64 << 20
 """Bytes kept waiting for a child that takes nothing (stopped, hung); batches beyond are
 let go (:class:`~genbacklash_ros.node.identify.Skipped`) and the next one sent breaks the
 chain."""
-START_TIMEOUT_S = 30.0  # a synchronous request waits at most this long for the child's reply
+REPLY_TIMEOUT_S = 30.0  # flush, refit, snapshot: the longest wait for the child's reply
 
 
 def _frame(obj: object) -> bytes:
@@ -191,7 +191,7 @@ class IdentifyProcess:
             token = self._next_token
             self._next_token += 1
             self._send((request, key, token))
-            deadline = time.monotonic() + START_TIMEOUT_S
+            deadline = time.monotonic() + REPLY_TIMEOUT_S
             while token not in self._replies:
                 self._pump()
                 if self._dead is not None:
@@ -201,7 +201,7 @@ class IdentifyProcess:
                 left = deadline - time.monotonic()
                 if left <= 0:
                     raise GenBacklashError(
-                        f"the identify process did not answer {request!r} in {START_TIMEOUT_S:g} s"
+                        f"the identify process did not answer {request!r} in {REPLY_TIMEOUT_S:g} s"
                     )
                 want_write = [self._sock] if self._out else []
                 select.select([self._sock], want_write, [], min(left, 0.1))

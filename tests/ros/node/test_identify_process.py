@@ -44,6 +44,14 @@ def _example(n: int = 3000, seed: int = 7) -> tuple[np.ndarray, np.ndarray, np.n
     return data.u, data.y, breaks
 
 
+def _refused(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Samples the identifier refuses at once (not finite): the child's work is then only
+    the transport's, which is what the outbox tests are about."""
+    breaks = np.zeros(n, dtype=bool)
+    breaks[0] = True
+    return np.full(n, np.nan), np.full(n, np.nan), breaks
+
+
 def test_the_child_identifies_what_the_synchronous_worker_does(process: IdentifyProcess) -> None:
     u, y, breaks = _example()
     with one_blas_thread():  # the child runs with one, as the node does
@@ -99,7 +107,7 @@ def test_submit_never_waits_for_a_stopped_child(process: IdentifyProcess) -> Non
     """What the socket cannot take waits in the outbox: the message thread goes on."""
     worker = ProcessWorker(WindowedIdentifier(3), process=process)
     worker.flush()  # the child is up
-    u, y, breaks = _example(4096)
+    u, y, breaks = _refused(4096)
     os.kill(process.pid, signal.SIGSTOP)
     try:
         start = time.monotonic()
@@ -111,7 +119,7 @@ def test_submit_never_waits_for_a_stopped_child(process: IdentifyProcess) -> Non
         os.kill(process.pid, signal.SIGCONT)
     worker.flush()
     results = worker.poll()
-    assert sum(r.samples for r in results) == 200 * 4096  # identified or skipped, none lost
+    assert sum(r.samples for r in results) == 200 * 4096  # refused or skipped, none lost
     worker.close()
 
 
@@ -123,7 +131,7 @@ def test_a_child_that_takes_nothing_costs_a_bounded_outbox(
     monkeypatch.setattr(identify_process, "MAX_OUTBOX", 1 << 20)
     worker = ProcessWorker(WindowedIdentifier(3), process=process)
     worker.flush()
-    u, y, breaks = _example(4096)
+    u, y, breaks = _refused(4096)
     follows = np.zeros_like(breaks)
     os.kill(process.pid, signal.SIGSTOP)
     try:

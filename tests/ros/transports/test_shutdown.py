@@ -24,7 +24,7 @@ from ._shutdown import KINDS, Feeder, trial, write_params
 pytestmark = pytest.mark.skipif(bool(rclpy_missing()), reason=rclpy_missing() or "-")
 
 # trials of each kind per transport: ~2 s each (start-up, feed, finish)
-TRIALS = {"rclpy": 3, "dds": 2, "rclpy-priority": 2}
+TRIALS = {"rclpy": 3, "dds": 2, "rclpy-priority": 1}
 
 
 @pytest.fixture(scope="module")
