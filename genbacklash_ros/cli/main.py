@@ -12,7 +12,7 @@ import json
 import math
 import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -336,24 +336,24 @@ def _positive_float(text: str) -> float:
     return value
 
 
-def _joint_count(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a whole number, got {text!r}") from None
-    if not 1 <= value <= 12:
-        raise argparse.ArgumentTypeError(f"must lie in 1..12, got {value}")
-    return value
+def _int_in(low: int, high: int, note: str = "") -> Callable[[str], int]:
+    """An argparse ``type``: a whole number in ``low..high`` (``note`` follows the range in
+    the error)."""
+
+    def whole_number(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be a whole number, got {text!r}") from None
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"must lie in {low}..{high}{note}, got {value}")
+        return value
+
+    return whole_number
 
 
-def _thread_priority(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a whole number, got {text!r}") from None
-    if not 0 <= value <= 99:
-        raise argparse.ArgumentTypeError(f"must lie in 0..99 (0: no real-time), got {value}")
-    return value
+_joint_count = _int_in(1, 12)
+_thread_priority = _int_in(0, 99, " (0: no real-time)")
 
 
 _BATCH_USES = (

@@ -424,7 +424,7 @@ def main_live(args: Any) -> int:
         run_live(
             settings,
             transport=args.transport,
-            thread_priority=getattr(args, "thread_priority", 0),
+            thread_priority=args.thread_priority,
         )
     except GenBacklashError as err:
         print(f"genbacklash demo: {err}", file=sys.stderr)

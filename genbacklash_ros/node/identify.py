@@ -43,6 +43,7 @@ import os
 import sys
 import threading
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol, TypeAlias
 
@@ -295,6 +296,11 @@ class ThreadWorker:
     thread : IdentifyThread, optional
         Shared with other workers (closed with them by its owner); default one of its own,
         closed with the worker.
+    on_result : callable, optional
+        Called with each result, on the thread that made it, instead of keeping it for
+        :meth:`poll` (an identify process sends it back at once:
+        :mod:`~genbacklash_ros.node.identify_process`). A batch's result is handed over
+        before the worker reports itself idle, so it comes before :meth:`flush` returns.
 
     Examples
     --------
@@ -314,6 +320,7 @@ class ThreadWorker:
         *,
         max_backlog: int = MAX_BACKLOG,
         thread: IdentifyThread | None = None,
+        on_result: Callable[[Result], None] | None = None,
     ) -> None:
         if isinstance(max_backlog, bool) or not isinstance(max_backlog, int) or max_backlog < 1:
             raise GenBacklashError(f"max_backlog must be a whole number >= 1, got {max_backlog!r}")
@@ -324,6 +331,7 @@ class ThreadWorker:
         self._busy = False
         self._stop = False
         self._results: deque[Result] = deque()
+        self._emit = self._results.append if on_result is None else on_result
         self._cond = threading.Condition()
         self._own = thread is None
         self._thread = IdentifyThread() if thread is None else thread
@@ -345,9 +353,7 @@ class ThreadWorker:
                 self._queued -= int(old[0].size)
             if skipped:
                 self._run.skipped()
-                self._results.append(
-                    Skipped(skipped, f"identifier more than {self._max} samples behind")
-                )
+                self._emit(Skipped(skipped, f"identifier more than {self._max} samples behind"))
                 # the oldest kept batch no longer follows what the identifier saw last
                 us0, ys0, b0 = self._queue[0]
                 b0 = b0.copy()
@@ -415,7 +421,7 @@ class ThreadWorker:
                 self._run.skipped()
                 result = Refused(int(us.size), f"identifier: {type(err).__name__}: {err}")
             with cond:
-                self._results.append(result)
+                self._emit(result)
         finally:
             with cond:
                 self._busy = False

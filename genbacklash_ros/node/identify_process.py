@@ -49,6 +49,7 @@ import sys
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from typing import Any, cast
 
 import numpy as np
@@ -398,32 +399,6 @@ def process_worker(identifier: OnlineIdentifier) -> ProcessWorker:
 # ------------------------------------------------------------------ the child
 
 
-class _Outbox:
-    """Stands in for a child worker's result queue: each result goes back over the socket
-    the moment the worker appends it (before the worker reports itself idle, so a flush's
-    reply always follows the results it waited for)."""
-
-    __slots__ = ("_key", "_send")
-
-    def __init__(self, key: int, send: Any) -> None:
-        self._key = key
-        self._send = send
-
-    def append(self, result: Result) -> None:
-        self._send(("result", self._key, result))
-
-    def __bool__(self) -> bool:
-        return False  # nothing is ever kept here
-
-
-class _ChildWorker(ThreadWorker):
-    """A thread worker in the child whose results go back over the socket."""
-
-    def __init__(self, identifier: OnlineIdentifier, thread: IdentifyThread, key: int, send: Any):
-        super().__init__(identifier, thread=thread)
-        self._results = _Outbox(key, send)  # type: ignore[assignment]
-
-
 def _read_exactly(sock: socket.socket, n: int) -> bytes | None:
     chunks = bytearray()
     while len(chunks) < n:
@@ -450,9 +425,12 @@ def serve(fd: int) -> None:
             except OSError:
                 pass  # the node is gone; the receive loop ends on its own
 
+    def sender(key: int) -> Callable[[Result], None]:
+        return lambda result: send(("result", key, result))
+
     sys.setswitchinterval(SWITCH_INTERVAL_S)  # replies and batches are taken between fits
     thread = IdentifyThread("genbacklash-identify-child")
-    workers: dict[int, _ChildWorker] = {}
+    workers: dict[int, ThreadWorker] = {}
     with one_blas_thread():
         while True:
             try:
@@ -467,7 +445,8 @@ def serve(fd: int) -> None:
             message = pickle.loads(body)
             kind, key = message[0], message[1]
             if kind == "new":
-                workers[key] = _ChildWorker(message[2], thread, key, send)
+                # each result goes back the moment it is made
+                workers[key] = ThreadWorker(message[2], thread=thread, on_result=sender(key))
             elif kind == "batch":
                 workers[key].submit(message[2], message[3], message[4])
             elif kind == "close":

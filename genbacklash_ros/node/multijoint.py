@@ -280,7 +280,7 @@ class MultiJointPipeline:
                 outputs.extend(_tagged(due, joint))
         return outputs
 
-    def reject(self, stream: Literal["command", "encoder"], reason: str) -> None:
+    def reject(self, stream: Literal["command", "encoder", "motor"], reason: str) -> None:
         """A message its transport could not read: counted by every joint."""
         for pipe in self._pipes.values():
             pipe.reject(stream, reason)

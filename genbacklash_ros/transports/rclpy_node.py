@@ -178,12 +178,6 @@ TAKE_BATCH = READER_DEPTH
 # cost 25-35 us of CPU with Fast DDS (wait set filled, rcl_wait with nothing ready) where a
 # take that finds nothing costs about 1 us: 2,000 wake-ups a second were 0.07 of a core
 DRAIN_ROUNDS = 4
-# The encoder's subscription is not waited on: a reading needs no answer, and waking for each
-# of 1,000 a second cost the message thread a wake-up each (2,000 to 4,800 a second with the
-# commands; a real-time thread, thread_priority, wakes for every one). Its readings are
-# taken at every wake-up (a command, a service, the timer, or WAKE_S at most: its reader
-# holds READER_DEPTH of them, 2 s at 1 kHz), in source order with the commands taken then,
-# so a command is still handled after every reading that came before it.
 PENDING_KEY = "parameters_pending"  # diagnostics key: pairs held at their last consistent values
 
 
@@ -586,7 +580,7 @@ class BacklashIdentifierNode(Node):  # type: ignore[misc]
             ours = _decoded(self._motor_codec, msg)
         except MessageError as err:  # bytes that do not decode: counted, as replay counts them
             self.get_logger().warning(f"motor encoder: {err}", throttle_duration_sec=5.0)
-            self._pipeline.reject("motor", str(err))  # type: ignore[arg-type]
+            self._pipeline.reject("motor", str(err))
             return
         self._publish(self._pipeline.on_motor(ours, self._receive_ns(info)))
 
@@ -670,9 +664,13 @@ class WaitLoop:
 
     On construction it claims the node's ``command`` and ``encoder`` subscriptions (executors
     no longer wait on them) and builds one rcl wait set holding the command's, the node's
-    other subscriptions, its timers, clients and services (not the encoder's: a reading needs
-    no answer, see :data:`DRAIN_ROUNDS`'s note). :meth:`run_once` waits on it (at most
-    ``timeout_s``), then
+    other subscriptions, its timers, clients and services. Not the encoder's: a reading needs
+    no answer, and waking for each of 1,000 a second cost the message thread a wake-up each
+    (2,000 to 4,800 a second with the commands; a real-time thread, ``thread_priority``, wakes
+    for every one). Its readings are taken at every wake-up (a command, a service, the timer,
+    or :data:`WAKE_S` at most: its reader holds ``READER_DEPTH`` of them, 2 s at 1 kHz), in
+    source order with the commands taken then, so a command is still handled after every
+    reading that came before it. :meth:`run_once` waits on it (at most ``timeout_s``), then
 
     1. takes every message pending on the two subscriptions (``take_message`` on their
        handles, at most :data:`TAKE_BATCH` each: their whole histories, as the DDS
@@ -732,7 +730,7 @@ class WaitLoop:
         node = self._node
         hot = [sub for sub, _ in self._hot]
         self._subs = hot + [s for s in node.subscriptions if id(s) not in self._hot_ids]
-        # waited on: the command's and the other subscriptions, not the encoder's (above)
+        # waited on: the command's and the other subscriptions, not the encoder's (class notes)
         self._waited = [hot[0], *self._subs[len(hot) :]]
         self._timers = list(node.timers)
         self._clients = list(node.clients)
@@ -773,7 +771,7 @@ class WaitLoop:
         woke = time.monotonic()
         if not self._context.ok():
             raise ExternalShutdownException()
-        # the command's if it is ready, and the encoder's whatever woke the wait (see above)
+        # the command's if it is ready, and the encoder's whatever woke the wait (class notes)
         taken = self.take_pending((ws.is_ready("subscription", 0), True))
         if taken:
             taken += self._drain(woke)
