@@ -50,6 +50,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
+from dataclasses import dataclass, field
 from typing import Any, cast
 
 import numpy as np
@@ -77,6 +78,17 @@ MAX_OUTBOX = 64 << 20
 let go (:class:`~genbacklash_ros.node.identify.Skipped`) and the next one sent breaks the
 chain."""
 REPLY_TIMEOUT_S = 30.0  # flush, refit, snapshot: the longest wait for the child's reply
+
+
+@dataclass
+class _Channel:
+    """What :class:`IdentifyProcess` keeps for one worker: the results come back into it,
+    and its counts say what the child still owes."""
+
+    key: int
+    results: deque[Result] = field(default_factory=deque)
+    awaited: int = 0  # samples handed over and not yet answered
+    broken: bool = False  # a batch was let go: the next one sent breaks the chain
 
 
 def _frame(obj: object) -> bytes:
@@ -124,7 +136,7 @@ class IdentifyProcess:
         self._lock = threading.RLock()
         self._out = bytearray()
         self._in = bytearray()
-        self._workers: dict[int, ProcessWorker] = {}
+        self._channels: dict[int, _Channel] = {}
         self._next_key = 0
         self._next_token = 0
         self._replies: dict[int, object] = {}
@@ -143,38 +155,40 @@ class IdentifyProcess:
 
     # -------------------------------------------------------------- workers' calls
 
-    def register(self, worker: ProcessWorker, identifier: OnlineIdentifier) -> int:
+    def register(self, identifier: OnlineIdentifier) -> _Channel:
+        """Start identifying with ``identifier`` in the child; its results come back into
+        the returned channel."""
         with self._lock:
-            key = self._next_key
+            channel = _Channel(self._next_key)
             self._next_key += 1
-            self._workers[key] = worker
-            self._send(("new", key, identifier))
-            return key
+            self._channels[channel.key] = channel
+            self._send(("new", channel.key, identifier))
+            return channel
 
-    def unregister(self, key: int) -> None:
+    def unregister(self, channel: _Channel) -> None:
         with self._lock:
-            if self._workers.pop(key, None) is not None:
-                self._send(("close", key))
+            if self._channels.pop(channel.key, None) is not None:
+                self._send(("close", channel.key))
                 self._pump()
 
-    def submit(self, worker: ProcessWorker, us: np.ndarray, ys: np.ndarray, b: np.ndarray) -> None:
+    def submit(self, channel: _Channel, us: np.ndarray, ys: np.ndarray, b: np.ndarray) -> None:
         with self._lock:
             n = int(us.size)
             if self._dead is not None:
-                worker._results.append(Refused(n, f"identifier: {self._dead}"))
+                channel.results.append(Refused(n, f"identifier: {self._dead}"))
                 return
             if len(self._out) > MAX_OUTBOX:  # the child takes nothing: let this batch go
-                worker._results.append(
+                channel.results.append(
                     Skipped(n, f"identify process behind by more than {MAX_OUTBOX} bytes")
                 )
-                worker._broken = True
+                channel.broken = True
                 return
-            if worker._broken and b.size:  # the batch no longer follows the last one sent
+            if channel.broken and b.size:  # the batch no longer follows the last one sent
                 b = b.copy()
                 b[0] = True
-                worker._broken = False
-            worker._awaited += n
-            self._send(("batch", worker._key, us, ys, b))
+                channel.broken = False
+            channel.awaited += n
+            self._send(("batch", channel.key, us, ys, b))
 
     def pump_soon(self) -> None:
         """Read what came back, unless the socket was read less than :data:`POLL_NS` ago."""
@@ -276,29 +290,29 @@ class IdentifyProcess:
         kind = message[0]
         if kind == "result":
             _, key, result = message
-            worker = self._workers.get(key)
-            samples = int(result.samples)
-            if worker is not None:
-                worker._awaited -= min(samples, worker._awaited)
-                worker._results.append(result)
+            channel = self._channels.get(key)
+            if channel is not None:
+                channel.awaited -= min(int(result.samples), channel.awaited)
+                channel.results.append(result)
         elif kind == "reply":
             _, token, value = message
             self._replies[token] = value
 
     def _why_gone(self, err: OSError | None) -> str:
-        try:
-            code = self._proc.wait(timeout=0.5)
-        except subprocess.TimeoutExpired:
+        # never waits: this runs on the node's message thread (an exit code not yet reaped
+        # is simply not named)
+        code = self._proc.poll()
+        if code is None:
             return f"the identify process stopped answering ({err or 'its socket closed'})"
         return f"the identify process ended (exit code {code})"
 
     def _died(self, reason: str) -> None:
         self._dead = reason
         self._out.clear()
-        for worker in self._workers.values():
-            if worker._awaited:
-                worker._results.append(Refused(worker._awaited, f"identifier: {reason}"))
-                worker._awaited = 0
+        for channel in self._channels.values():
+            if channel.awaited:
+                channel.results.append(Refused(channel.awaited, f"identifier: {reason}"))
+                channel.awaited = 0
 
 
 class ProcessWorker:
@@ -315,12 +329,9 @@ class ProcessWorker:
 
     def __init__(self, identifier: OnlineIdentifier, *, process: IdentifyProcess | None = None):
         self._process = shared_process() if process is None else process
-        self._results: deque[Result] = deque()
-        self._awaited = 0
-        self._broken = False  # a batch was let go: the next one sent breaks the chain
         self._initial = identifier
         self._closed = False
-        self._key = self._process.register(self, identifier)
+        self._channel = self._process.register(identifier)
 
     @property
     def identifier(self) -> OnlineIdentifier:
@@ -329,17 +340,17 @@ class ProcessWorker:
         gone. Changing the copy changes nothing in the child."""
         if self._closed or self._process.dead is not None:
             return self._initial
-        return cast(OnlineIdentifier, self._process.call(self._key, "snapshot"))
+        return cast(OnlineIdentifier, self._process.call(self._channel.key, "snapshot"))
 
     def submit(self, us: np.ndarray, ys: np.ndarray, breaks: np.ndarray) -> None:
         """Hand the batch over (never waits for the identifier)."""
-        self._process.submit(self, us, ys, breaks)
+        self._process.submit(self._channel, us, ys, breaks)
 
     def poll(self) -> list[Result]:
         """The results that came back since the last call (never waits)."""
-        if self._awaited:
+        if self._channel.awaited:
             self._process.pump_soon()
-        results = self._results
+        results = self._channel.results
         if not results:
             return []
         out: list[Result] = []
@@ -353,7 +364,7 @@ class ProcessWorker:
         if self._closed or self._process.dead is not None:
             return
         try:
-            self._process.call(self._key, "flush")
+            self._process.call(self._channel.key, "flush")
         except GenBacklashError:
             return  # the child is gone: what was awaited is refused (see poll)
 
@@ -362,7 +373,7 @@ class ProcessWorker:
         if self._closed:
             return None
         try:
-            reply = self._process.call(self._key, "refit")
+            reply = self._process.call(self._channel.key, "refit")
         except GenBacklashError as err:
             return Refused(1, str(err))
         return cast("Result | None", reply)
@@ -372,7 +383,7 @@ class ProcessWorker:
         if self._closed:
             return
         self._closed = True
-        self._process.unregister(self._key)
+        self._process.unregister(self._channel)
 
 
 _SHARED: IdentifyProcess | None = None

@@ -139,12 +139,12 @@ def test_a_child_that_takes_nothing_costs_a_bounded_outbox(
             worker.submit(u, y, follows)
         skipped = [r for r in worker.poll() if isinstance(r, Skipped)]
         assert skipped and "identify process behind" in skipped[0].reason
-        assert worker._broken
+        assert worker._channel.broken
     finally:
         os.kill(process.pid, signal.SIGCONT)
     worker.flush()  # the outbox drained
     worker.submit(u, y, follows)  # sent, with its first sample breaking the chain
-    assert not worker._broken
+    assert not worker._channel.broken
     worker.flush()
     results = skipped + worker.poll()
     assert sum(r.samples for r in results) == 401 * 4096
