@@ -246,6 +246,28 @@ def test_a_command_imports_only_its_own_module() -> None:
         assert command in listed
 
 
+def test_the_command_line_starts_openblas_on_one_thread() -> None:
+    """Importing the command line tells OpenBLAS one thread before numpy loads it (every
+    command limits the BLAS to one anyway: its threads would only start and spin), and
+    keeps a value the caller set."""
+    code = (
+        "import os, sys; import genbacklash_ros.cli.main; "
+        "sys.stdout.write(os.environ['OPENBLAS_NUM_THREADS'])"
+    )
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    seen = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+    ).stdout
+    kept = subprocess.run(
+        [sys.executable, "-c", code],
+        env={**env, "OPENBLAS_NUM_THREADS": "3"},
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+    assert (seen, kept) == ("1", "3")
+
+
 def test_every_command_runs_with_one_blas_thread(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
