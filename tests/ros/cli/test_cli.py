@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import json
 import os
 import subprocess
@@ -244,6 +245,24 @@ def test_a_command_imports_only_its_own_module() -> None:
     commands = ("identify", "diagnose", "replay", "node", "excite", "fleet", "fleet-report")
     for command in (*commands, "export", "readings"):
         assert command in listed
+
+
+def test_only_the_console_scripts_own_call_freezes_what_is_left_for_the_exit(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The console script's process ends after main(): what is still alive then is frozen,
+    so that the interpreter's final collection does not walk it (rosbags' typestore, a
+    replay's history). A program that calls main(argv) keeps its collector as it was."""
+    data = _simulate(tmp_path, 1)
+    gc.unfreeze()
+    try:
+        assert main(["identify", str(data)]) == 0
+        assert gc.get_freeze_count() == 0
+        monkeypatch.setattr(sys, "argv", ["genbacklash", "identify", str(data)])
+        assert main() == 0
+        assert gc.get_freeze_count() > 0
+    finally:
+        gc.unfreeze()
 
 
 def test_the_command_line_starts_openblas_on_one_thread() -> None:
