@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import json
 import os
 import subprocess
@@ -244,6 +245,46 @@ def test_a_command_imports_only_its_own_module() -> None:
     commands = ("identify", "diagnose", "replay", "node", "excite", "fleet", "fleet-report")
     for command in (*commands, "export", "readings"):
         assert command in listed
+
+
+def test_only_the_console_scripts_own_call_freezes_what_is_left_for_the_exit(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The console script's process ends after main(): what is still alive then is frozen,
+    so that the interpreter's final collection does not walk it (rosbags' typestore, a
+    replay's history). A program that calls main(argv) keeps its collector as it was."""
+    data = _simulate(tmp_path, 1)
+    gc.unfreeze()
+    try:
+        assert main(["identify", str(data)]) == 0
+        assert gc.get_freeze_count() == 0
+        monkeypatch.setattr(sys, "argv", ["genbacklash", "identify", str(data)])
+        assert main() == 0
+        assert gc.get_freeze_count() > 0
+    finally:
+        gc.unfreeze()
+
+
+def test_the_command_line_starts_openblas_on_one_thread() -> None:
+    """Importing the command line tells OpenBLAS one thread before numpy loads it (every
+    command limits the BLAS to one anyway: its threads would only start and spin), and
+    keeps a value the caller set."""
+    code = (
+        "import os, sys; import genbacklash_ros.cli.main; "
+        "sys.stdout.write(os.environ['OPENBLAS_NUM_THREADS'])"
+    )
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    seen = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+    ).stdout
+    kept = subprocess.run(
+        [sys.executable, "-c", code],
+        env={**env, "OPENBLAS_NUM_THREADS": "3"},
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+    assert (seen, kept) == ("1", "3")
 
 
 def test_every_command_runs_with_one_blas_thread(
