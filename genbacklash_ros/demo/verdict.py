@@ -86,7 +86,8 @@ class Comparison:
 
 @dataclass(frozen=True)
 class DemoVerdict:
-    """One joint's verdict.
+    """One joint's verdict, on two sets of its readings (module notes): harm on either is
+    harm.
 
     Attributes
     ----------
