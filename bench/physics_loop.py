@@ -34,6 +34,11 @@ standing verdict of harm, which the restart holds) and with both removed (what a
 checkpoint held before: the restart measures its 3 s first and tries the model again).
 The table gives the second record's cuts.
 
+With ``--late-stamps MS`` the node gets the readings stamped as a busy publisher stamps them
+(:func:`~genbacklash_ros.physics.loop.late_stamps`: busy for MS on average after each command,
+the readings taken meanwhile stamped together when it is done), as the live demo's arm
+publishes them; the physics is sampled at the readings' true instants.
+
 The numbers: the RMS load tracking error ``load - desired`` (the true load at every encoder
 instant) and each compensator's cut against ``none`` in percent, over the whole record and
 over its second half (the node learns in the first); the node's final play ``c_L + c_R``
@@ -42,7 +47,7 @@ against the geometric play; the guard's final trust and error ratio.
 Run: ``python bench/physics_loop.py [--seeds 0 1 2] [--bandwidths 20 60 100]
 [--variants ...] [--duration 40] [--guard on|off] [--delay-ms 0]
 [--param NAME=VALUE ...] [--motor-encoder] [--seeded-start OFFSET] [--baseline-scale X]
-[--no-offline-baseline] [--offline-variant NAME] [--restart OFFSET]``
+[--no-offline-baseline] [--offline-variant NAME] [--restart OFFSET] [--late-stamps MS]``
 """
 
 from __future__ import annotations
@@ -138,6 +143,14 @@ def _arguments(argv: Sequence[str] | None = None) -> argparse.Namespace:
         help="restart the node from its own final checkpoint on seed + OFFSET's motion, with "
         "the checkpoint's baseline and without it",
     )
+    parser.add_argument(
+        "--late-stamps",
+        type=float,
+        default=0.0,
+        metavar="MS",
+        help="the readings stamped by a publisher busy MS on average after each command "
+        "(the live demo's arm; default 0: stamped when taken)",
+    )
     args = parse_physics_arguments(parser, argv)
     return args
 
@@ -228,7 +241,7 @@ def _restart_tables(args: argparse.Namespace, folder: Path) -> None:
                 run = folder / "node.json"
                 run.unlink(missing_ok=True)
                 node = {**extra, "checkpoint_file": str(run)}
-                first = Clocks(seed, args.duration)
+                first = Clocks(seed, args.duration, late_ms=args.late_stamps)
                 loads, _, _, judged = node_loop(
                     params, first, guard=args.guard == "on", delay_ns=delay, extra=node,
                     motor=args.motor_encoder,
@@ -238,7 +251,7 @@ def _restart_tables(args: argparse.Namespace, folder: Path) -> None:
                 late = first.t >= first.t[-1] // 2
                 fresh_late = 100 * (1 - rms((loads - first.desired)[late]) / rms(none[late]))
                 saved = load_checkpoint(run)
-                clocks = Clocks(seed + args.restart, args.duration)
+                clocks = Clocks(seed + args.restart, args.duration, late_ms=args.late_stamps)
                 half = clocks.t >= clocks.t[-1] // 2
                 errors = {
                     "none": open_loop(params, clocks, clocks.values, delay) - clocks.desired,
@@ -300,7 +313,7 @@ def _tables(args: argparse.Namespace, folder: Path) -> None:
                     shutil.copyfile(file, run)
                     run_extra["checkpoint_file"] = str(run)
                     start_play = f" {offline_play / geometric:.3f} |"
-                clocks = Clocks(seed, args.duration)
+                clocks = Clocks(seed, args.duration, late_ms=args.late_stamps)
                 half = clocks.t >= clocks.t[-1] // 2
                 delay = round(args.delay_ms * 1e6)
                 true_commands = compensate(truth.model, clocks.values)

@@ -216,8 +216,15 @@ class CompensationGuard:
         model: GeneralBacklash | Cascade | None,
     ) -> GuardVerdict:
         """Judge a batch of samples (the gear's input ``us``, the load ``ys``; ``breaks[k]``:
-        sample ``k`` does not follow sample ``k - 1``) with ``model``, the model the
-        compensator used for them. Returns the new :attr:`verdict`."""
+        the drivetrain's path from sample ``k - 1`` to sample ``k`` is not known, and the
+        free run restarts at the measured load there) with ``model``, the model the
+        compensator used for them. Returns the new :attr:`verdict`.
+
+        Give breaks only where readings were lost or taken out: the compensator runs open
+        loop on its own commands, and a restart at every break of a chain broken by stamps
+        alone re-anchors the model on the measured load where it is judged, hiding a load
+        that coasts into the play (the node passes its screen's ``restarts``, not its
+        sample rule's breaks: BENCHMARKS.md, the live demo, branch coast2-1)."""
         u = np.asarray(us, dtype=np.float64)
         y = np.asarray(ys, dtype=np.float64)
         if u.size == 0:

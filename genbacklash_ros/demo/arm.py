@@ -10,6 +10,13 @@ themselves, taken at the moment the arm takes the compensated answer to them (th
 for both), so what compensation changes is measured live: the RMS load tracking error (load
 minus the desired command now) of each, per joint.
 
+A second, *perturbed* twin takes the same desired commands as the first, its load started
+:data:`PERTURB` of the play away: what it and the first twin differ by is the comparison's own
+spread (a load that coasts in the play parts from its twin once it sits elsewhere in it), and
+the readings taken while the arm held a command other than the desired one (and
+:data:`~genbacklash_ros.demo.verdict.SETTLE_S` after) are counted apart: where compensation
+acted (:mod:`genbacklash_ros.demo.verdict`).
+
 No ROS here: :mod:`genbacklash_ros.demo.live` puts it on topics.
 
 Examples
@@ -29,11 +36,16 @@ import numpy as np
 
 from genbacklash_core import GenBacklashError
 from genbacklash_core.scenarios import OperationSettings, operation_commands
+from genbacklash_ros.demo.verdict import SETTLE_S, Comparison, DemoVerdict
 
 if TYPE_CHECKING:  # the engine needs mujoco: imported when an arm is made
     from genbacklash_ros.physics.engine import Drivetrain, Trajectory
 
-__all__ = ["ArmSettings", "JointErrors", "SimulatedArm"]
+__all__ = ["PERTURB", "ArmSettings", "JointErrors", "SimulatedArm"]
+
+PERTURB = 0.25
+"""The perturbed twin's load starts this share of the play away from the others' (its motor
+and command start that far off; the first command takes the motor back, the load stays)."""
 
 
 @dataclass(frozen=True)
@@ -82,15 +94,18 @@ class ArmSettings:
 
 @dataclass
 class JointErrors:
-    """Squared tracking errors of one joint, summed (obeyed arm and uncompensated twin)."""
+    """Squared tracking errors of one joint, summed (obeyed arm, uncompensated twin and
+    perturbed twin)."""
 
     obeyed: float = 0.0
     twin: float = 0.0
+    perturbed: float = 0.0
     count: int = 0
 
-    def add(self, obeyed: float, twin: float) -> None:
+    def add(self, obeyed: float, twin: float, perturbed: float = math.nan) -> None:
         self.obeyed += obeyed * obeyed
         self.twin += twin * twin
+        self.perturbed += perturbed * perturbed
         self.count += 1
 
     def rms(self) -> tuple[float, float]:
@@ -99,16 +114,32 @@ class JointErrors:
             return math.nan, math.nan
         return math.sqrt(self.obeyed / self.count), math.sqrt(self.twin / self.count)
 
+    def comparison(self, rate: float) -> Comparison:
+        """The three RMS errors (NaN when empty) over ``count / rate`` seconds."""
+        if not self.count:
+            return Comparison(math.nan, math.nan, math.nan, 0.0)
+        n = self.count
+        return Comparison(
+            math.sqrt(self.obeyed / n),
+            math.sqrt(self.twin / n),
+            math.sqrt(self.perturbed / n),
+            n / rate,
+        )
+
 
 @dataclass
 class _Joint:
     desired: np.ndarray
     arm: Drivetrain
     twin: Drivetrain
+    perturbed: Drivetrain
     arm_part: Trajectory | None = None  # the last stretch stepped
     twin_part: Trajectory | None = None
+    perturbed_part: Trajectory | None = None
     window: JointErrors = field(default_factory=JointErrors)
     late: JointErrors = field(default_factory=JointErrors)  # the second half of the motion
+    acted: JointErrors = field(default_factory=JointErrors)  # while compensation acted
+    acted_until: int = -1  # readings up to this time (ns) count as acted
 
 
 class SimulatedArm:
@@ -140,6 +171,7 @@ class SimulatedArm:
                     desired,
                     Drivetrain(self.params, position=start),
                     Drivetrain(self.params, position=start),
+                    Drivetrain(self.params, position=start + PERTURB * self.params.play),
                 )
             )
         self.commands = min(j.desired.size for j in self._joints)
@@ -176,21 +208,31 @@ class SimulatedArm:
         for j, obeyed, twin_u in zip(self._joints, self.obeyed, held, strict=True):
             j.arm_part = j.arm.hold(obeyed, until_ns)
             j.twin_part = j.twin.hold(twin_u, until_ns)
+            j.perturbed_part = j.perturbed.hold(twin_u, until_ns)
 
     def loads_at(self, t_ns: int, tick: int) -> tuple[float, ...]:
-        """The arm's load positions at ``t_ns`` (inside the last stretch), and both loads'
-        errors against the desired command of ``tick`` (the one in force) counted."""
+        """The arm's load positions at ``t_ns`` (inside the last stretch), and the three
+        loads' errors against the desired command of ``tick`` (the one in force) counted;
+        apart while compensation acts (the arm holds a command other than the twins',
+        and :data:`~genbacklash_ros.demo.verdict.SETTLE_S` after)."""
         desired = self.desired(tick)
+        held = self.desired(self.twin_tick)
         late = tick >= self.commands // 2
         at = np.array([t_ns], dtype=np.int64)
+        settle = round(SETTLE_S * 1e9)
         loads = []
-        for j, want in zip(self._joints, desired, strict=True):
-            assert j.arm_part is not None and j.twin_part is not None  # stepped at __init__
-            load = float(j.arm_part.load_at(at)[0])
-            twin = float(j.twin_part.load_at(at)[0])
-            j.window.add(load - want, twin - want)
+        for j, want, obeyed, twin_u in zip(self._joints, desired, self.obeyed, held, strict=True):
+            a, b, c = j.arm_part, j.twin_part, j.perturbed_part
+            assert a is not None and b is not None and c is not None  # stepped at __init__
+            load, twin, other = (float(part.load_at(at)[0]) for part in (a, b, c))
+            errors = (load - want, twin - want, other - want)
+            j.window.add(*errors)
             if late:
-                j.late.add(load - want, twin - want)
+                j.late.add(*errors)
+            if obeyed != twin_u:
+                j.acted_until = t_ns + settle
+            if t_ns <= j.acted_until:
+                j.acted.add(*errors)
             loads.append(load)
         return tuple(loads)
 
@@ -205,3 +247,11 @@ class SimulatedArm:
     def second_half(self) -> list[tuple[float, float]]:
         """Per joint, the ``(obeyed, twin)`` RMS errors over the second half of the motion."""
         return [j.late.rms() for j in self._joints]
+
+    def verdicts(self) -> list[DemoVerdict]:
+        """Per joint, the verdict on the second half and on the readings while compensation
+        acted (:mod:`genbacklash_ros.demo.verdict`)."""
+        rate = self.settings.encoder_rate
+        return [
+            DemoVerdict(j.late.comparison(rate), j.acted.comparison(rate)) for j in self._joints
+        ]

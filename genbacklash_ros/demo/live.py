@@ -15,8 +15,10 @@ Two ROS 2 nodes start:
 Once a second a line per joint shows what happens: the play the node estimates against the
 drivetrain's geometric play, the load tracking error of the arm (on the compensated commands)
 against its uncompensated twin over the last second, and whether compensation is on, faded or
-off. A table closes the run. Nothing is written to disk but the node's log, in a temporary
-directory that is removed afterwards unless the node failed.
+off. A table closes the run: the second half's cut, what two uncompensated twins differ by
+there, and the cut over the readings while compensation acted; harm is called only beyond
+that spread (:mod:`genbacklash_ros.demo.verdict`). Nothing is written to disk but the
+node's log, in a temporary directory that is removed afterwards unless the node failed.
 
 Needs rclpy (``pip install 'genbacklash[ros]'``) and mujoco (``[physics]``).
 """
@@ -39,6 +41,7 @@ from typing import Any
 
 from genbacklash_core import GenBacklashError
 from genbacklash_ros.demo.arm import ArmSettings, SimulatedArm
+from genbacklash_ros.demo.verdict import DemoVerdict
 
 __all__ = ["LiveResult", "main_live", "node_params_yaml", "run_live"]
 
@@ -62,6 +65,7 @@ class LiveResult:
     commands_sent: int
     commands_answered: int
     behind_s: float
+    verdicts: tuple[DemoVerdict, ...] = ()
 
 
 def node_params_yaml(joints: tuple[str, ...], thread_priority: int = 0) -> str:
@@ -348,6 +352,7 @@ def _run_arm(
             commands_sent=sent,
             commands_answered=inbox.answered,
             behind_s=behind / 1e9,
+            verdicts=tuple(arm.verdicts()),
         )
     _table(result, log)
     return result
@@ -376,32 +381,31 @@ def _table(result: LiveResult, log: Callable[[str], None]) -> None:
     log("")
     log(
         f"{'joint':<12}{'play (mrad)':>12}{'geometric':>11}{'RMS err, 2nd half (mrad)':>26}"
-        f"{'cut':>7}  compensation"
+        f"{'cut':>7}{'twins':>7}{'acted (s)':>10}{'cut then':>9}  compensation"
     )
     for k, joint in enumerate(result.joints):
         comp, raw = result.compensated_rms[k], result.uncompensated_rms[k]
         cut = 1.0 - comp / raw if raw > 0 else math.nan
+        verdict = result.verdicts[k] if k < len(result.verdicts) else None
+        spread = f"{verdict.half.spread:.0%}" if verdict else "n/a"
+        acted = f"{verdict.acted.seconds:.1f}" if verdict else "n/a"
+        then = verdict.acted.cut if verdict else math.nan
+        then_text = "n/a" if not math.isfinite(then) else f"{then:.0%}"
         log(
             f"{joint:<12}{_mrad(result.play[k]):>12}{_mrad(result.geometric_play):>11}"
             f"{_mrad(comp) + ' vs ' + _mrad(raw) + ' uncomp.':>26}"
-            f"{cut:>7.0%}  {result.compensation[k]}"
+            f"{cut:>7.0%}{spread:>7}{acted:>10}{then_text:>9}  {result.compensation[k]}"
         )
     log(
         f"{result.commands_answered} of {result.commands_sent} commands answered "
-        "(the arm obeys only the compensated commands)"
+        "(the arm obeys only the compensated commands; 'twins': what two uncompensated twins "
+        "differ by over the second half; 'acted': readings while compensated commands went "
+        "out and 1 s after, and the cut over them)"
     )
-    worse = [
-        joint
-        for joint, comp, raw in zip(
-            result.joints, result.compensated_rms, result.uncompensated_rms, strict=True
-        )
-        if raw > 0 and comp > 1.02 * raw
-    ]
-    if worse:
-        log(
-            f"WARNING: compensation made tracking worse on {', '.join(worse)} in this run "
-            "(the compensation guard did not stop it); please report it with this output"
-        )
+    for joint, verdict in zip(result.joints, result.verdicts, strict=False):
+        line = verdict.explain(joint)
+        if line is not None:
+            log(line)
     if result.behind_s > 0.02:
         log(
             f"note: the simulated arm fell behind real time by up to {1e3 * result.behind_s:.0f} "

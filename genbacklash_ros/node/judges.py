@@ -106,13 +106,15 @@ class CompensationJudges:
         self,
         us: np.ndarray,
         ys: np.ndarray,
-        breaks: np.ndarray,
+        restarts: np.ndarray,
         model: GeneralBacklash | Cascade | None,
     ) -> None:
         """Samples screened for the identifier: does compensating with ``model`` help on
-        them (the guard, which fades it if not), and the tracking measured on every reading
-        since (the judge)."""
-        self.guard.update(us, ys, breaks, model)
+        them (the guard, which fades it if not; ``restarts``: where the drivetrain's path
+        since the sample before is not known, the screen's
+        :attr:`~genbacklash_ros.node.screen.Screened.restarts`), and the tracking measured on
+        every reading since (the judge)."""
+        self.guard.update(us, ys, restarts, model)
         self.tracking.flush()
         self.apply()
 

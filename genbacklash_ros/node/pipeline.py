@@ -929,9 +929,10 @@ class BacklashPipeline:
         self._events(screened.events)
         if screened.size == 0:
             return
-        # does compensating with the model in use help on these samples? (fades it if not)
+        # does compensating with the model in use help on these samples? (fades it if not;
+        # its free run restarts only where the path is not known: screened.restarts)
         self._judges.judge_samples(
-            screened.us, screened.ys, screened.breaks, self._use.current.model
+            screened.us, screened.ys, screened.restarts, self._use.current.model
         )
         assert self._worker is not None
         self._worker.submit(screened.us, screened.ys, screened.breaks)

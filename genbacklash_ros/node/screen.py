@@ -36,7 +36,7 @@ from genbacklash_ros.node.align import AlignedBatch
 from genbacklash_ros.node.health import HealthEvent, StreamHealth
 from genbacklash_ros.node.sample_rule import keep_breaks, link_breaks
 
-__all__ = ["Screen", "Screened", "linked_breaks"]
+__all__ = ["Screen", "Screened", "early_stamps", "linked_breaks"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -52,12 +52,17 @@ class Screened:
         the last sample handed on before).
     events : list of Drop or Note
         Spikes and samples held back after a gap (drops), and the notes of faults.
+    restarts : numpy.ndarray of bool
+        The breaks after which the drivetrain's path is not known (the guard's restarts):
+        ``breaks`` without those of a reading stamped early (:func:`early_stamps`) when
+        none was taken out between (module notes).
     """
 
     us: np.ndarray
     ys: np.ndarray
     breaks: np.ndarray
     events: list[HealthEvent]
+    restarts: np.ndarray
 
     @property
     def size(self) -> int:
@@ -95,6 +100,22 @@ def linked_breaks(
     return lift_bridged(breaks, steps - 1.0, monotone)  # steps - 1: readings lost before
 
 
+def early_stamps(held: np.ndarray, period: float, previous: int | None) -> np.ndarray:
+    """``early[k]``: the reading held by sample ``k`` is stamped less than half a ``period``
+    after the one before (``previous`` for ``k = 0``; None: not early): no reading can have
+    been lost between the two, whatever their stamps say (module notes).
+
+    >>> early_stamps(np.array([10, 14, 24, 44]), 10.0, 0).tolist()
+    [False, True, False, False]
+    >>> early_stamps(np.array([10, 12]), 10.0, None).tolist()
+    [False, True]
+    """
+    early: np.ndarray = np.rint(stamp_steps(held, previous) / period) <= 0.0
+    if previous is None and early.size:
+        early[0] = False
+    return early
+
+
 class Screen:
     """Screens aligned batches and links them by the sample rule (see the module notes)."""
 
@@ -110,17 +131,21 @@ class Screen:
         previous = self._last_t if batch.linked else None
         if batch.period is None:  # no period known yet: every sample breaks
             breaks = link_breaks(batch.held, None, previous_ns=previous)
+            restarts = breaks.copy()
         else:
             bridge = batch.monotone if self._bridge else None
             breaks = linked_breaks(batch.held, batch.period, previous, bridge)
+            restarts = breaks & ~early_stamps(batch.held, batch.period, previous)
         breaks |= batch.marks
+        restarts |= batch.marks
         us, ys, held = batch.us, batch.ys, batch.held
         screening = health.screen(batch.times, us, ys, estimate, batch.resumed)
         kept = screening.keep
         last_t: int | None = int(held[-1])
         if kept is not None:
             breaks, tail = keep_breaks(breaks, kept)
+            restarts, _ = keep_breaks(restarts, kept)
             us, ys, held = us[kept], ys[kept], held[kept]
             last_t = None if tail or held.size == 0 else int(held[-1])
         self._last_t = last_t
-        return Screened(us, ys, breaks, screening.events)
+        return Screened(us, ys, breaks, screening.events, restarts)

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from genbacklash_core import GenBacklashError
-from genbacklash_ros.demo.arm import ArmSettings, SimulatedArm
+from genbacklash_ros.demo.arm import PERTURB, ArmSettings, SimulatedArm
 from genbacklash_ros.demo.live import node_params_yaml
 from genbacklash_ros.node.parameters import NodeParameters
 from tests.ros.transports._ros2 import domain_id
@@ -30,8 +30,31 @@ def test_the_twin_and_the_arm_agree_on_the_same_commands() -> None:
             arm.loads_at(tick * 10_000_000 + 2_000_000 * (k + 1), tick)
     for obeyed, twin in arm.window():
         assert obeyed == twin and np.isfinite(obeyed)
+    assert [v.acted.seconds for v in arm.verdicts()] == [0.0, 0.0]  # compensation never acted
     with pytest.raises(GenBacklashError, match="needs as many values"):
         arm.obey((0.1,), 0)
+
+
+def test_readings_count_as_acted_while_the_arm_holds_another_command_and_a_second_after() -> None:
+    """One command of 10 ms that differs from the desired one: the readings from its answer
+    to SETTLE_S after it are counted apart, and the perturbed twin, its load started a
+    quarter of the play away, differs from the first twin (the comparison's spread)."""
+    rate = 500.0
+    arm = SimulatedArm(ArmSettings(joints=("a",), duration=4.0, encoder_rate=rate))
+    for tick in range(300):
+        values = arm.desired(tick)
+        if tick == 50:
+            values = (values[0] + 0.01,)
+        arm.obey(values, tick)
+        arm.step_to((tick + 1) * 10_000_000)
+        for k in range(5):
+            arm.loads_at(tick * 10_000_000 + 2_000_000 * (k + 1), tick)
+    (verdict,) = arm.verdicts()
+    # readings 52, 54 ... 58 ms into tick 50, then all readings of 1 s after the next answer
+    assert verdict.acted.seconds * rate == pytest.approx(5 + 1.0 * rate, abs=2)
+    assert np.isfinite(verdict.acted.cut) and np.isfinite(verdict.half.spread)
+    assert verdict.half.perturbed != verdict.half.twin  # the perturbed twin is another path
+    assert PERTURB * arm.play > 0.01
 
 
 def test_the_joints_move_differently() -> None:

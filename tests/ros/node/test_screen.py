@@ -6,9 +6,12 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from genbacklash_core import Estimate, Structure
 from genbacklash_core.samples import lift_bridged, missing_readings
+from genbacklash_ros.node.align import AlignedBatch
+from genbacklash_ros.node.health import StreamHealth
 from genbacklash_ros.node.sample_rule import link_breaks
-from genbacklash_ros.node.screen import linked_breaks
+from genbacklash_ros.node.screen import Screen, early_stamps, linked_breaks
 
 MS = 1_000_000
 
@@ -51,3 +54,34 @@ def test_linked_breaks_count_lost_readings_exactly_on_wall_clock_stamps() -> Non
     assert linked_breaks(held, float(MS), t0 - MS).tolist() == [False, True]
     bridged = linked_breaks(held, float(MS), t0 - MS, np.array([True, True]))
     assert bridged.tolist() == [False, False]
+
+
+def _batch(held: list[int], marks: list[bool] | None = None) -> AlignedBatch:
+    t = np.array(held, dtype=np.int64)
+    flags = np.zeros(t.size, bool) if marks is None else np.array(marks)
+    return AlignedBatch(t, np.zeros(t.size), np.zeros(t.size), t, flags, float(2 * MS), True)
+
+
+def test_an_early_stamp_breaks_the_chain_but_does_not_restart_the_guard() -> None:
+    """A reading stamped 0.1 period after the one before (a publisher catching up) breaks
+    the sample rule's chain, but nothing was lost: the guard's free run goes on there. A
+    lost reading, a reading taken out before (a mark) and the first sample of a new time
+    line restart it."""
+    screen = Screen()
+    health = StreamHealth()
+    est = Estimate.empty(Structure(3))
+    first = screen.run(_batch([0, 2 * MS, 2 * MS + MS // 5, 4 * MS, 8 * MS]), health, est)
+    assert first.breaks.tolist() == [True, False, True, False, True]
+    assert first.restarts.tolist() == [True, False, False, False, True]
+    # linked to the batch before: an early first sample goes on, a mark restarts
+    second = screen.run(_batch([8 * MS + MS // 5, 10 * MS, 10 * MS + 1], [False, False, True]),
+                        health, est)  # fmt: skip
+    assert second.breaks.tolist() == [True, False, True]
+    assert second.restarts.tolist() == [False, False, True]
+
+
+def test_early_stamps_are_steps_below_half_a_period() -> None:
+    held = np.array([10, 14, 16, 24, 34], dtype=np.int64)
+    assert early_stamps(held, 10.0, 0).tolist() == [False, True, True, False, False]
+    assert early_stamps(held, 10.0, 7)[0] == np.True_  # 0.3 period after the one before
+    assert early_stamps(held, 10.0, None)[0] == np.False_
