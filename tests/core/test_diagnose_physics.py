@@ -121,6 +121,53 @@ def test_a_coasting_load_keeps_moving_and_a_torque_holds_its_flank() -> None:
     np.testing.assert_allclose(x, down)  # rides the lower flank down (the play never shows)
 
 
+@settings(max_examples=40, deadline=None)
+@given(
+    speed=st.floats(1e-3, 0.05),
+    retention=st.floats(0.5, 1.0),
+    friction=st.floats(0.0, 1e-3),
+    window=st.integers(1, 12),
+    at=st.integers(41, 199),
+    shift=st.floats(0.0, 1.0),
+)
+def test_a_restart_moves_the_coasting_load_and_keeps_its_velocity(
+    speed: float, retention: float, friction: float, window: int, at: int, shift: float
+) -> None:
+    # a flank pushes the load up for 40 samples and stops; the load coasts on in a wide
+    # play. Restarted at a reading ``shift`` above where it would be, it moves on exactly as
+    # before, ``shift`` higher: the anchor moves it and leaves its velocity alone (the former
+    # rule treated the pinned bounds as a flank and gave the load the jump's velocity)
+    lo = np.concatenate([speed * np.arange(1.0, 41.0), np.full(160, 40.0 * speed)])
+    hi = lo + 100.0
+    physics = LoadPhysics("coasting_load", retention, friction, window)
+    free = physics.simulate(lo, hi, 0.0)
+    anchors = np.zeros(lo.size, dtype=bool)
+    anchors[at] = True
+    pinned_lo, pinned_hi = lo.copy(), hi.copy()
+    pinned_lo[at] = pinned_hi[at] = free[at] + shift
+    again = physics.simulate(pinned_lo, pinned_hi, 0.0, anchors)
+    np.testing.assert_array_equal(again[:at], free[:at])
+    np.testing.assert_allclose(again[at:], free[at:] + shift, rtol=0.0, atol=1e-9)
+
+
+def test_a_coasting_load_restarted_at_a_reading_moves_on_at_its_velocity() -> None:
+    # the flank pushes the load up at 0.01 per sample for 50 samples, then stops; the load
+    # coasts on (no friction) inside a wide play; a reading at sample 100 puts it at 2.0
+    lo = np.concatenate([np.linspace(0.01, 0.5, 50), np.full(100, 0.5)])
+    hi = lo + 5.0
+    anchors = np.zeros(lo.size, dtype=bool)
+    anchors[100] = True
+    pinned_lo, pinned_hi = lo.copy(), hi.copy()
+    pinned_lo[100] = pinned_hi[100] = 2.0
+    physics = LoadPhysics("coasting_load", retention=1.0, window=1)
+    x = physics.simulate(pinned_lo, pinned_hi, 0.0, anchors)
+    np.testing.assert_allclose(x[100:], 2.0 + 0.01 * np.arange(50), atol=1e-12)
+    # without the anchor mask the pinned bounds are a flank the load stops against: the
+    # velocity it leaves with is its jump onto the reading, not the one it had
+    as_flank = physics.simulate(pinned_lo, pinned_hi, 0.0)
+    assert as_flank[101] - as_flank[100] != pytest.approx(0.01)
+
+
 def test_load_physics_is_validated() -> None:
     with pytest.raises(GenBacklashError, match="unknown load physics"):
         LoadPhysics("gravity")  # type: ignore[arg-type]
