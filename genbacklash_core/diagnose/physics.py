@@ -25,7 +25,12 @@ recursion on the same bounds (all quantities per sample; the model has no clock)
     A spring after the play: the load ``z`` is pulled towards the interval ``[lo, hi]`` by
     ``stiffness^2 (clamp(z, lo, hi) - z)`` and the spring's damping ``2 damping stiffness``
     acts while it is deflected; free of both flanks it coasts as above. A stiff spring with
-    ``retention = 0`` is the play operator.
+    ``retention = 0`` is the play operator. At an anchor the load likewise takes the reading
+    as its position and keeps its velocity, slowed as a free load's (the pinned bounds are
+    no flank to be deflected from: read as one, they pulled the load towards the reading and
+    left it with the spring's reply to the model's own error, a ``coasting_load``-like jolt
+    every restart that took compliant drivetrains' records to ``coasting_load`` once the
+    coasting load kept its velocity).
 ``load_torque``
     A torque on the load (gravity, a process force) that beats the load's friction over part
     of the travel, ``region = (z_1, z_2)``: there the load rests on one flank (``side`` -1:
@@ -160,11 +165,12 @@ class LoadPhysics:
         ``x0`` at rest.
 
         ``anchors`` marks the samples where the simulation restarts at a reading, to which
-        the caller has pinned ``lo == hi``: the coasting load takes that position and keeps
-        its velocity (module notes). The other kinds read the pinned bounds as they are.
+        the caller has pinned ``lo == hi``: the coasting load and the spring's load take
+        that position and keep their velocity (module notes). The torque's load has none to
+        keep: eq. (20)'s clamp onto the pinned bounds is its restart.
         """
+        pinned = None if anchors is None else np.asarray(anchors, dtype=bool).tolist()
         if self.kind == "coasting_load":
-            pinned = None if anchors is None else np.asarray(anchors, dtype=bool).tolist()
             return _coast(lo, hi, x0, (self.retention, self.friction, self.window), pinned)
         if self.kind == "compliant_coupling":
             return _spring(
@@ -172,6 +178,7 @@ class LoadPhysics:
                 hi,
                 x0,
                 (self.stiffness, self.damping, self.retention, self.friction),
+                pinned,
             )
         return _torque(lo, hi, x0, self.side, self.region, self.fall)
 
@@ -226,7 +233,11 @@ def _coast(
 
 
 def _spring(
-    lo: FloatArray, hi: FloatArray, x0: float, parameters: tuple[float, float, float, float]
+    lo: FloatArray,
+    hi: FloatArray,
+    x0: float,
+    parameters: tuple[float, float, float, float],
+    anchors: list[bool] | None,
 ) -> FloatArray:
     """``compliant_coupling`` (module notes), semi-implicit Euler."""
     stiffness, damping, retention, friction = parameters
@@ -238,13 +249,14 @@ def _spring(
     z, w = x0, 0.0
     for t in range(n):
         bottom, top = low[t], high[t]
-        if z < bottom or z > top:
+        anchored = anchors is not None and anchors[t]  # then bottom == top: the reading
+        if not anchored and (z < bottom or z > top):
             deflection = (bottom if z < bottom else top) - z
             w += k * deflection - c * w
         else:
             speed = retention * abs(w) - friction
             w = 0.0 if speed <= 0.0 else (speed if w > 0.0 else -speed)
-        z += w
+        z = bottom if anchored else z + w  # restarted at the reading, the velocity kept
         out[t] = z
     return np.asarray(out, dtype=np.float64)
 
