@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from genbacklash_core import GenBacklashError, GeneralBacklash
@@ -166,6 +166,82 @@ def test_a_coasting_load_restarted_at_a_reading_moves_on_at_its_velocity() -> No
     # velocity it leaves with is its jump onto the reading, not the one it had
     as_flank = physics.simulate(pinned_lo, pinned_hi, 0.0)
     assert as_flank[101] - as_flank[100] != pytest.approx(0.01)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    speed=st.floats(1e-3, 0.05),
+    stiffness=st.floats(0.05, 1.0),
+    damping=st.floats(0.0, 0.7),
+    retention=st.floats(0.5, 1.0),
+    friction=st.floats(0.0, 1e-3),
+    later=st.integers(1, 60),
+    shift=st.floats(0.0, 1.0),
+)
+def test_a_restart_moves_the_springs_load_and_keeps_its_velocity(
+    speed: float,
+    stiffness: float,
+    damping: float,
+    retention: float,
+    friction: float,
+    later: int,
+    shift: float,
+) -> None:
+    # the spring drags the load up behind a flank for 40 samples; the flank stops and the
+    # load, once it is past it, coasts on in a wide play. Restarted there at a reading
+    # ``shift`` above where it would be, it moves on exactly as before, ``shift`` higher
+    # (the former rule read the pinned bounds as a flank: the spring pulled the load
+    # towards the reading and gave it the pull's velocity)
+    lo = np.concatenate([speed * np.arange(1.0, 41.0), np.full(260, 40.0 * speed)])
+    hi = lo + 100.0
+    physics = LoadPhysics("compliant_coupling", retention, friction, HOLD, stiffness, damping)
+    free = physics.simulate(lo, hi, 0.0)
+    behind = np.flatnonzero(free < lo)  # deflected: the spring still pulls
+    at = max(41, int(behind[-1]) + 2 if behind.size else 0) + later
+    assume(at < lo.size)
+    anchors = np.zeros(lo.size, dtype=bool)
+    anchors[at] = True
+    pinned_lo, pinned_hi = lo.copy(), hi.copy()
+    pinned_lo[at] = pinned_hi[at] = free[at] + shift
+    again = physics.simulate(pinned_lo, pinned_hi, 0.0, anchors)
+    np.testing.assert_array_equal(again[:at], free[:at])
+    np.testing.assert_allclose(again[at:], free[at:] + shift, rtol=0.0, atol=1e-9)
+
+
+def test_a_springs_load_restarted_at_a_reading_moves_on_at_its_velocity() -> None:
+    # the spring drags the load up at 0.01 per sample, then the flank stops and the load
+    # coasts on (no friction) inside a wide play; a reading at sample 200 puts it at 5.0
+    lo = np.concatenate([np.linspace(0.01, 0.5, 50), np.full(250, 0.5)])
+    hi = lo + 10.0
+    physics = LoadPhysics("compliant_coupling", retention=1.0, stiffness=0.5, damping=0.5)
+    free = physics.simulate(lo, hi, 0.0)
+    velocity = free[199] - free[198]
+    assert velocity > 0.0
+    anchors = np.zeros(lo.size, dtype=bool)
+    anchors[200] = True
+    pinned_lo, pinned_hi = lo.copy(), hi.copy()
+    pinned_lo[200] = pinned_hi[200] = 5.0
+    x = physics.simulate(pinned_lo, pinned_hi, 0.0, anchors)
+    np.testing.assert_allclose(x[200:], 5.0 + velocity * np.arange(100), atol=1e-12)
+    # without the anchor mask the pinned bounds are a flank the spring pulls the load to:
+    # it does not land on the reading, and leaves with the pull's velocity
+    as_flank = physics.simulate(pinned_lo, pinned_hi, 0.0)
+    assert as_flank[200] != pytest.approx(5.0)
+    assert as_flank[202] - as_flank[201] != pytest.approx(velocity)
+
+
+def test_a_torques_load_restarted_at_a_reading_takes_it() -> None:
+    # the load torque has no velocity to keep: eq. (20)'s clamp onto the pinned bounds is its
+    # restart, with or without the anchor mask
+    lo = np.linspace(0.0, 1.0, 100)
+    hi = lo + 0.07
+    anchors = np.zeros(lo.size, dtype=bool)
+    anchors[60] = True
+    lo[60] = hi[60] = 0.65
+    physics = LoadPhysics("load_torque", side=1, region=(-5.0, 5.0), fall=0.01)
+    x = physics.simulate(lo, hi, 0.0, anchors)
+    assert x[60] == 0.65
+    np.testing.assert_array_equal(x, physics.simulate(lo, hi, 0.0))
 
 
 def test_load_physics_is_validated() -> None:
