@@ -121,6 +121,24 @@ def test_a_coasting_load_keeps_moving_and_a_torque_holds_its_flank() -> None:
     np.testing.assert_allclose(x, down)  # rides the lower flank down (the play never shows)
 
 
+def restarted(
+    physics: LoadPhysics, lo: np.ndarray, hi: np.ndarray, at: int, reading: float, mark: bool = True
+) -> np.ndarray:
+    """``physics`` on the bounds ``lo, hi`` restarted at sample ``at`` at ``reading``: the bounds
+    pinned to it and, with ``mark``, the anchor marked (as ``ModelSpec.simulate`` restarts)."""
+    anchors = np.zeros(lo.size, dtype=bool)
+    anchors[at] = True
+    pinned_lo, pinned_hi = lo.copy(), hi.copy()
+    pinned_lo[at] = pinned_hi[at] = reading
+    return physics.simulate(pinned_lo, pinned_hi, 0.0, anchors if mark else None)
+
+
+def assert_shifted(free: np.ndarray, again: np.ndarray, at: int, shift: float) -> None:
+    """``again`` is ``free`` up to sample ``at`` and ``shift`` higher from there on."""
+    np.testing.assert_array_equal(again[:at], free[:at])
+    np.testing.assert_allclose(again[at:], free[at:] + shift, rtol=0.0, atol=1e-9)
+
+
 @settings(max_examples=40, deadline=None)
 @given(
     speed=st.floats(1e-3, 0.05),
@@ -141,13 +159,7 @@ def test_a_restart_moves_the_coasting_load_and_keeps_its_velocity(
     hi = lo + 100.0
     physics = LoadPhysics("coasting_load", retention, friction, window)
     free = physics.simulate(lo, hi, 0.0)
-    anchors = np.zeros(lo.size, dtype=bool)
-    anchors[at] = True
-    pinned_lo, pinned_hi = lo.copy(), hi.copy()
-    pinned_lo[at] = pinned_hi[at] = free[at] + shift
-    again = physics.simulate(pinned_lo, pinned_hi, 0.0, anchors)
-    np.testing.assert_array_equal(again[:at], free[:at])
-    np.testing.assert_allclose(again[at:], free[at:] + shift, rtol=0.0, atol=1e-9)
+    assert_shifted(free, restarted(physics, lo, hi, at, free[at] + shift), at, shift)
 
 
 def test_a_coasting_load_restarted_at_a_reading_moves_on_at_its_velocity() -> None:
@@ -155,16 +167,12 @@ def test_a_coasting_load_restarted_at_a_reading_moves_on_at_its_velocity() -> No
     # coasts on (no friction) inside a wide play; a reading at sample 100 puts it at 2.0
     lo = np.concatenate([np.linspace(0.01, 0.5, 50), np.full(100, 0.5)])
     hi = lo + 5.0
-    anchors = np.zeros(lo.size, dtype=bool)
-    anchors[100] = True
-    pinned_lo, pinned_hi = lo.copy(), hi.copy()
-    pinned_lo[100] = pinned_hi[100] = 2.0
     physics = LoadPhysics("coasting_load", retention=1.0, window=1)
-    x = physics.simulate(pinned_lo, pinned_hi, 0.0, anchors)
+    x = restarted(physics, lo, hi, 100, 2.0)
     np.testing.assert_allclose(x[100:], 2.0 + 0.01 * np.arange(50), atol=1e-12)
     # without the anchor mask the pinned bounds are a flank the load stops against: the
     # velocity it leaves with is its jump onto the reading, not the one it had
-    as_flank = physics.simulate(pinned_lo, pinned_hi, 0.0)
+    as_flank = restarted(physics, lo, hi, 100, 2.0, mark=False)
     assert as_flank[101] - as_flank[100] != pytest.approx(0.01)
 
 
@@ -199,13 +207,7 @@ def test_a_restart_moves_the_springs_load_and_keeps_its_velocity(
     behind = np.flatnonzero(free < lo)  # deflected: the spring still pulls
     at = max(41, int(behind[-1]) + 2 if behind.size else 0) + later
     assume(at < lo.size)
-    anchors = np.zeros(lo.size, dtype=bool)
-    anchors[at] = True
-    pinned_lo, pinned_hi = lo.copy(), hi.copy()
-    pinned_lo[at] = pinned_hi[at] = free[at] + shift
-    again = physics.simulate(pinned_lo, pinned_hi, 0.0, anchors)
-    np.testing.assert_array_equal(again[:at], free[:at])
-    np.testing.assert_allclose(again[at:], free[at:] + shift, rtol=0.0, atol=1e-9)
+    assert_shifted(free, restarted(physics, lo, hi, at, free[at] + shift), at, shift)
 
 
 def test_a_springs_load_restarted_at_a_reading_moves_on_at_its_velocity() -> None:
@@ -217,15 +219,11 @@ def test_a_springs_load_restarted_at_a_reading_moves_on_at_its_velocity() -> Non
     free = physics.simulate(lo, hi, 0.0)
     velocity = free[199] - free[198]
     assert velocity > 0.0
-    anchors = np.zeros(lo.size, dtype=bool)
-    anchors[200] = True
-    pinned_lo, pinned_hi = lo.copy(), hi.copy()
-    pinned_lo[200] = pinned_hi[200] = 5.0
-    x = physics.simulate(pinned_lo, pinned_hi, 0.0, anchors)
+    x = restarted(physics, lo, hi, 200, 5.0)
     np.testing.assert_allclose(x[200:], 5.0 + velocity * np.arange(100), atol=1e-12)
     # without the anchor mask the pinned bounds are a flank the spring pulls the load to:
     # it does not land on the reading, and leaves with the pull's velocity
-    as_flank = physics.simulate(pinned_lo, pinned_hi, 0.0)
+    as_flank = restarted(physics, lo, hi, 200, 5.0, mark=False)
     assert as_flank[200] != pytest.approx(5.0)
     assert as_flank[202] - as_flank[201] != pytest.approx(velocity)
 
@@ -234,14 +232,10 @@ def test_a_torques_load_restarted_at_a_reading_takes_it() -> None:
     # the load torque has no velocity to keep: eq. (20)'s clamp onto the pinned bounds is its
     # restart, with or without the anchor mask
     lo = np.linspace(0.0, 1.0, 100)
-    hi = lo + 0.07
-    anchors = np.zeros(lo.size, dtype=bool)
-    anchors[60] = True
-    lo[60] = hi[60] = 0.65
     physics = LoadPhysics("load_torque", side=1, region=(-5.0, 5.0), fall=0.01)
-    x = physics.simulate(lo, hi, 0.0, anchors)
+    x = restarted(physics, lo, lo + 0.07, 60, 0.65)
     assert x[60] == 0.65
-    np.testing.assert_array_equal(x, physics.simulate(lo, hi, 0.0))
+    np.testing.assert_array_equal(x, restarted(physics, lo, lo + 0.07, 60, 0.65, mark=False))
 
 
 def test_load_physics_is_validated() -> None:
