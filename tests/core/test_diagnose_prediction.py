@@ -3,13 +3,17 @@ it: load physics ranked among themselves by what they predict between lost readi
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+from typing import Any
+
 import numpy as np
 import pytest
 
 from genbacklash_core import GenBacklashError, GeneralBacklash
 from genbacklash_core.cascade import Cascade, LinearBlock
-from genbacklash_core.diagnose import AugmentedModel
+from genbacklash_core.diagnose import AugmentedModel, DiagnoseSettings
 from genbacklash_core.diagnose.gap import measure_gap, split_record
+from genbacklash_core.diagnose.loop import _Run
 from genbacklash_core.diagnose.physics import LoadPhysics
 from genbacklash_core.diagnose.prediction import restarted_gap
 from genbacklash_core.diagnose.spec import ModelSpec, anchors_of
@@ -51,3 +55,20 @@ def test_a_cascade_cannot_restart() -> None:
     u = np.linspace(0.0, 1.0, 200)
     with pytest.raises(GenBacklashError, match="linear block"):
         restarted_gap(model, u, u, split_record(200, 0.3), np.zeros(200, dtype=bool))
+
+
+def _candidate(model: AugmentedModel) -> Any:
+    return SimpleNamespace(fit=SimpleNamespace(model=model))
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_load_physics_are_ranked_among_their_places_by_the_restarted_misfit(seed: int) -> None:
+    u, y, breaks, truth = _record(seed)
+    coasting = AugmentedModel(truth.base, physics=LoadPhysics("coasting_load", 0.99, 0.0, 1))
+    other = _candidate(AugmentedModel(truth.base, offset=0.01))
+    first, spring = _candidate(coasting), _candidate(truth)
+    run = _Run(u, y, split_record(N, 0.3), (), DiagnoseSettings(), record_breaks=breaks)
+    assert run.physics_by_prediction([first, other, spring]) == [spring, other, first]
+    assert run.physics_by_prediction([spring, other, first]) == [spring, other, first]
+    unbroken = _Run(u, y, split_record(N, 0.3), (), DiagnoseSettings())
+    assert unbroken.physics_by_prediction([first, other, spring]) == [first, other, spring]
