@@ -19,13 +19,16 @@
    lost readings in the estimation data those that lower the BIC by the margin are ranked by
    their validation gap instead (see ``_Run.anchored``): a model without a linear block
    restarts its simulation at the reading after each loss, a cascade cannot, so their
-   estimation errors are not alike. An ``input_lag`` fit whose lag vanishes is named
-   ``time_delay``: what it adds is a dead time (whole samples and a fraction). A physical
-   effect fitted behind a servo's lag the model lacks adds two effects in one step, and so
-   does a servo's lag that brings a dead time beyond the model's (the lag and
-   ``time_delay``'s dead time): when the best non-physical nominees, each followed by its
-   best follow-up, do better (the BIC, or with lost readings the validation misfit, as in
-   step 7), the best of them is taken instead (:meth:`_Run.two_in_one`).
+   estimation errors are not alike. The load physics among them take their places in that
+   order by the validation misfit of the simulation restarted after each loss
+   (:func:`~.prediction.restarted_gap`): they all restart alike, and a free run of a load
+   that coasts or rings across the play drifts whatever the model. An ``input_lag`` fit
+   whose lag vanishes is named ``time_delay``: what it adds is a dead time (whole samples
+   and a fraction). A physical effect fitted behind a servo's lag the model lacks adds two
+   effects in one step, and so does a servo's lag that brings a dead time beyond the model's
+   (the lag and ``time_delay``'s dead time): when the best non-physical nominees, each
+   followed by its best follow-up, do better (the BIC, or with lost readings the validation
+   misfit, as in step 7), the best of them is taken instead (:meth:`_Run.two_in_one`).
 5. The best is accepted only if it lowers the BIC by more than a margin *and* lowers the
    validation gap significantly (a one-sided Newey-West test on the squared errors, plus a
    minimum relative drop, and with a measured floor a drop of more than ``floor_margin - 1``
