@@ -54,6 +54,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import shutil
 import tempfile
 import time
@@ -152,6 +153,8 @@ def _arguments(argv: Sequence[str] | None = None) -> argparse.Namespace:
         "(the live demo's arm; default 0: stamped when taken)",
     )
     args = parse_physics_arguments(parser, argv)
+    if not math.isfinite(args.late_stamps) or args.late_stamps < 0.0:
+        parser.error(f"--late-stamps must be a time in ms >= 0, got {args.late_stamps:g}")
     return args
 
 

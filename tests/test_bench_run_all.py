@@ -44,3 +44,20 @@ def test_hand_kept_sections_are_carried_over(run_all: ModuleType) -> None:
     (demo,) = kept["take_cost"]
     assert demo.startswith("## Live demo") and "\n## " not in demo
     assert run_all.hand_kept("# t\n\n## A\na\n") == {}
+
+
+@pytest.mark.parametrize("value", ["-1", "nan", "inf"])
+def test_physics_loop_refuses_a_late_stamp_time_that_is_no_time(
+    value: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--late-stamps -1`` ran every record as if no stamp were late; now it is refused
+    before anything runs, with the reason."""
+    sys.path.insert(0, str(BENCH))
+    try:
+        physics_loop = importlib.import_module("physics_loop")
+        with pytest.raises(SystemExit) as stop:
+            physics_loop._arguments(["--late-stamps", value])
+    finally:
+        sys.path.remove(str(BENCH))
+    assert stop.value.code == 2
+    assert "--late-stamps must be a time in ms >= 0" in capsys.readouterr().err
