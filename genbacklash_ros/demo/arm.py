@@ -102,7 +102,7 @@ class JointErrors:
     perturbed: float = 0.0
     count: int = 0
 
-    def add(self, obeyed: float, twin: float, perturbed: float = math.nan) -> None:
+    def add(self, obeyed: float, twin: float, perturbed: float) -> None:
         self.obeyed += obeyed * obeyed
         self.twin += twin * twin
         self.perturbed += perturbed * perturbed
@@ -110,9 +110,8 @@ class JointErrors:
 
     def rms(self) -> tuple[float, float]:
         """``(obeyed, twin)`` RMS errors, NaN when empty."""
-        if not self.count:
-            return math.nan, math.nan
-        return math.sqrt(self.obeyed / self.count), math.sqrt(self.twin / self.count)
+        errors = self.comparison(1.0)
+        return errors.arm, errors.twin
 
     def comparison(self, rate: float) -> Comparison:
         """The three RMS errors (NaN when empty) over ``count / rate`` seconds."""
