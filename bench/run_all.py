@@ -31,6 +31,7 @@ BENCHMARKS = (
     "physics_loop",
     "operation_loop",
     "physics_null",
+    "physics_start",
     "physics_diagnose",
     "coverage",
     "spike_screen",

@@ -13,6 +13,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from types import ModuleType
 
+import numpy as np
 import pytest
 
 BENCH = Path(__file__).resolve().parents[1] / "bench"
@@ -61,3 +62,24 @@ def test_physics_loop_refuses_a_late_stamp_time_that_is_no_time(
         sys.path.remove(str(BENCH))
     assert stop.value.code == 2
     assert "--late-stamps must be a time in ms >= 0" in capsys.readouterr().err
+
+
+def test_physics_start_finds_the_latest_switch_over_that_still_meets_the_target() -> None:
+    """``bench/physics_start.py``'s arithmetic: an error of 1 before the switch-over and 0
+    after cuts ``1 - sqrt(T / D)`` over a record of D seconds, so a 50 % target allows a
+    switch-over up to D / 4 and no later; and two runs first differ where they first differ."""
+    sys.path.insert(0, str(BENCH))
+    try:
+        physics_start = importlib.import_module("physics_start")
+    finally:
+        sys.path.remove(str(BENCH))
+    seconds = np.arange(4000) * 0.01  # 40 s at 100 Hz
+    none, true = np.ones(seconds.size), np.zeros(seconds.size)
+    assert physics_start.latest_start(seconds, none, true, 50.0) == pytest.approx(10.0)
+    assert physics_start.latest_start(seconds, none, true, 49.0) == pytest.approx(10.4)
+    assert np.isnan(physics_start.latest_start(seconds, none, none, 1.0))
+    a = np.arange(10.0)
+    b = a.copy()
+    assert physics_start.first_difference(a, b) is None
+    b[7] += 1e-15
+    assert physics_start.first_difference(a, b) == 7
