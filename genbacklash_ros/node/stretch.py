@@ -68,10 +68,14 @@ def _seen(
 
 def first_at(times: np.ndarray, due: int, start: int, end: int) -> int:
     """The first message of ``start .. end - 1`` whose time is ``due`` or later (``end``:
-    none); the times need not be in order. Two array methods, not ``np.flatnonzero``'s
-    wrappers: it runs at every stretch."""
+    none); the times need not be in order. One comparison and ``argmax`` (the first True,
+    else 0: that element says which), not ``np.flatnonzero``'s wrappers nor ``any``'s: it
+    runs at every stretch."""
+    if end <= start:
+        return end
     late = times[start:end] >= due
-    return start + int(late.argmax()) if late.any() else end
+    first = int(late.argmax())
+    return start + first if late[first] else end
 
 
 STRETCH_MAX = 8192  # messages looked at for one stretch at most

@@ -222,6 +222,24 @@ def test_read_many_steady_topic_and_damage() -> None:
     assert not ok[7] and not ok[9] and ok[11]
 
 
+def test_read_many_takes_a_message_only_with_every_constant_byte() -> None:
+    """One message per byte, that byte changed: ``read_many`` takes exactly the messages
+    whose constant bytes are all the layout's (a change in the stamp or a float read is
+    not a change of layout), as ``read`` judges them one by one."""
+    base = JointState(Header(Time(3, 5), "frame"), ("d", "w"), (0.25, -0.5))
+    raw = cdr(base)
+    reader = RawValueReader(JointState.ros_type, "encoder", joint="d")
+    reader.read(raw)  # learns the layout
+    (layout,) = reader._layouts.values()
+    assert layout is not None
+    changed = [raw[:k] + bytes([raw[k] ^ 0x10]) + raw[k + 1 :] for k in range(len(raw))]
+    _, _, ok = reader.read_many([raw, *changed])
+    expected = [layout.learnt.matches(r) for r in changed]
+    assert ok.tolist() == [True, *expected]
+    constant = {start + i for start, run in layout.learnt.constant for i in range(len(run))}
+    assert [not e for e in expected] == [k in constant for k in range(len(raw))]
+
+
 @settings(max_examples=60, deadline=None, derandomize=True)
 @given(
     st.lists(multi_arrays(), min_size=1, max_size=15),
