@@ -290,3 +290,19 @@ def json_play(result: dict[str, object]) -> float:
     bl = shape["backlash"]
     assert isinstance(bl, dict)
     return float(bl["c_left"]) + float(bl["c_right"])
+
+
+def param_values(pairs: Sequence[str]) -> dict[str, object]:
+    """``--param NAME=VALUE`` pairs as node parameters: a value is a number where it reads
+    as one, else the text.
+
+    >>> param_values(["servo_model=auto", "servo_window=4"])
+    {'servo_model': 'auto', 'servo_window': 4.0}
+    """
+    values: dict[str, object] = {}
+    for name, _, text in (p.partition("=") for p in pairs):
+        try:
+            values[name] = float(text)
+        except ValueError:
+            values[name] = text
+    return values

@@ -26,8 +26,10 @@ standing verdict of harm, or neither).
 The numbers: the RMS load tracking error against no compensation, whole record and second
 half, in percent; the judge's final state, ratio and which baseline it judged against.
 
+``--param NAME=VALUE`` sets a node parameter of every node run (e.g. ``servo_model=auto``).
+
 Run: ``python bench/operation_loop.py [--seeds 0 1 2 3 4 5] [--duration 40]
-[--seeded-start OFFSET] [--baseline-scale X] [--restart OFFSET]``
+[--seeded-start OFFSET] [--baseline-scale X] [--restart OFFSET] [--param NAME=VALUE ...]``
 """
 
 from __future__ import annotations
@@ -40,7 +42,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
-from _common import PHYSICS_TOPICS, cli_json, printed_section, rms
+from _common import PHYSICS_TOPICS, cli_json, param_values, printed_section, rms
 
 from genbacklash_core import compensate, simulate_backlash
 from genbacklash_core.scenarios import OPERATION_BACKLASH, OperationSettings
@@ -115,6 +117,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--baseline-scale", type=float, default=1.0, metavar="X")
     parser.add_argument("--restart", type=int, default=None, metavar="OFFSET")
     parser.add_argument("--quick", action="store_true", help="seed 0, 10 s (a smoke test)")
+    parser.add_argument("--param", action="append", default=[], metavar="NAME=VALUE")
     args = parser.parse_args(argv)
     if args.quick:
         args.seeds, args.duration = [0], 10.0
@@ -142,7 +145,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         with tempfile.TemporaryDirectory() as tmp:
             for seed in args.seeds:
                 began = time.perf_counter()
-                extra: dict[str, object] = {}
+                extra = param_values(args.param)
                 offline = float("nan")
                 if seeded:
                     file, offline = _start(args, seed, Path(tmp))

@@ -66,6 +66,7 @@ from _common import (
     PHYSICS_TOPICS,
     cli_json,
     json_play,
+    param_values,
     parse_physics_arguments,
     physics_parser,
     printed_section,
@@ -81,14 +82,6 @@ from genbacklash_ros.physics.bag import write_physics_bag
 from genbacklash_ros.physics.loop import Clocks, node_loop, open_loop
 from genbacklash_ros.physics.truth import quasi_static
 from genbacklash_ros.physics.variants import VARIANTS, variant
-
-
-def _value(text: str) -> object:
-    """A --param value: a number where it reads as one, else the text."""
-    try:
-        return float(text)
-    except ValueError:
-        return text
 
 
 def _arguments(argv: Sequence[str] | None = None) -> argparse.Namespace:
@@ -223,7 +216,7 @@ def _cuts(errors: dict[str, np.ndarray], half: np.ndarray) -> dict[str, tuple[fl
 def _restart_tables(args: argparse.Namespace, folder: Path) -> None:
     """``--restart``: a fresh run writing checkpoints, then the restart from its final one
     with the baseline or harm it carries and without either (module notes)."""
-    extra = {k: _value(v) for k, _, v in (p.partition("=") for p in args.param)}
+    extra = param_values(args.param)
     print(
         "| variant | bandwidth (Hz) | seed / restart seed "
         "| fresh run: cut node, whole / 2nd half (%), measured (state, ratio) "
@@ -291,7 +284,7 @@ def _restart_tables(args: argparse.Namespace, folder: Path) -> None:
 
 
 def _tables(args: argparse.Namespace, folder: Path) -> None:
-    extra = {k: _value(v) for k, _, v in (p.partition("=") for p in args.param)}
+    extra = param_values(args.param)
     seeded = args.seeded_start is not None
     print(
         "| variant | bandwidth (Hz) | seed | rms none (mrad) | cut true (%) | cut node (%) "

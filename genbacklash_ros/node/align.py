@@ -93,6 +93,13 @@ class AlignedBatch:
     unpaired : int
         Samples taken out because no motor reading was taken at their stamp (a motor
         encoder as the gear's input; counted quietly).
+    commands : numpy.ndarray or None
+        With a servo modelled: the commands holding at each sample (``us`` is then the
+        modelled servo output), for the guard's second yardstick
+        (:class:`~genbacklash_ros.node.judges.CompensationJudges`); None otherwise.
+    command_monotone : numpy.ndarray of bool or None
+        With a servo modelled: ``monotone`` of the commands (``monotone`` is then all
+        False: the servo output is not bridged); None otherwise or on a grid.
     """
 
     times: np.ndarray
@@ -106,6 +113,8 @@ class AlignedBatch:
     monotone: np.ndarray | None = None
     resumed: np.ndarray | None = None
     unpaired: int = 0
+    commands: np.ndarray | None = None
+    command_monotone: np.ndarray | None = None
 
     @property
     def size(self) -> int:
@@ -374,7 +383,14 @@ class Aligner:
             return batch
         xs, self._servo_state = model.output(batch.times, batch.us, self._servo_state)
         no = np.zeros(batch.size, dtype=bool)
-        return dataclasses.replace(batch, us=xs, monotone=no, resumed=None)
+        return dataclasses.replace(
+            batch,
+            us=xs,
+            monotone=no,
+            resumed=None,
+            commands=batch.us,
+            command_monotone=batch.monotone,
+        )
 
     def _servo_estimate(self, final: bool) -> AlignedBatch | None:
         """``"auto"``: once the held samples span the window (or at the end), estimate the
@@ -399,6 +415,11 @@ class Aligner:
             if not held[i].linked:
                 marks[sum(b.size for b in held[:i])] = True
         period = held[-1].period
+        monotone = (
+            np.concatenate([b.monotone for b in held])
+            if all(b.monotone is not None for b in held)
+            else None
+        )
         breaks, _ = keep_breaks(link_breaks(times, period, marks=marks), np.ones(times.size, bool))
         try:
             self.servo_fit = estimate_servo(times, us, np.concatenate([b.ys for b in held]), breaks)
@@ -415,6 +436,7 @@ class Aligner:
             period,
             held[0].linked,
             early,
+            monotone,
         )
         return self._servo_output(batch)
 

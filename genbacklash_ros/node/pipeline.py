@@ -389,7 +389,7 @@ class BacklashPipeline:
         self._comp = CompensateStage(params.compensator_options(), compensate=params.compensate)
         judges = CompensationJudges(params, self._comp, start)
         self._judges = judges
-        self._guard, self._tracking = judges.guard, judges.tracking  # (one look-up less)
+        self._tracking = judges.tracking  # (one look-up less)
         self._stretches.bind(
             self._align, self._comp, self._use, self._tracking, in_loop=self._in_loop
         )
@@ -449,7 +449,7 @@ class BacklashPipeline:
     @property
     def guard(self) -> GuardVerdict:
         """The compensation guard's latest verdict (:mod:`genbacklash_core.guard`)."""
-        return self._guard.verdict
+        return self._judges.verdict
 
     @property
     def measured(self) -> TrackingVerdict:
@@ -848,7 +848,7 @@ class BacklashPipeline:
             result = worker.refit()
             if result is not None:
                 self._take_results([result])
-        self._guard.flush()  # the samples the guard has not judged yet
+        self._judges.flush()  # the samples the guard has not judged yet
         now = self._clock.now
         if now is None:
             return outputs
@@ -874,7 +874,7 @@ class BacklashPipeline:
         health = self._health.report(stamp_ns)
         silent = self._silence.report(params.command_type, params.encoder_type)
         period = self._ledger.take_period()
-        guard = self._guard.verdict
+        guard = self._judges.verdict
         measured = self._tracking.verdict
         status = self._comp.status(est, health.active if health.passing else (), guard, measured)
         return status_output(
@@ -924,7 +924,7 @@ class BacklashPipeline:
             )
         if batch.size == 0:
             return
-        self._health.model_fits = self._guard.verdict.state != "off"
+        self._health.model_fits = self._judges.verdict.state != "off"
         screened = self._screen.run(batch, self._health, self._use.current)
         self._events(screened.events)
         if screened.size == 0:
@@ -932,7 +932,12 @@ class BacklashPipeline:
         # does compensating with the model in use help on these samples? (fades it if not;
         # its free run restarts only where the path is not known: screened.restarts)
         self._judges.judge_samples(
-            screened.us, screened.ys, screened.restarts, self._use.current.model
+            screened.us,
+            screened.ys,
+            screened.restarts,
+            self._use.current.model,
+            screened.commands,
+            screened.command_restarts,
         )
         assert self._worker is not None
         self._worker.submit(screened.us, screened.ys, screened.breaks)

@@ -56,6 +56,14 @@ class Screened:
         The breaks after which the drivetrain's path is not known (the guard's restarts):
         ``breaks`` without those of a reading stamped early (:func:`early_stamps`) when
         none was taken out between (module notes).
+    commands : numpy.ndarray or None
+        With a servo modelled: the commands holding at the samples kept (``us`` is the
+        modelled servo output); None otherwise.
+    command_restarts : numpy.ndarray of bool or None
+        With a servo modelled: the restarts of a free run on the commands, lost readings
+        bridged where the commands were monotone (the rule of ``restarts`` for a backlash
+        on the commands, :class:`~genbacklash_ros.node.judges.CompensationJudges`); None
+        otherwise.
     """
 
     us: np.ndarray
@@ -63,6 +71,8 @@ class Screened:
     breaks: np.ndarray
     events: list[HealthEvent]
     restarts: np.ndarray
+    commands: np.ndarray | None = None
+    command_restarts: np.ndarray | None = None
 
     @property
     def size(self) -> int:
@@ -136,16 +146,26 @@ class Screen:
             bridge = batch.monotone if self._bridge else None
             breaks = linked_breaks(batch.held, batch.period, previous, bridge)
             restarts = breaks & ~early_stamps(batch.held, batch.period, previous)
+        command_restarts = None
+        if batch.commands is not None:  # the commands' path is known across lost readings
+            command_restarts = restarts.copy()
+            if batch.period is not None and batch.command_monotone is not None:
+                lifted = linked_breaks(batch.held, batch.period, previous, batch.command_monotone)
+                command_restarts = lifted & ~early_stamps(batch.held, batch.period, previous)
+            command_restarts |= batch.marks
         breaks |= batch.marks
         restarts |= batch.marks
-        us, ys, held = batch.us, batch.ys, batch.held
+        us, ys, held, commands = batch.us, batch.ys, batch.held, batch.commands
         screening = health.screen(batch.times, us, ys, estimate, batch.resumed)
         kept = screening.keep
         last_t: int | None = int(held[-1])
         if kept is not None:
             breaks, tail = keep_breaks(breaks, kept)
             restarts, _ = keep_breaks(restarts, kept)
+            if command_restarts is not None:
+                command_restarts, _ = keep_breaks(command_restarts, kept)
             us, ys, held = us[kept], ys[kept], held[kept]
+            commands = None if commands is None else commands[kept]
             last_t = None if tail or held.size == 0 else int(held[-1])
         self._last_t = last_t
-        return Screened(us, ys, breaks, screening.events, restarts)
+        return Screened(us, ys, breaks, screening.events, restarts, commands, command_restarts)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -85,3 +87,36 @@ def test_early_stamps_are_steps_below_half_a_period() -> None:
     assert early_stamps(held, 10.0, 0).tolist() == [False, True, True, False, False]
     assert early_stamps(held, 10.0, 7)[0] == np.True_  # 0.3 period after the one before
     assert early_stamps(held, 10.0, None)[0] == np.False_
+
+
+def test_with_a_servo_modelled_the_commands_restart_only_where_their_path_is_unknown() -> None:
+    """The servo output is not bridged (its rows break at every lost reading), but the
+    guard's free run on the commands goes on across a lost reading where the commands were
+    monotone, as a backlash alone's rows do; a mark restarts both."""
+    t = np.array([0, 2 * MS, 6 * MS, 8 * MS, 12 * MS, 14 * MS], dtype=np.int64)
+    monotone = np.array([True, True, True, True, False, True])
+    marks = np.array([False, False, False, True, False, False])
+    batch = AlignedBatch(
+        t,
+        np.zeros(t.size),
+        np.zeros(t.size),
+        t,
+        marks,
+        float(2 * MS),
+        True,
+        monotone=np.zeros(t.size, dtype=bool),
+        commands=np.linspace(0.0, 1.0, t.size),
+        command_monotone=monotone,
+    )
+    screened = Screen(bridge=True).run(batch, StreamHealth(), Estimate.empty(Structure(3)))
+    assert screened.restarts.tolist() == [True, False, True, True, True, False]
+    assert screened.command_restarts is not None
+    assert screened.command_restarts.tolist() == [True, False, False, True, True, False]
+    assert screened.commands is not None and screened.commands.tolist() == batch.commands.tolist()
+    # no servo modelled: no commands, no second restarts
+    plain = Screen(bridge=True).run(
+        dataclasses.replace(batch, commands=None, command_monotone=None),
+        StreamHealth(),
+        Estimate.empty(Structure(3)),
+    )
+    assert plain.commands is None and plain.command_restarts is None

@@ -115,6 +115,16 @@ def test_the_node_takes_the_rows_batch_takes(servo: ServoModel | str) -> None:
     np.testing.assert_array_equal(got_t, rows.t)
     np.testing.assert_array_equal(got_u, rows.u)
     assert all(not b.monotone.any() for b in batches if b.monotone is not None)  # no bridging
+    # the commands ride along for the guard's second yardstick, with their own monotone
+    # flags (the held window's batches concatenated): a servo-less aligner's, to the bit
+    plain = Aligner(use_header=True, grid_ns=0, wait_ns=100 * MS, settle_ns=0)
+    bare = _feed(plain, cmd_t, cmd_u, t, y)
+    for key in ("us", "monotone"):
+        want = np.concatenate([getattr(b, key) for b in bare])
+        name = "commands" if key == "us" else "command_monotone"
+        got = np.concatenate([getattr(b, name) for b in batches])
+        np.testing.assert_array_equal(got, want)
+    assert all(b.commands is None and b.command_monotone is None for b in bare)
 
 
 def test_servo_parameters_are_validated_and_reported() -> None:

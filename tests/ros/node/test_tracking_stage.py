@@ -226,10 +226,10 @@ def test_compensation_back_after_the_guard_held_it_off_is_tried_again(tmp_path: 
     verdict = pipe.guard
     pipe._judges.apply()  # the guard still on: nothing changes
     assert pipe.measured.state == "on"
-    pipe._guard.verdict = dataclasses.replace(verdict, trust=0.0, state="off")
+    pipe._judges.guard.verdict = dataclasses.replace(verdict, trust=0.0, state="off")
     pipe._judges.apply()
     assert pipe.measured.state == "on"  # the judge's own verdict, the guard's trust apart
-    pipe._guard.verdict = verdict
+    pipe._judges.guard.verdict = verdict
     pipe._judges.apply()
     measured = pipe.measured
     assert measured.state == "judging" and "trial" in measured.reason
