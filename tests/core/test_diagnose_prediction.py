@@ -1,0 +1,74 @@
+"""The restarted validation misfit (genbacklash_core.diagnose.prediction) and the loop's use of
+it: load physics ranked among themselves by what they predict between lost readings."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+import pytest
+
+from genbacklash_core import GenBacklashError, GeneralBacklash
+from genbacklash_core.cascade import Cascade, LinearBlock
+from genbacklash_core.diagnose import AugmentedModel, DiagnoseSettings
+from genbacklash_core.diagnose.gap import measure_gap, split_record
+from genbacklash_core.diagnose.loop import _Run
+from genbacklash_core.diagnose.physics import LoadPhysics
+from genbacklash_core.diagnose.prediction import restarted_gap
+from genbacklash_core.diagnose.spec import ModelSpec, anchors_of
+
+N = 3000
+
+
+def _record(seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, AugmentedModel]:
+    """A ringing spring's load, knocked to a random place at each of 60 lost readings: the
+    truth restarted there predicts every sample, its free run does not."""
+    rng = np.random.default_rng(seed)
+    u = np.cumsum(rng.normal(0.0, 0.02, N))
+    truth = AugmentedModel(
+        GeneralBacklash.ideal(1.0, 0.2, 0.2),
+        physics=LoadPhysics("compliant_coupling", 0.99, 0.0, 1, stiffness=0.15, damping=0.05),
+    )
+    breaks = np.zeros(N, dtype=bool)
+    breaks[0] = True
+    breaks[rng.choice(np.arange(100, N), 60, replace=False)] = True
+    spec = ModelSpec.of(truth)
+    theta = spec.vector(truth)
+    free = spec.simulate(theta, u, 0.0).y
+    knocked = free + rng.normal(0.0, 0.1, N)
+    y = spec.simulate(theta, u, 0.0, anchors=anchors_of(breaks), y=knocked).y
+    return u, y, breaks, truth
+
+
+def test_the_truth_restarted_predicts_every_sample_its_free_run_drifts() -> None:
+    u, y, breaks, truth = _record(0)
+    split = split_record(N, 0.3)
+    assert restarted_gap(truth, u, y, split, breaks) < 1e-9
+    assert measure_gap(truth, u, y, split).gap > 0.05
+
+
+def test_a_cascade_cannot_restart() -> None:
+    model = AugmentedModel(
+        Cascade(GeneralBacklash.ideal(0.5, 0.2, 0.2), LinearBlock(a=(1.0,), b=(-0.5, 0.0)))
+    )
+    u = np.linspace(0.0, 1.0, 200)
+    with pytest.raises(GenBacklashError, match="linear block"):
+        restarted_gap(model, u, u, split_record(200, 0.3), np.zeros(200, dtype=bool))
+
+
+def _candidate(model: AugmentedModel) -> Any:
+    return SimpleNamespace(fit=SimpleNamespace(model=model))
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_load_physics_are_ranked_among_their_places_by_the_restarted_misfit(seed: int) -> None:
+    u, y, breaks, truth = _record(seed)
+    coasting = AugmentedModel(truth.base, physics=LoadPhysics("coasting_load", 0.99, 0.0, 1))
+    other = _candidate(AugmentedModel(truth.base, offset=0.01))
+    first, spring = _candidate(coasting), _candidate(truth)
+    run = _Run(u, y, split_record(N, 0.3), (), DiagnoseSettings(), record_breaks=breaks)
+    assert run.physics_by_prediction([first, other, spring]) == [spring, other, first]
+    assert run.physics_by_prediction([spring, other, first]) == [spring, other, first]
+    unbroken = _Run(u, y, split_record(N, 0.3), (), DiagnoseSettings())
+    assert unbroken.physics_by_prediction([first, other, spring]) == [first, other, spring]
