@@ -65,13 +65,31 @@ def _candidate(model: AugmentedModel) -> Any:
 def test_load_physics_are_ranked_among_their_places_by_the_restarted_misfit(seed: int) -> None:
     u, y, breaks, truth = _record(seed)
     coasting = AugmentedModel(truth.base, physics=LoadPhysics("coasting_load", 0.99, 0.0, 1))
+    plain = AugmentedModel(truth.base)
     other = _candidate(AugmentedModel(truth.base, offset=0.01))
     first, spring = _candidate(coasting), _candidate(truth)
     run = _Run(u, y, split_record(N, 0.3), (), DiagnoseSettings(), record_breaks=breaks)
-    assert run.physics_by_prediction([first, other, spring]) == [spring, other, first]
-    assert run.physics_by_prediction([spring, other, first]) == [spring, other, first]
+    ranked, predicted = run.physics_by_prediction([first, other, spring], plain)
+    assert ranked == [spring, other, first]
+    assert predicted is not None and predicted.misfit[id(spring)] < 1e-9
+    assert predicted.before == restarted_gap(plain, u, y, split_record(N, 0.3), breaks)
+    assert run.physics_by_prediction([spring, other, first], plain)[0] == [spring, other, first]
     unbroken = _Run(u, y, split_record(N, 0.3), (), DiagnoseSettings())
-    assert unbroken.physics_by_prediction([first, other, spring]) == [first, other, spring]
+    assert unbroken.physics_by_prediction([first, other, spring], plain) == (
+        [first, other, spring],
+        None,
+    )
+
+
+def test_a_restarted_misfit_that_tells_no_load_physics_from_the_model_ranks_nothing() -> None:
+    """When no load physics predicts the restarted runs better than the model it augments by
+    what the loop calls a drop, that misfit does not rank them: the free-run order stays."""
+    u, y, breaks, truth = _record(0)
+    coasting = AugmentedModel(truth.base, physics=LoadPhysics("coasting_load", 0.99, 0.0, 1))
+    first, spring = _candidate(coasting), _candidate(truth)
+    run = _Run(u, y, split_record(N, 0.3), (), DiagnoseSettings(), record_breaks=breaks)
+    # the truth itself as the model: nothing predicts better than it
+    assert run.physics_by_prediction([first, spring], truth) == ([first, spring], None)
 
 
 def _fitted(effect: str, model: AugmentedModel, bic_change: float) -> Any:
@@ -99,29 +117,30 @@ def test_a_near_tie_between_load_physics_is_measured_on_the_restarted_misfit() -
     chosen = _fitted("compliant_coupling", truth, -2000.0)
     rival = _fitted("compliant_coupling", soft, -3000.0)
     run = _Run(u, y, split, (), DiagnoseSettings(), breaks[split.estimation], record_breaks=breaks)
-    gaps = {id(c): measure_gap(c.fit.model, u, y, split) for c in (chosen, rival)}
+    ranked, gaps, predicted = run.rank_by_gap([rival, chosen], plain)
     report = measure_gap(plain, u, y, split)
     # a near tie on the free run: the rival closes more of the misfit than the truth does
     assert report.gap - gaps[id(rival)].gap > report.gap - gaps[id(chosen)].gap
-    assert run.physics_by_prediction([rival, chosen]) == [chosen, rival]
-    assert not run.ties(plain, report, chosen, rival, gaps)
-    assert run.break_tie(plain, report, [chosen, rival], chosen, gaps) is None
-    # the same pair without lost readings in the estimation data: the free run decides
-    free = _Run(u, y, split, (), DiagnoseSettings(), record_breaks=breaks)
-    assert free.misfits(truth, soft)[0] == [gaps[id(chosen)].gap, gaps[id(rival)].gap]
+    assert ranked == [chosen, rival]
+    assert not run.ties(report, chosen, rival, gaps, predicted)
+    assert run.break_tie(report, [chosen, rival], chosen, gaps, predicted) is None
+    # on the free run it is a near tie, and the lower BIC takes it
+    assert run.ties(report, chosen, rival, gaps, None)
+    swapped = run.break_tie(report, [chosen, rival], chosen, gaps, None)
+    assert swapped is not None and swapped[0] is rival
 
 
 def test_misfits_restart_only_load_physics_without_a_linear_block() -> None:
     u, y, breaks, truth = _record(1)
     split = split_record(N, 0.3)
     run = _Run(u, y, split, (), DiagnoseSettings(), breaks[split.estimation], record_breaks=breaks)
+    coasting = AugmentedModel(truth.base, physics=LoadPhysics("coasting_load", 0.99, 0.0, 1))
     plain = AugmentedModel(truth.base)
-    (mine, before), what = run.misfits(truth, reference=plain)
+    (mine, other), what = run.misfits(truth, coasting, restarted=True)
     assert what == "validation misfit restarted after each loss"
-    assert mine < 1e-9 < restarted_gap(plain, u, y, split, breaks) == before
-    (mine, other), what = run.misfits(truth, plain)  # the plain backlash has no load physics
+    assert mine < 1e-9 < restarted_gap(coasting, u, y, split, breaks) == other
+    free = (measure_gap(truth, u, y, split).gap, measure_gap(plain, u, y, split).gap)
+    (mine, other), what = run.misfits(truth, plain, restarted=True)  # plain: no load physics
     assert what == "validation misfit"
-    assert (mine, other) == (
-        measure_gap(truth, u, y, split).gap,
-        measure_gap(plain, u, y, split).gap,
-    )
+    assert (mine, other) == free
+    assert run.misfits(truth, plain, restarted=False)[0] == list(free)
