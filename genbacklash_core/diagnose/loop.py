@@ -248,8 +248,9 @@ def _drop(
 
     >>> _drop(0.02, 0.015, DiagnoseSettings(), None)
     (0.25, 0.05, '')
-    >>> _drop(0.02, 0.015, DiagnoseSettings(), 0.01)[:2]
-    (0.5, 0.1)
+    >>> drop, least, words = _drop(0.02, 0.015, DiagnoseSettings(), 0.01)
+    >>> round(drop, 9), least, words
+    (0.5, 0.1, ' of the excess over the floor 0.0100')
     """
     if floor is not None and before > floor:
         words = f" of the excess over the floor {floor:.4f}"
