@@ -402,13 +402,15 @@ class ModelSpec:
             else float(self.unread(theta, np.array([y_start]))[0]) / self._gain(p)
         )
         lo, hi = play_bounds(left, right)
+        pinned = None
         if anchors is not None and y is not None and not structure.cascade:
+            pinned = anchors
             lo, hi = lo.copy(), hi.copy()
             lo[anchors] = hi[anchors] = self.unread(theta, y[anchors])  # pin x to the reading
         if self.physics is None:
             x = play_operator(lo, hi, x0)  # eq. (20)
         else:  # the load's own motion on eq. (20)'s interval (:mod:`.physics`)
-            x = self.physics.simulate(lo, hi, x0)
+            x = self.physics.simulate(lo, hi, x0, pinned)
         if structure.cascade:
             a, b = structure.linear_part(p)
             num = np.concatenate([[0.0], a])

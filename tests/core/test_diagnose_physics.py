@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from genbacklash_core import GenBacklashError, GeneralBacklash
@@ -119,6 +119,123 @@ def test_a_coasting_load_keeps_moving_and_a_torque_holds_its_flank() -> None:
     held = LoadPhysics("load_torque", side=-1, region=(-1.0, 2.0), fall=1.0)
     x = held.simulate(down, down + 0.2, 1.2)
     np.testing.assert_allclose(x, down)  # rides the lower flank down (the play never shows)
+
+
+def restarted(
+    physics: LoadPhysics, lo: np.ndarray, hi: np.ndarray, at: int, reading: float, mark: bool = True
+) -> np.ndarray:
+    """``physics`` on the bounds ``lo, hi`` restarted at sample ``at`` at ``reading``: the bounds
+    pinned to it and, with ``mark``, the anchor marked (as ``ModelSpec.simulate`` restarts)."""
+    anchors = np.zeros(lo.size, dtype=bool)
+    anchors[at] = True
+    pinned_lo, pinned_hi = lo.copy(), hi.copy()
+    pinned_lo[at] = pinned_hi[at] = reading
+    return physics.simulate(pinned_lo, pinned_hi, 0.0, anchors if mark else None)
+
+
+def assert_shifted(free: np.ndarray, again: np.ndarray, at: int, shift: float) -> None:
+    """``again`` is ``free`` up to sample ``at`` and ``shift`` higher from there on."""
+    np.testing.assert_array_equal(again[:at], free[:at])
+    np.testing.assert_allclose(again[at:], free[at:] + shift, rtol=0.0, atol=1e-9)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    speed=st.floats(1e-3, 0.05),
+    retention=st.floats(0.5, 1.0),
+    friction=st.floats(0.0, 1e-3),
+    window=st.integers(1, 12),
+    at=st.integers(41, 199),
+    shift=st.floats(0.0, 1.0),
+)
+def test_a_restart_moves_the_coasting_load_and_keeps_its_velocity(
+    speed: float, retention: float, friction: float, window: int, at: int, shift: float
+) -> None:
+    # a flank pushes the load up for 40 samples and stops; the load coasts on in a wide
+    # play. Restarted at a reading ``shift`` above where it would be, it moves on exactly as
+    # before, ``shift`` higher: the anchor moves it and leaves its velocity alone (the former
+    # rule treated the pinned bounds as a flank and gave the load the jump's velocity)
+    lo = np.concatenate([speed * np.arange(1.0, 41.0), np.full(160, 40.0 * speed)])
+    hi = lo + 100.0
+    physics = LoadPhysics("coasting_load", retention, friction, window)
+    free = physics.simulate(lo, hi, 0.0)
+    assert_shifted(free, restarted(physics, lo, hi, at, free[at] + shift), at, shift)
+
+
+def test_a_coasting_load_restarted_at_a_reading_moves_on_at_its_velocity() -> None:
+    # the flank pushes the load up at 0.01 per sample for 50 samples, then stops; the load
+    # coasts on (no friction) inside a wide play; a reading at sample 100 puts it at 2.0
+    lo = np.concatenate([np.linspace(0.01, 0.5, 50), np.full(100, 0.5)])
+    hi = lo + 5.0
+    physics = LoadPhysics("coasting_load", retention=1.0, window=1)
+    x = restarted(physics, lo, hi, 100, 2.0)
+    np.testing.assert_allclose(x[100:], 2.0 + 0.01 * np.arange(50), atol=1e-12)
+    # without the anchor mask the pinned bounds are a flank the load stops against: the
+    # velocity it leaves with is its jump onto the reading, not the one it had
+    as_flank = restarted(physics, lo, hi, 100, 2.0, mark=False)
+    assert as_flank[101] - as_flank[100] != pytest.approx(0.01)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    speed=st.floats(1e-3, 0.05),
+    stiffness=st.floats(0.05, 1.0),
+    damping=st.floats(0.0, 0.7),
+    retention=st.floats(0.5, 1.0),
+    friction=st.floats(0.0, 1e-3),
+    later=st.integers(1, 60),
+    shift=st.floats(0.0, 1.0),
+)
+def test_a_restart_moves_the_springs_load_and_keeps_its_velocity(
+    speed: float,
+    stiffness: float,
+    damping: float,
+    retention: float,
+    friction: float,
+    later: int,
+    shift: float,
+) -> None:
+    # the spring drags the load up behind a flank for 40 samples; the flank stops and the
+    # load, once it is past it, coasts on in a wide play. Restarted there at a reading
+    # ``shift`` above where it would be, it moves on exactly as before, ``shift`` higher
+    # (the former rule read the pinned bounds as a flank: the spring pulled the load
+    # towards the reading and gave it the pull's velocity)
+    lo = np.concatenate([speed * np.arange(1.0, 41.0), np.full(260, 40.0 * speed)])
+    hi = lo + 100.0
+    physics = LoadPhysics("compliant_coupling", retention, friction, HOLD, stiffness, damping)
+    free = physics.simulate(lo, hi, 0.0)
+    behind = np.flatnonzero(free < lo)  # deflected: the spring still pulls
+    at = max(41, int(behind[-1]) + 2 if behind.size else 0) + later
+    assume(at < lo.size)
+    assert_shifted(free, restarted(physics, lo, hi, at, free[at] + shift), at, shift)
+
+
+def test_a_springs_load_restarted_at_a_reading_moves_on_at_its_velocity() -> None:
+    # the spring drags the load up at 0.01 per sample, then the flank stops and the load
+    # coasts on (no friction) inside a wide play; a reading at sample 200 puts it at 5.0
+    lo = np.concatenate([np.linspace(0.01, 0.5, 50), np.full(250, 0.5)])
+    hi = lo + 10.0
+    physics = LoadPhysics("compliant_coupling", retention=1.0, stiffness=0.5, damping=0.5)
+    free = physics.simulate(lo, hi, 0.0)
+    velocity = free[199] - free[198]
+    assert velocity > 0.0
+    x = restarted(physics, lo, hi, 200, 5.0)
+    np.testing.assert_allclose(x[200:], 5.0 + velocity * np.arange(100), atol=1e-12)
+    # without the anchor mask the pinned bounds are a flank the spring pulls the load to:
+    # it does not land on the reading, and leaves with the pull's velocity
+    as_flank = restarted(physics, lo, hi, 200, 5.0, mark=False)
+    assert as_flank[200] != pytest.approx(5.0)
+    assert as_flank[202] - as_flank[201] != pytest.approx(velocity)
+
+
+def test_a_torques_load_restarted_at_a_reading_takes_it() -> None:
+    # the load torque has no velocity to keep: eq. (20)'s clamp onto the pinned bounds is its
+    # restart, with or without the anchor mask
+    lo = np.linspace(0.0, 1.0, 100)
+    physics = LoadPhysics("load_torque", side=1, region=(-5.0, 5.0), fall=0.01)
+    x = restarted(physics, lo, lo + 0.07, 60, 0.65)
+    assert x[60] == 0.65
+    np.testing.assert_array_equal(x, restarted(physics, lo, lo + 0.07, 60, 0.65, mark=False))
 
 
 def test_load_physics_is_validated() -> None:
