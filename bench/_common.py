@@ -251,6 +251,35 @@ def physics_parser(description: str | None, duration: float) -> argparse.Argumen
     return parser
 
 
+@dataclass(frozen=True)
+class PhysicsRecord:
+    """One record of a physics bench's grid (:func:`physics_records`): its variant, servo
+    bandwidth (Hz) and seed, the drivetrain's parameters and its quasi-static truth
+    (:func:`~genbacklash_ros.physics.truth.quasi_static` over the operation scenario's
+    travel)."""
+
+    name: str
+    bandwidth: float
+    seed: int
+    params: Any
+    truth: Any
+
+
+def physics_records(args: argparse.Namespace) -> Iterator[PhysicsRecord]:
+    """The records of :func:`physics_parser`'s grid, variant by variant, bandwidth by
+    bandwidth, seed by seed; each drivetrain and its truth built once for its seeds."""
+    from genbacklash_core.scenarios import OperationSettings
+    from genbacklash_ros.physics.truth import quasi_static
+    from genbacklash_ros.physics.variants import variant
+
+    for name in args.variants:
+        for bw in args.bandwidths:
+            params = variant(name, bandwidth=bw)
+            truth = quasi_static(params, OperationSettings().travel)
+            for seed in args.seeds:
+                yield PhysicsRecord(name, bw, seed, params, truth)
+
+
 def rms(e: np.ndarray) -> float:
     """The root-mean-square of ``e``."""
     return float(np.sqrt(np.mean(e * e)))

@@ -69,6 +69,7 @@ from _common import (
     param_values,
     parse_physics_arguments,
     physics_parser,
+    physics_records,
     printed_section,
     rms,
 )
@@ -80,7 +81,6 @@ from genbacklash_ros.node.checkpoint import load_checkpoint, save_checkpoint, wa
 from genbacklash_ros.node.parameters import NodeParameters
 from genbacklash_ros.physics.bag import write_physics_bag
 from genbacklash_ros.physics.loop import Clocks, node_loop, open_loop
-from genbacklash_ros.physics.truth import quasi_static
 from genbacklash_ros.physics.variants import VARIANTS, variant
 
 
@@ -228,59 +228,55 @@ def _restart_tables(args: argparse.Namespace, folder: Path) -> None:
     )
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     delay = round(args.delay_ms * 1e6)
-    for name in args.variants:
-        for bw in args.bandwidths:
-            params = variant(name, bandwidth=bw)
-            truth = quasi_static(params, OperationSettings().travel)
-            for seed in args.seeds:
-                began = time.perf_counter()
-                run = folder / "node.json"
-                run.unlink(missing_ok=True)
-                node = {**extra, "checkpoint_file": str(run)}
-                first = Clocks(seed, args.duration, late_ms=args.late_stamps)
-                loads, _, _, judged = node_loop(
-                    params, first, guard=args.guard == "on", delay_ns=delay, extra=node,
-                    motor=args.motor_encoder,
-                )  # fmt: skip
-                none = open_loop(params, first, first.values, delay) - first.desired
-                fresh = 100 * (1 - rms(loads - first.desired) / rms(none))
-                late = first.t >= first.t[-1] // 2
-                fresh_late = 100 * (1 - rms((loads - first.desired)[late]) / rms(none[late]))
-                saved = load_checkpoint(run)
-                clocks = Clocks(seed + args.restart, args.duration, late_ms=args.late_stamps)
-                half = clocks.t >= clocks.t[-1] // 2
-                errors = {
-                    "none": open_loop(params, clocks, clocks.values, delay) - clocks.desired,
-                    "true": open_loop(params, clocks, compensate(truth.model, clocks.values), delay)
-                    - clocks.desired,
-                }
-                states = []
-                bare = dataclasses.replace(saved, baseline=None, harm=None)
-                for key, kept in (("with", saved), ("without", bare)):
-                    save_checkpoint(run, kept)
-                    loads, _, _, measured = node_loop(
-                        params, clocks, guard=args.guard == "on", delay_ns=delay, extra=node,
-                        motor=args.motor_encoder,
-                    )  # fmt: skip
-                    errors[key] = loads - clocks.desired
-                    states.append(f"{measured.state}, {measured.ratio:.2f}")
-                cut = _cuts(errors, half)
-                base = saved.baseline
-                stored = f"{1e3 * base.rms:.2f} over {base.seconds:.1f}" if base else "none"
-                harm = saved.harm
-                held = (
-                    f"{1e3 * harm.play:.1f}, {harm.ratio:.2f}, {harm.held:.1f}" if harm else "none"
-                )
-                print(
-                    f"| {name} | {bw:g} | {seed} / {seed + args.restart} "
-                    f"| {fresh:.1f} / {fresh_late:.1f}, {judged.state}, {judged.ratio:.2f} "
-                    f"| {stored} | {held} | {1e3 * rms(errors['none']):.2f} "
-                    f"| {cut['true'][0]:.1f} "
-                    f"| {cut['with'][0]:.1f} / {cut['with'][1]:.1f} "
-                    f"| {cut['without'][0]:.1f} / {cut['without'][1]:.1f} "
-                    f"| {' / '.join(states)} | {time.perf_counter() - began:.1f} |",
-                    flush=True,
-                )
+    for record in physics_records(args):
+        name, bw, seed = record.name, record.bandwidth, record.seed
+        params, truth = record.params, record.truth
+        began = time.perf_counter()
+        run = folder / "node.json"
+        run.unlink(missing_ok=True)
+        node = {**extra, "checkpoint_file": str(run)}
+        first = Clocks(seed, args.duration, late_ms=args.late_stamps)
+        loads, _, _, judged = node_loop(
+            params, first, guard=args.guard == "on", delay_ns=delay, extra=node,
+            motor=args.motor_encoder,
+        )  # fmt: skip
+        none = open_loop(params, first, first.values, delay) - first.desired
+        fresh = 100 * (1 - rms(loads - first.desired) / rms(none))
+        late = first.t >= first.t[-1] // 2
+        fresh_late = 100 * (1 - rms((loads - first.desired)[late]) / rms(none[late]))
+        saved = load_checkpoint(run)
+        clocks = Clocks(seed + args.restart, args.duration, late_ms=args.late_stamps)
+        half = clocks.t >= clocks.t[-1] // 2
+        errors = {
+            "none": open_loop(params, clocks, clocks.values, delay) - clocks.desired,
+            "true": open_loop(params, clocks, compensate(truth.model, clocks.values), delay)
+            - clocks.desired,
+        }
+        states = []
+        bare = dataclasses.replace(saved, baseline=None, harm=None)
+        for key, kept in (("with", saved), ("without", bare)):
+            save_checkpoint(run, kept)
+            loads, _, _, measured = node_loop(
+                params, clocks, guard=args.guard == "on", delay_ns=delay, extra=node,
+                motor=args.motor_encoder,
+            )  # fmt: skip
+            errors[key] = loads - clocks.desired
+            states.append(f"{measured.state}, {measured.ratio:.2f}")
+        cut = _cuts(errors, half)
+        base = saved.baseline
+        stored = f"{1e3 * base.rms:.2f} over {base.seconds:.1f}" if base else "none"
+        harm = saved.harm
+        held = f"{1e3 * harm.play:.1f}, {harm.ratio:.2f}, {harm.held:.1f}" if harm else "none"
+        print(
+            f"| {name} | {bw:g} | {seed} / {seed + args.restart} "
+            f"| {fresh:.1f} / {fresh_late:.1f}, {judged.state}, {judged.ratio:.2f} "
+            f"| {stored} | {held} | {1e3 * rms(errors['none']):.2f} "
+            f"| {cut['true'][0]:.1f} "
+            f"| {cut['with'][0]:.1f} / {cut['with'][1]:.1f} "
+            f"| {cut['without'][0]:.1f} / {cut['without'][1]:.1f} "
+            f"| {' / '.join(states)} | {time.perf_counter() - began:.1f} |",
+            flush=True,
+        )
 
 
 def _tables(args: argparse.Namespace, folder: Path) -> None:
@@ -294,61 +290,55 @@ def _tables(args: argparse.Namespace, folder: Path) -> None:
         + " s |"
     )
     print("|---|---|---|---|---|---|---|---|---|---|---|" + ("---|---|---|" if seeded else ""))
-    for name in args.variants:
-        for bw in args.bandwidths:
-            params = variant(name, bandwidth=bw)
-            truth = quasi_static(params, OperationSettings().travel)
-            geometric = params.c_left + params.c_right
-            for seed in args.seeds:
-                start = time.perf_counter()
-                run_extra = dict(extra)
-                start_play, offline = "", float("nan")
-                if seeded:
-                    file, offline_play, offline = _seeded_start(args, name, bw, seed, folder)
-                    run = folder / "start.json"  # the node checkpoints over its start
-                    shutil.copyfile(file, run)
-                    run_extra["checkpoint_file"] = str(run)
-                    start_play = f" {offline_play / geometric:.3f} |"
-                clocks = Clocks(seed, args.duration, late_ms=args.late_stamps)
-                half = clocks.t >= clocks.t[-1] // 2
-                delay = round(args.delay_ms * 1e6)
-                true_commands = compensate(truth.model, clocks.values)
-                errors = {
-                    "none": open_loop(params, clocks, clocks.values, delay) - clocks.desired,
-                    "true": open_loop(params, clocks, true_commands, delay) - clocks.desired,
-                }
-                loads, est, verdict, measured = node_loop(
-                    params,
-                    clocks,
-                    guard=args.guard == "on",
-                    delay_ns=delay,
-                    extra=run_extra,
-                    motor=args.motor_encoder,
-                )
-                errors["node"] = loads - clocks.desired
-                whole = {k: 100 * (1 - rms(e) / rms(errors["none"])) for k, e in errors.items()}
-                late = {
-                    k: 100 * (1 - rms(e[half]) / rms(errors["none"][half]))
-                    for k, e in errors.items()
-                }
-                model = est.model
-                bl = getattr(model, "backlash", model)
-                play = (bl.c_left + bl.c_right) / geometric if bl is not None else float("nan")
-                print(
-                    f"| {name} | {bw:g} | {seed} | {1e3 * rms(errors['none']):.2f} "
-                    f"| {whole['true']:.1f} | {whole['node']:.1f} "
-                    f"| {late['true']:.1f} / {late['node']:.1f} | {play:.3f} "
-                    f"| {verdict.trust:.2f}, {verdict.ratio:.2f} "
-                    f"| {measured.state}, {measured.ratio:.2f} |{start_play}"
-                    + (
-                        f" {1e3 * offline:.2f} / {1e3 * rms(errors['none']):.2f} "
-                        f"| {measured.baseline} |"
-                        if seeded
-                        else ""
-                    )
-                    + f" {time.perf_counter() - start:.1f} |",
-                    flush=True,
-                )
+    for record in physics_records(args):
+        name, bw, seed = record.name, record.bandwidth, record.seed
+        params, truth = record.params, record.truth
+        geometric = params.c_left + params.c_right
+        start = time.perf_counter()
+        run_extra = dict(extra)
+        start_play, offline = "", float("nan")
+        if seeded:
+            file, offline_play, offline = _seeded_start(args, name, bw, seed, folder)
+            run = folder / "start.json"  # the node checkpoints over its start
+            shutil.copyfile(file, run)
+            run_extra["checkpoint_file"] = str(run)
+            start_play = f" {offline_play / geometric:.3f} |"
+        clocks = Clocks(seed, args.duration, late_ms=args.late_stamps)
+        half = clocks.t >= clocks.t[-1] // 2
+        delay = round(args.delay_ms * 1e6)
+        true_commands = compensate(truth.model, clocks.values)
+        errors = {
+            "none": open_loop(params, clocks, clocks.values, delay) - clocks.desired,
+            "true": open_loop(params, clocks, true_commands, delay) - clocks.desired,
+        }
+        loads, est, verdict, measured = node_loop(
+            params,
+            clocks,
+            guard=args.guard == "on",
+            delay_ns=delay,
+            extra=run_extra,
+            motor=args.motor_encoder,
+        )
+        errors["node"] = loads - clocks.desired
+        whole = {k: 100 * (1 - rms(e) / rms(errors["none"])) for k, e in errors.items()}
+        late = {k: 100 * (1 - rms(e[half]) / rms(errors["none"][half])) for k, e in errors.items()}
+        model = est.model
+        bl = getattr(model, "backlash", model)
+        play = (bl.c_left + bl.c_right) / geometric if bl is not None else float("nan")
+        print(
+            f"| {name} | {bw:g} | {seed} | {1e3 * rms(errors['none']):.2f} "
+            f"| {whole['true']:.1f} | {whole['node']:.1f} "
+            f"| {late['true']:.1f} / {late['node']:.1f} | {play:.3f} "
+            f"| {verdict.trust:.2f}, {verdict.ratio:.2f} "
+            f"| {measured.state}, {measured.ratio:.2f} |{start_play}"
+            + (
+                f" {1e3 * offline:.2f} / {1e3 * rms(errors['none']):.2f} | {measured.baseline} |"
+                if seeded
+                else ""
+            )
+            + f" {time.perf_counter() - start:.1f} |",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

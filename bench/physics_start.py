@@ -34,14 +34,17 @@ import time
 from collections.abc import Sequence
 
 import numpy as np
-from _common import parse_physics_arguments, physics_parser, printed_section, rms
+from _common import (
+    parse_physics_arguments,
+    physics_parser,
+    physics_records,
+    printed_section,
+    rms,
+)
 
 from genbacklash_core import compensate
-from genbacklash_core.scenarios import OperationSettings
 from genbacklash_ros.blas_threads import one_blas_thread
 from genbacklash_ros.physics.loop import Clocks, node_loop, open_loop
-from genbacklash_ros.physics.truth import quasi_static
-from genbacklash_ros.physics.variants import variant
 
 TARGET_POINTS = 10.0
 """The whole-record target's allowance below the true-play compensator's cut (points)."""
@@ -91,41 +94,37 @@ def main(argv: Sequence[str] | None = None) -> None:
             "| true from first (%) | latest start (s) | node / true by quarter (%) | s |"
         )
         print("|---|---|---|---|---|---|---|---|---|---|")
-        for name in args.variants:
-            for bw in args.bandwidths:
-                params = variant(name, bandwidth=bw)
-                truth = quasi_static(params, OperationSettings().travel)
-                for seed in args.seeds:
-                    began = time.perf_counter()
-                    clocks = Clocks(seed, args.duration)
-                    seconds = (clocks.t - clocks.t[0]) / 1e9
-                    plain = open_loop(params, clocks, clocks.values)
-                    none = plain - clocks.desired
-                    true_commands = compensate(truth.model, clocks.values)
-                    true = open_loop(params, clocks, true_commands) - clocks.desired
-                    loads, _, _, _ = node_loop(params, clocks, guard=True)
-                    node = loads - clocks.desired
-                    index = first_difference(loads, plain)
-                    first = float("nan") if index is None else float(seconds[index])
-                    spliced = (
-                        float("nan")
-                        if index is None
-                        else cut(np.where(seconds < first, none, true), none)
-                    )
-                    need = cut(true, none) - TARGET_POINTS
-                    quarters = np.minimum((4 * seconds / seconds[-1]).astype(int), 3)
-                    by_quarter = ", ".join(
-                        f"{cut(node[quarters == q], none[quarters == q]):.0f} / "
-                        f"{cut(true[quarters == q], none[quarters == q]):.0f}"
-                        for q in range(4)
-                    )
-                    print(
-                        f"| {name} | {bw:g} | {seed} | {cut(true, none):.1f} "
-                        f"| {cut(node, none):.1f} | {first:.2f} | {spliced:.1f} "
-                        f"| {latest_start(seconds, none, true, need):.1f} | {by_quarter} "
-                        f"| {time.perf_counter() - began:.1f} |",
-                        flush=True,
-                    )
+        for record in physics_records(args):
+            name, bw, seed = record.name, record.bandwidth, record.seed
+            params, truth = record.params, record.truth
+            began = time.perf_counter()
+            clocks = Clocks(seed, args.duration)
+            seconds = (clocks.t - clocks.t[0]) / 1e9
+            plain = open_loop(params, clocks, clocks.values)
+            none = plain - clocks.desired
+            true_commands = compensate(truth.model, clocks.values)
+            true = open_loop(params, clocks, true_commands) - clocks.desired
+            loads, _, _, _ = node_loop(params, clocks, guard=True)
+            node = loads - clocks.desired
+            index = first_difference(loads, plain)
+            first = float("nan") if index is None else float(seconds[index])
+            spliced = (
+                float("nan") if index is None else cut(np.where(seconds < first, none, true), none)
+            )
+            need = cut(true, none) - TARGET_POINTS
+            quarters = np.minimum((4 * seconds / seconds[-1]).astype(int), 3)
+            by_quarter = ", ".join(
+                f"{cut(node[quarters == q], none[quarters == q]):.0f} / "
+                f"{cut(true[quarters == q], none[quarters == q]):.0f}"
+                for q in range(4)
+            )
+            print(
+                f"| {name} | {bw:g} | {seed} | {cut(true, none):.1f} "
+                f"| {cut(node, none):.1f} | {first:.2f} | {spliced:.1f} "
+                f"| {latest_start(seconds, none, true, need):.1f} | {by_quarter} "
+                f"| {time.perf_counter() - began:.1f} |",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":
