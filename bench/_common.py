@@ -14,6 +14,7 @@ import contextlib
 import gc
 import io
 import json
+import math
 import os
 import platform
 import sys
@@ -245,10 +246,32 @@ def physics_parser(description: str | None, duration: float) -> argparse.Argumen
 
     parser = argparse.ArgumentParser(description=(description or "").split("\n\n")[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
-    parser.add_argument("--bandwidths", type=float, nargs="+", default=[20.0, 60.0, 100.0])
-    parser.add_argument("--variants", nargs="+", default=list(VARIANTS))
-    parser.add_argument("--duration", type=float, default=duration)
+    parser.add_argument(
+        "--bandwidths", type=positive, nargs="+", default=[20.0, 60.0, 100.0], metavar="HZ"
+    )
+    parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
+    parser.add_argument("--duration", type=positive, default=duration, metavar="S")
     return parser
+
+
+def positive(text: str) -> float:
+    """An argument that must be a finite number above 0 (``argparse`` type): a servo's
+    bandwidth, a record's duration.
+
+    >>> positive("2.5")
+    2.5
+    >>> positive("0")
+    Traceback (most recent call last):
+    ...
+    argparse.ArgumentTypeError: must be a number > 0, got '0'
+    """
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0.0):
+        raise argparse.ArgumentTypeError(f"must be a number > 0, got {text!r}")
+    return value
 
 
 @dataclass(frozen=True)

@@ -83,3 +83,34 @@ def test_physics_start_finds_the_latest_switch_over_that_still_meets_the_target(
     assert physics_start.first_difference(a, b) is None
     b[7] += 1e-15
     assert physics_start.first_difference(a, b) == 7
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--variants", "nearideal"], "argument --variants: invalid choice: 'nearideal'"),
+        (["--duration", "0"], "argument --duration: must be a number > 0, got '0'"),
+        (["--duration", "inf"], "argument --duration: must be a number > 0, got 'inf'"),
+        (["--bandwidths", "60", "-20"], "argument --bandwidths: must be a number > 0"),
+        (["--bandwidths", "nan"], "argument --bandwidths: must be a number > 0"),
+    ],
+)
+@pytest.mark.parametrize(
+    "bench",
+    ["physics_accuracy", "physics_diagnose", "physics_loop", "physics_null", "physics_start"],
+)
+def test_the_physics_benches_refuse_a_grid_that_is_no_grid(
+    bench: str, argv: list[str], message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A misspelt variant ran as far as building it and then stopped with a traceback, and a
+    duration of 0 failed deep in the scenario; now each is refused with one line before
+    anything runs."""
+    sys.path.insert(0, str(BENCH))
+    try:
+        module = importlib.import_module(bench)
+        with pytest.raises(SystemExit) as stop:
+            module._arguments(argv)
+    finally:
+        sys.path.remove(str(BENCH))
+    assert stop.value.code == 2
+    assert message in capsys.readouterr().err
