@@ -139,19 +139,26 @@ class Screen:
         """The samples of ``batch`` to identify from, judged with ``estimate`` (the estimate
         in use) by ``health``."""
         previous = self._last_t if batch.linked else None
+        command_restarts = None
         if batch.period is None:  # no period known yet: every sample breaks
             breaks = link_breaks(batch.held, None, previous_ns=previous)
             restarts = breaks.copy()
+            if batch.commands is not None:
+                command_restarts = breaks.copy()
         else:
             bridge = batch.monotone if self._bridge else None
             breaks = linked_breaks(batch.held, batch.period, previous, bridge)
-            restarts = breaks & ~early_stamps(batch.held, batch.period, previous)
-        command_restarts = None
-        if batch.commands is not None:  # the commands' path is known across lost readings
-            command_restarts = restarts.copy()
-            if batch.period is not None and batch.command_monotone is not None:
-                lifted = linked_breaks(batch.held, batch.period, previous, batch.command_monotone)
-                command_restarts = lifted & ~early_stamps(batch.held, batch.period, previous)
+            early = early_stamps(batch.held, batch.period, previous)
+            restarts = breaks & ~early
+            if batch.commands is not None:  # the commands' path is known across lost readings
+                along = batch.command_monotone
+                lifted = (
+                    breaks
+                    if along is None
+                    else linked_breaks(batch.held, batch.period, previous, along)
+                )
+                command_restarts = lifted & ~early
+        if command_restarts is not None:
             command_restarts |= batch.marks
         breaks |= batch.marks
         restarts |= batch.marks
