@@ -55,12 +55,14 @@ from genbacklash_core import (
     compensate,
     simulate_backlash,
 )
+from genbacklash_core.guard import GuardSettings
 from genbacklash_core.scenarios import simulate_worn
 from genbacklash_ros.bags.bagio import align
 from genbacklash_ros.bags.replay import ReplayResult
 from genbacklash_ros.bags.simbags import BagTruth, read_truth
 from genbacklash_ros.reports.page import DASH, Section, Table, write_page
 from genbacklash_ros.reports.page import Figure as PageFigure
+from genbacklash_ros.reports.plant_check import PlantCheck, check_plant
 from genbacklash_ros.reports.plots import parameter_unit
 
 __all__ = [
@@ -97,6 +99,9 @@ _COLORS = {
 }
 
 
+_DEFAULT_GUARD = GuardSettings()  # a ReportData built by hand: the node's defaults
+
+
 def _backlash(model: GeneralBacklash | Cascade | None) -> GeneralBacklash | None:
     return model.backlash if isinstance(model, Cascade) else model
 
@@ -125,6 +130,9 @@ class ReportData:
         The zoomed window, seconds.
     end : float
         The end of the record, seconds.
+    guard : GuardSettings
+        The replay's guard settings: their thresholds judge whether the plant the
+        predictions simulate describes the readings (:mod:`~.plant_check`).
     """
 
     t0_ns: int
@@ -140,6 +148,7 @@ class ReportData:
     model: GeneralBacklash | None
     window: tuple[float, float]
     end: float
+    guard: GuardSettings = _DEFAULT_GUARD
 
     @property
     def truth_end(self) -> GeneralBacklash | None:
@@ -236,6 +245,7 @@ def report_data(result: ReplayResult) -> ReportData:
         model=_backlash(result.estimate.model),
         window=_zoom_window(cmd_t, cmd_raw, end),
         end=end,
+        guard=result.params.guard_settings(),
     )
 
 
@@ -432,6 +442,10 @@ class TrackingErrors:
     measured_t, measured : ndarray
         The recorded error: encoder minus the command held (no compensation was applied
         while recording), one per reading.
+    check : PlantCheck or None
+        Whether the plant, run free on the recorded commands, reproduces the readings
+        (None without aligned samples): where it does not, the predictions are the plant's,
+        not the drivetrain's, and the page says so instead of leading with them.
     """
 
     plant: str
@@ -442,6 +456,13 @@ class TrackingErrors:
     final: np.ndarray | None
     measured_t: np.ndarray
     measured: np.ndarray
+    check: PlantCheck | None = None
+
+    @property
+    def trusted(self) -> bool:
+        """True unless the plant check found that the plant does not describe the
+        readings."""
+        return self.check is None or self.check.describes
 
     def rms(self, error: np.ndarray | None, since: float = -math.inf) -> float:
         """Time-weighted RMS of ``error`` over the commands from ``since`` (s) on."""
@@ -463,12 +484,17 @@ class TrackingErrors:
 
 
 def _plant(
-    truth: BagTruth | None, model: GeneralBacklash | None, t: np.ndarray, u: np.ndarray
+    truth: BagTruth | None,
+    model: GeneralBacklash | None,
+    t: np.ndarray,
+    u: np.ndarray,
+    x0: float | None = None,
 ) -> np.ndarray:
     """The load the plant makes of the commands ``u`` at times ``t`` (s), starting at rest
-    at the first desired position. The true plant is simulated in pieces between the
-    truth's dead-zone times (the gap as it wears; each piece at its midpoint's gap)."""
-    x0 = float(u[0])
+    at ``x0`` (default the first desired position). The true plant is simulated in pieces
+    between the truth's dead-zone times (the gap as it wears; each piece at its midpoint's
+    gap)."""
+    x0 = float(u[0]) if x0 is None else x0
     if truth is None:
         assert model is not None
         return simulate_backlash(model, u, x0)
@@ -507,7 +533,19 @@ def _tracking_errors(d: ReportData) -> TrackingErrors | None:
             final = _plant(d.truth, d.model, t, sent) - desired
     except GenBacklashError:
         return None
-    return TrackingErrors(plant, t, weight, none, node, final, d.t, d.y - d.u)
+    check = None
+    if d.u.size:
+        checked = _backlash(d.truth.model) if d.truth is not None else d.model
+        assert checked is not None
+        check = check_plant(
+            checked,
+            d.u,
+            d.y,
+            d.guard,
+            plant,
+            lambda u, x0: _plant(d.truth, d.model, d.t, u, x0),
+        )
+    return TrackingErrors(plant, t, weight, none, node, final, d.t, d.y - d.u, check)
 
 
 def _rolling_rms(
@@ -524,19 +562,36 @@ def _rolling_rms(
 
 
 def plant_caption(errors: TrackingErrors | None) -> str:
-    """One sentence on what the tracking-error prediction simulated."""
+    """What the tracking-error prediction simulated, and whether that plant describes
+    the recording (:mod:`~genbacklash_ros.reports.plant_check`)."""
     if errors is None:
         return "No plant to simulate: the bag holds no truth and there is no final estimate."
     if errors.plant == "truth":
-        return (
+        text = (
             "Plant: the true drivetrain stored in the bag (its dead zones as they wear), "
             "driven by each command sequence; the error is the load position minus the "
             "command (the desired load position)."
         )
+    else:
+        text = (
+            "Plant: the final estimate (the bag holds no truth), so these numbers are the "
+            "model's own prediction and flatter the compensation; the error is the load "
+            "position minus the command (the desired load position)."
+        )
+    if errors.check is None:
+        return text
+    if errors.check.describes:
+        return f"{text} {errors.check.sentence()}"
+    stored = (
+        " The truth a bag stores is a play (for a physics bag its quasi-static "
+        "characteristic): it leaves out the servo, the load's inertia, a spring or gravity."
+        if errors.plant == "truth"
+        else ""
+    )
     return (
-        "Plant: the final estimate (the bag holds no truth), so these numbers are the "
-        "model's own prediction and flatter the compensation; the error is the load "
-        "position minus the command (the desired load position)."
+        f"{text} {errors.check.sentence()} This plant does not describe the recording: "
+        "the predicted errors and cuts are not what this drivetrain would see; the "
+        "measured error and the compensation table say what happened." + stored
     )
 
 
@@ -1139,10 +1194,16 @@ def tracking_headline(errors: TrackingErrors | None) -> str:
     base_all = errors.rms(errors.none)
     final = errors.rms(errors.final)
     node = errors.rms(errors.node)
-    return (
+    numbers = (
         f"RMS tracking error without compensation {_fmt(base_all)} rad, with the final "
         f"estimate's inverse {_fmt(final)} rad ({_cut(base_all, final)} cut); with the "
         f"compensation the node sent {_fmt(node)} rad ({_cut(base_all, node)} cut)."
+    )
+    if errors.trusted:
+        return numbers
+    return (
+        "Not a prediction for this drivetrain: the plant simulated does not describe the "
+        f"recording, so the cuts below are the plant's own. Predicted by that plant: {numbers}"
     )
 
 
@@ -1240,6 +1301,17 @@ def _compensation_summary(result: ReplayResult) -> str:
     return f"{last.state} at the end (weight {last.weight:.2f}): {last.reason}"
 
 
+def _untrusted_alert(errors: TrackingErrors) -> str:
+    """The alert of a page whose plant does not describe the recording."""
+    assert errors.check is not None
+    return (
+        "The predicted tracking errors on this page come from a plant that does not "
+        f"describe the recording (it misses the readings by {errors.check.ratio:.2f} of "
+        "what the command misses them by): read the measured error and when compensation "
+        "was on, not the predicted cuts."
+    )
+
+
 def _page_content(
     result: ReplayResult,
     data: ReportData,
@@ -1296,7 +1368,10 @@ def _page_content(
         "title": "Backlash replay report",
         "subtitle": bag,
         "summary": summary,
-        "alerts": [f"Stopped early: {result.error}"] if result.error else [],
+        "alerts": [
+            *([f"Stopped early: {result.error}"] if result.error else []),
+            *([_untrusted_alert(errors)] if errors is not None and not errors.trusted else []),
+        ],
         "sections": sections,
     }
 
