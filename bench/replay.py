@@ -52,7 +52,7 @@ from _common import command_line, machine_description, md_table, write_section
 from _replay_shapes import SHAPES, Shape
 
 from genbacklash_core import GeneralBacklash, InverseBacklash
-from genbacklash_core.inverse import _Branch, _plan
+from genbacklash_core.inverse.branches import Branch, inversion_plan
 from genbacklash_core.scenarios import OPERATION_BACKLASH
 from genbacklash_ros.bags.bagio import BagReader
 from genbacklash_ros.bags.raw_values import RawValueReader
@@ -404,19 +404,19 @@ def inverse_costs(model: GeneralBacklash, n: int) -> dict[str, float]:
     inversion, on the table and on the root solve, on a path like a drivetrain's."""
     rng = np.random.default_rng(SEED)
     path = np.cumsum(rng.normal(0.0, 0.01, n)).tolist()
-    branch = _plan(model, -np.inf, np.inf).up
+    branch = inversion_plan(model, -np.inf, np.inf).up
     targets = np.clip(path, -1.0, 1.0).tolist()
     out: dict[str, list[float]] = {k: [] for k in ("step", "step_solve", "inv", "inv_solve")}
-    solve = _Branch.invert_fast
+    solve = Branch.invert_fast
     for _ in range(ROUNDS):
         for name, fast in (("step", True), ("step_solve", False)):
             if not fast:
-                _Branch.invert_fast = _Branch.invert  # type: ignore[method-assign]
+                Branch.invert_fast = Branch.invert  # type: ignore[method-assign]
             try:
                 comp = InverseBacklash(model)
                 out[name].append(timed(lambda c=comp: [c.step(x) for x in path]) / n)
             finally:
-                _Branch.invert_fast = solve  # type: ignore[method-assign]
+                Branch.invert_fast = solve  # type: ignore[method-assign]
         out["inv"].append(timed(lambda: _warm(branch.invert_fast, targets)) / n)
         out["inv_solve"].append(timed(lambda: _warm(branch.invert, targets)) / n)
     return {k: best(v) for k, v in out.items()}

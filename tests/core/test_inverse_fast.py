@@ -1,5 +1,5 @@
-"""The table inverse of a branch (``_Branch.invert_fast``, ``invert_many``, the public
-``branch_inverse``) against the root solve it replaces (``_Branch.invert``): the same command
+"""The table inverse of a branch (``Branch.invert_fast``, ``invert_many``, the public
+``branch_inverse``) against the root solve it replaces (``Branch.invert``): the same command
 to within 1e-9 of the command range, on monotone and turning branches, in and out of reach;
 and the compensator built on it against the same compensator on the root solve."""
 
@@ -23,8 +23,8 @@ from genbacklash_core import (
     compensate,
     paper_example,
 )
-from genbacklash_core import inverse as inverse_module
-from genbacklash_core.inverse import _Branch, _plan
+from genbacklash_core.inverse import branches as inverse_branches
+from genbacklash_core.inverse.branches import Branch, inversion_plan
 
 from .test_inverse import MODELS, _walk, monotone_models
 
@@ -49,7 +49,7 @@ def any_models(draw: st.DrawFn) -> tuple[GeneralBacklash, float, float]:
     high = c_right + draw(st.floats(0.2, 4.0))
     try:
         model = GeneralBacklash(branch(), c_left, branch(), c_right)
-        _plan(model, low, high)
+        inversion_plan(model, low, high)
     except GenBacklashError:
         assume(False)
     return model, low, high
@@ -61,7 +61,7 @@ def test_property_table_inverse_is_the_root_solve(
     case: tuple[GeneralBacklash, float, float], targets: list[float], guess: float
 ) -> None:
     model, low, high = case
-    plan = _plan(model, low, high)
+    plan = inversion_plan(model, low, high)
     span = high - low
     for branch in (plan.left, plan.right):
         solved = np.array([branch.invert(y, guess) for y in targets])
@@ -77,7 +77,7 @@ def test_unbounded_pieces_and_targets_beyond_the_table(name: str) -> None:
     """Without output limits the pieces may be unbounded: the table covers part of them and
     the root solve the rest (far targets), with the same answers."""
     model = MODELS[name]
-    plan = _plan(model, -math.inf, math.inf)
+    plan = inversion_plan(model, -math.inf, math.inf)
     targets = np.concatenate((np.linspace(-3.0, 3.0, 301), [-1e6, -200.0, 150.0, 1e9]))
     for branch in (plan.up, plan.down):
         solved = np.array([branch.invert(y, 0.0) for y in targets.tolist()])
@@ -89,7 +89,7 @@ def test_unbounded_pieces_and_targets_beyond_the_table(name: str) -> None:
 
 def test_a_table_is_built_once_and_only_for_curved_branches() -> None:
     model = paper_example(1).model
-    plan = _plan(model, -2.0, 2.0)
+    plan = inversion_plan(model, -2.0, 2.0)
     assert plan.up.table is None
     plan.up.invert_fast(0.5, 0.0)
     table = plan.up.table
@@ -97,7 +97,7 @@ def test_a_table_is_built_once_and_only_for_curved_branches() -> None:
     assert np.all(np.diff(table.g) > 0)  # increasing, as bisection needs
     plan.up.invert_fast(0.6, 0.0)
     assert plan.up.table is table
-    straight = _plan(GeneralBacklash.ideal(1.0, 0.3, 0.5), -2.0, 2.0)
+    straight = inversion_plan(GeneralBacklash.ideal(1.0, 0.3, 0.5), -2.0, 2.0)
     assert straight.up.invert_fast(0.25, 0.0) == straight.up.invert(0.25, 0.0) == 0.75
     assert straight.up.table is None  # the closed form needs none
 
@@ -106,20 +106,20 @@ def test_the_polish_rejects_a_wrong_guess(monkeypatch: pytest.MonkeyPatch) -> No
     """A table guess off by more than the tolerance goes to the root solve: the tolerance
     bites (a guess off by 1e-6 would otherwise be returned, 1e-6 of the range wrong)."""
     model = paper_example(1).model
-    branch = _plan(model, -2.0, 2.0).up
+    branch = inversion_plan(model, -2.0, 2.0).up
     want = branch.invert(0.4, 0.0)
     branch.invert_fast(0.4, 0.0)  # builds the table
     table = branch.table
     assert table is not None
     monkeypatch.setattr(type(table), "guess", lambda self, target: want + 1e-3)
     calls: list[float] = []
-    original = _Branch.invert
+    original = Branch.invert
 
-    def counting(self: _Branch, y: float, guess: float) -> float:
+    def counting(self: Branch, y: float, guess: float) -> float:
         calls.append(guess)
         return original(self, y, guess)
 
-    monkeypatch.setattr(_Branch, "invert", counting)
+    monkeypatch.setattr(Branch, "invert", counting)
     assert abs(branch.invert_fast(0.4, 0.0) - want) <= 1e-15
     assert calls == [want + 1e-3]  # the solve, from the table's guess
 
@@ -135,10 +135,10 @@ def test_property_compensator_on_the_table_is_the_compensator_on_the_solve(
     x_d = _walk(seed, n, low, high)
     fast = compensate(model, x_d, options)
     with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(_Branch, "invert_fast", _Branch.invert)
-        inverse_module._plan.cache_clear()  # plans (and tables) built afresh
+        patch.setattr(Branch, "invert_fast", Branch.invert)
+        inverse_branches.inversion_plan.cache_clear()  # plans (and tables) built afresh
         solved = compensate(model, x_d, options)
-    inverse_module._plan.cache_clear()
+    inverse_branches.inversion_plan.cache_clear()
     assert np.all(np.abs(fast - solved) <= EXACT * (high - low))
 
 
@@ -146,7 +146,7 @@ def test_branch_inverse_public_form() -> None:
     model = paper_example(1).model
     options = CompensatorOptions(u_min=-2.0, u_max=2.0)
     x = np.linspace(-1.0, 1.0, 12).reshape(3, 4)
-    plan = _plan(model, -2.0, 2.0)
+    plan = inversion_plan(model, -2.0, 2.0)
     for push, branch in ((1, plan.up), (-1, plan.down)):
         u = branch_inverse(model, x, push, options)
         assert u.shape == x.shape
@@ -226,7 +226,7 @@ def test_steps_build_the_state_only_when_asked() -> None:
 def test_a_branch_with_no_usable_node_gives_an_empty_table() -> None:
     # found by hypothesis (test_fuzz::test_inverse_backlash): a branch whose values all
     # overflow left no node, and the table's rising filter raised an IndexError
-    from genbacklash_core.inverse import _InverseTable
+    from genbacklash_core.inverse.branches import InverseTable
 
     class Overflowing:
         a, b, shift, sense = -1.0, 1.0, 0.0, 1.0
@@ -234,7 +234,7 @@ def test_a_branch_with_no_usable_node_gives_an_empty_table() -> None:
         def values_and_slopes(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             return np.full(u.shape, np.inf), np.full(u.shape, np.nan)
 
-    table = _InverseTable(Overflowing())  # type: ignore[arg-type]
+    table = InverseTable(Overflowing())  # type: ignore[arg-type]
     assert table.g.size == 0
     assert math.isnan(table.guess(0.1))
     assert np.isnan(table.guesses(np.array([0.1]))).all()
