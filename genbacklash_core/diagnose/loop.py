@@ -79,7 +79,9 @@ from genbacklash_core.backlash import GeneralBacklash
 from genbacklash_core.cascade import Cascade
 from genbacklash_core.data import NonFinitePolicy, check_excitation
 from genbacklash_core.errors import GenBacklashError
-from genbacklash_core.identify import _detect_sign, _prepare, identify_backlash, identify_cascade
+from genbacklash_core.identify import identify_backlash, identify_cascade
+from genbacklash_core.identify.fitting import prepare_inputs
+from genbacklash_core.identify.regression import detect_sign
 from genbacklash_core.structure import as_order
 
 from .context import Context, build_context
@@ -156,7 +158,7 @@ def _start_fit(
             return fit_model(AugmentedModel(result.model), u, y, breaks=breaks)
         # The branch sense from the input-output covariance over a few lags: with a lag or a
         # dead time the output follows the input late, and lag 0 alone can get it wrong.
-        sign = _detect_sign(u, y, _SIGN_LAGS)
+        sign = detect_sign(u, y, _SIGN_LAGS)
         # The paper's iteration can settle on a degenerate model when the data hold effects
         # the start lacks (a long dead time, a slow lag); a plain straight-line start guards.
         result = identify_backlash(u, y, start.degree, sign=sign, breaks=breaks)
@@ -980,7 +982,7 @@ def diagnose(
     settings = DiagnoseSettings() if settings is None else settings
     stage = progress if progress is not None else _quiet
     effects = tuple(CATALOG if catalog is None else catalog)
-    uu, yy, bb = _prepare(u, y, nonfinite, breaks)  # a dropped sample breaks the chain
+    uu, yy, bb = prepare_inputs(u, y, nonfinite, breaks)  # a dropped sample breaks the chain
     split = split_record(uu.size, settings.validation)
     u_est, y_est = uu[split.estimation], yy[split.estimation]
     b_est = None if bb is None else bb[split.estimation]

@@ -40,7 +40,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from genbacklash_core._typing import BoolArray, FloatArray, IntArray
-from genbacklash_core.identify import _backlash_columns, _switching, backlash_rows
+from genbacklash_core.identify.regression import (
+    backlash_columns,
+    backlash_rows,
+    switching_functions,
+)
 from genbacklash_core.play import play_operator
 from genbacklash_core.samples import breaks_to_rows
 from genbacklash_core.simulate import play_bounds
@@ -230,7 +234,7 @@ def _window_cascade_rows(
         return WindowRows(np.empty((0, size)), np.empty(0), np.zeros(0, dtype=bool), x, first)
     u_prev = u[t0 - 1 : count - 1]  # u(t-1)
     x_prev2 = x[t0 - 2 : count - 2]  # x(t-2)
-    f1, f2 = _switching(structure, p, u_prev, x_prev2)  # f(t-1), eqs. (27)-(28)
+    f1, f2 = switching_functions(structure, p, u_prev, x_prev2)  # f(t-1), eqs. (27)-(28)
     moving = np.abs(u_prev - u[t0 - 2 : count - 2]) > deadband
     resting = samples_since_change(x)[t0 - 2 : count - 2]  # up to x(t-2)
     horizon = settling_samples(structure, p) if settling is None else settling
@@ -243,7 +247,7 @@ def _window_cascade_rows(
     m = int(np.count_nonzero(use))
     n_bl = structure.n_backlash
     phi = np.empty((m, size), order="F")
-    phi[:, :n_bl] = _backlash_columns(structure, p, u_prev[use], f1[use], f2[use])
+    phi[:, :n_bl] = backlash_columns(structure, p, u_prev[use], f1[use], f2[use])
     col = n_bl
     for i in range(2, na + 1):
         phi[:, col] = x[t0 - i : count - i][use]  # x(t-i), eq. (32)
@@ -344,7 +348,7 @@ def cascade_memory_rows(
         [np.equal(lags.x_low, lags.x_high)[::-1], low == high]
     )  # x determined (both bounds agree)
     x2 = x_seq[m - 2 : m - 2 + size]  # x(t-2) per row
-    f1, f2 = _switching(structure, p, u_lag1, x2)  # f(t-1), eqs. (27)-(28)
+    f1, f2 = switching_functions(structure, p, u_lag1, x2)  # f(t-1), eqs. (27)-(28)
     moving = np.abs(u_lag1 - u_lag2) > deadband
     resting = np.empty(size)  # samples since x last changed, up to x(t-2)
     resting[0] = lags.resting
@@ -426,17 +430,19 @@ def memory_regression(
         na, nb = structure.na, structure.nb
         m = max(na, 2)
         u1, x2 = rows[:, 1], rows[:, 2]
-        f1, f2 = _switching(structure, p, u1, x2)  # f(t-1), eqs. (27)-(28), internal x(t-2)
+        f1, f2 = switching_functions(
+            structure, p, u1, x2
+        )  # f(t-1), eqs. (27)-(28), internal x(t-2)
         phi = np.empty((rows.shape[0], structure.n_parameters), order="F")
         n_bl = structure.n_backlash
-        phi[:, :n_bl] = _backlash_columns(structure, p, u1, f1, f2)  # eq. (32)
+        phi[:, :n_bl] = backlash_columns(structure, p, u1, f1, f2)  # eq. (32)
         phi[:, n_bl : n_bl + na - 1] = rows[:, 2 : 1 + na]  # x(t-2) .. x(t-r), eq. (32)
         phi[:, n_bl + na - 1 :] = -rows[:, 1 + m : 1 + m + nb]  # -y(t-1) .. -y(t-p)
         target = rows[:, -1] - x2 * (1.0 - f1) * (1.0 - f2)  # eq. (35)
         used = np.ones(rows.shape[0], dtype=bool)
         return phi, target, used, f1 > 0.0, f2 > 0.0
     u, x_prev = rows[:, 1], rows[:, 2]
-    f1, f2 = _switching(structure, p, u, x_prev)  # eqs. (27)-(28), measured x(t-1)
+    f1, f2 = switching_functions(structure, p, u, x_prev)  # eqs. (27)-(28), measured x(t-1)
     used = (f1 + f2) > 0.0  # eq. (29): other rows carry no information of their own
     if holds:
         held = ~used & (rows[:, 5] != 0.0)  # a hold with its anchor: x(t) = branch(u_a)
@@ -446,5 +452,5 @@ def memory_regression(
             f2 = np.where(held, (rows[:, 5] > 0.0).astype(np.float64), f2)
             used = used | held
     f1, f2 = f1[used], f2[used]
-    phi = _backlash_columns(structure, p, u[used], f1, f2)  # eq. (22)
+    phi = backlash_columns(structure, p, u[used], f1, f2)  # eq. (22)
     return phi, rows[used, 3], used, f1 > 0.0, f2 > 0.0  # target x(t), eq. (24)

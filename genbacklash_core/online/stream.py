@@ -44,7 +44,7 @@ import math
 import numpy as np
 
 from genbacklash_core._typing import BoolArray, FloatArray, IntArray
-from genbacklash_core.identify import _switching
+from genbacklash_core.identify.regression import switching_functions
 from genbacklash_core.samples import run_lengths
 from genbacklash_core.structure import Structure
 
@@ -145,7 +145,7 @@ class RowStream:
         keeps a narrow oscillation from flooding the memory with readings of one point, and
         was the most accurate choice on Example 1 (parameter RMSE 0.0044 over 1000 samples,
         against 0.0045 with every hold and 0.0048 without holds)."""
-        f1, f2 = _switching(structure, p, rows[:, 1], rows[:, 2])  # eqs. (27)-(28)
+        f1, f2 = switching_functions(structure, p, rows[:, 1], rows[:, 2])  # eqs. (27)-(28)
         engaged = (f1 + f2) > 0.0
         direction = np.where(f1 > 0.0, -1.0, 1.0)
         lost = np.cumsum(run < 2)  # readings lost (chain breaks) up to each sample

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from genbacklash_core import GeneralBacklash, identify_backlash, nrmse, paper_example
-from genbacklash_core.identify import _iterate, _solve_damped
+from genbacklash_core.identify.iteration import run_iteration
+from genbacklash_core.identify.regression import solve_damped
 from genbacklash_core.samples import sample_breaks
 from genbacklash_core.scenarios import (
     OPERATION_BACKLASH,
@@ -58,7 +59,7 @@ def test_damped_solve_keeps_undetermined_directions() -> None:
     theta_true = np.array([1.0, -2.0, 0.0])
     target = phi @ theta_true
     previous = np.array([0.0, 0.0, 7.0])
-    theta = _solve_damped(phi, target, previous)
+    theta = solve_damped(phi, target, previous)
     assert theta is not None
     np.testing.assert_allclose(theta[:2], theta_true[:2], atol=1e-4)
     assert theta[2] == pytest.approx(7.0)  # no data on it: where it was
@@ -135,7 +136,7 @@ def test_iteration_settling_with_a_branch_never_engaged_does_not_converge() -> N
     branch."""
     u, y, breaks, _, _ = _fleet_r01_d4()
     structure = Structure(3, 0, 0, 1.0)
-    out = _iterate(structure, u, y, structure.start(), 30, 1e-4, None, breaks)
+    out = run_iteration(structure, u, y, structure.start(), 30, 1e-4, None, breaks)
     assert not out.converged
     assert "left branch" in out.reason and "never engaged" in out.reason, out.reason
 
