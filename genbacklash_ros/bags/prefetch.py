@@ -17,6 +17,11 @@ process) with more threads than one (e.g. OpenBLAS's, a progress bar's, a ROS ex
 in a daemonic process (multiprocessing allows it no children: ``genbacklash fleet``'s
 workers), on one CPU, where the OS does not list a process's threads (only Linux's
 ``/proc`` is read), or when the environment variable ``GENBACKLASH_PREFETCH`` is ``0``.
+Nor, unless that variable is ``1``, when no CPU is free: when the 1-minute load average
+(this process included) is at least the number of CPUs this process may run on. A child
+pays only on a free core (BENCHMARKS.md "branch prefetch-1": 0.4-0.5 s less wall time on a
+300 s bag); on a saturated machine it competes with the replay itself (0.1-0.3 s more wall
+time, 0.25 s more CPU).
 ``spawn`` and ``forkserver`` are not used: their child imports the readers again (~0.3 s of
 CPU) and first runs the caller's main script again, which a script without a
 ``__main__`` guard does not survive.
@@ -43,7 +48,8 @@ from genbacklash_ros.bags.bagio import BagError, BagReader, RawMessage, RawRecor
 __all__ = ["ENV", "PrefetchedMessages", "can_prefetch"]
 
 ENV = "GENBACKLASH_PREFETCH"
-"""Set to ``0`` to read in process wherever :func:`can_prefetch` is asked."""
+"""``0``: read in process wherever :func:`can_prefetch` is asked; ``1``: fork a reading
+child wherever that is safe, whatever the load."""
 
 _PIPE_BYTES = 1 << 20  # a block of 8192 messages of ~100 bytes pickled: about 0.9 MB
 _STOP_WAIT = 2.0  # seconds the parent waits for the child to end before terminating it
@@ -64,15 +70,27 @@ def _cpus() -> int:
         return os.cpu_count() or 1
 
 
+def _load() -> float:
+    """The 1-minute load average (0 where the OS does not tell)."""
+    try:
+        return os.getloadavg()[0]
+    except (AttributeError, OSError):
+        return 0.0
+
+
 def can_prefetch() -> bool:
-    """Whether a reading child process can be forked here now (see the module's notes)."""
-    if os.environ.get(ENV, "").strip() == "0":
+    """Whether a reading child process should be forked here now (see the module's notes)."""
+    wish = os.environ.get(ENV, "").strip()
+    if wish == "0":
         return False
-    if multiprocessing.current_process().daemon or _cpus() < 2:
+    cpus = _cpus()
+    if multiprocessing.current_process().daemon or cpus < 2:
         return False
     if "fork" not in multiprocessing.get_all_start_methods():
         return False
-    return _threads() == 1 and threading.active_count() == 1
+    if _threads() != 1 or threading.active_count() != 1:
+        return False
+    return wish == "1" or _load() < cpus
 
 
 def _widen(conn: Connection) -> None:

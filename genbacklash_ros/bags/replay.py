@@ -482,11 +482,11 @@ def replay(
         ``joint``).
     prefetch : bool
         Read the bag one block ahead in a child process, on a second core
-        (:mod:`genbacklash_ros.bags.prefetch`), where one can be forked safely: from a
-        process of one thread, not daemonic, on more than one CPU, without
-        ``GENBACKLASH_PREFETCH=0`` (:func:`~genbacklash_ros.bags.prefetch.can_prefetch`);
-        else, and with False or ``batched`` False, read in this process. The outputs are
-        the same.
+        (:mod:`genbacklash_ros.bags.prefetch`), where one can be forked safely and pays:
+        from a process of one thread, not daemonic, on more than one CPU, with a CPU free
+        (the load average below the CPUs), without ``GENBACKLASH_PREFETCH=0``
+        (:func:`~genbacklash_ros.bags.prefetch.can_prefetch`); else, and with False or
+        ``batched`` False, read in this process. The outputs are the same.
 
     Returns
     -------

@@ -886,9 +886,10 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     parser.add_argument(
         "--no-prefetch",
         action="store_true",
-        help="read the bag in this process (default: one block ahead in a child process, "
-        "on a second CPU when there is one; the same output, less wall time, a little more "
-        "CPU; also GENBACKLASH_PREFETCH=0)",
+        help="read the bag in this process (default: one block ahead in a child process "
+        "when a second CPU is free, i.e. the load average is below the CPUs; the same "
+        "output, less wall time, a little more CPU; GENBACKLASH_PREFETCH=0 is the same, "
+        "=1 reads ahead whatever the load)",
     )
     parser.set_defaults(
         func=per_joint(

@@ -163,10 +163,18 @@ def test_no_child_with_the_variable_at_0_or_a_second_thread(
 ) -> None:
     monkeypatch.setattr("genbacklash_ros.bags.prefetch._threads", lambda: 1)
     monkeypatch.setattr("genbacklash_ros.bags.prefetch._cpus", lambda: 2)
+    monkeypatch.setattr("genbacklash_ros.bags.prefetch._load", lambda: 1.5)
+    monkeypatch.delenv(ENV, raising=False)
     assert can_prefetch() == (threading.active_count() == 1)
     monkeypatch.setenv(ENV, "0")
     assert not can_prefetch()
     monkeypatch.delenv(ENV)
+    monkeypatch.setattr("genbacklash_ros.bags.prefetch._load", lambda: 2.0)
+    assert not can_prefetch()  # no CPU free: the child would compete with the replay
+    monkeypatch.setenv(ENV, "1")
+    assert can_prefetch() == (threading.active_count() == 1)  # whatever the load
+    monkeypatch.delenv(ENV)
+    monkeypatch.setattr("genbacklash_ros.bags.prefetch._load", lambda: 0.0)
     monkeypatch.setattr("genbacklash_ros.bags.prefetch._cpus", lambda: 1)
     assert not can_prefetch()  # one CPU: nothing to gain
     monkeypatch.setattr("genbacklash_ros.bags.prefetch._cpus", lambda: 2)
@@ -209,8 +217,11 @@ def _records(bag: Path) -> str:
     return digest.hexdigest()
 
 
-def test_a_daemonic_process_replays_in_process(tmp_path: Path) -> None:
+def test_a_daemonic_process_replays_in_process(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """multiprocessing allows a daemonic process no child (genbacklash fleet's workers)."""
+    monkeypatch.setenv(ENV, "1")  # not for the load
     context = multiprocessing.get_context("fork")
     answers = context.Queue()
     worker = context.Process(
@@ -291,8 +302,7 @@ def _gone(pid: int, within: float) -> bool:
 
 def _start_replay(bag: Path, out: Path) -> tuple[subprocess.Popen[str], int]:
     """A real ``genbacklash replay`` process, and its reading child once it runs."""
-    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
-    env.pop(ENV, None)
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", ENV: "1"}  # a child whatever the load
     code = "import sys; from genbacklash_ros.cli.main import main; sys.exit(main())"
     args = ["replay", str(bag), "--command", COMMAND_TOPIC, "--encoder", ENCODER_TOPIC]
     proc = subprocess.Popen(
