@@ -19,11 +19,12 @@ workers), on one CPU, where the OS does not list a process's threads (only Linux
 ``/proc`` is read), or when the environment variable ``GENBACKLASH_PREFETCH`` is ``0``.
 Nor, unless that variable is ``1``, when no CPU is free: when the 1-minute load average
 (this process included) is at least the number of CPUs this process may run on. A child
-pays only on a free core (BENCHMARKS.md "branch prefetch-1": 0.4-0.5 s less wall time on a
-300 s bag); on a saturated machine it competes with the replay itself (0.1-0.3 s more wall
-time, 0.25 s more CPU).
-``spawn`` and ``forkserver`` are not used: their child imports the readers again (~0.3 s of
-CPU) and first runs the caller's main script again, which a script without a
+pays only on a free core (BENCHMARKS.md "Rerun 2026-11-28 (evening), branch prefetch-1": up
+to 0.5 s less wall time on a 300 s bag); on a saturated machine it competes with the replay
+itself (0.1-0.3 s more wall time, 0.2-0.3 s more CPU).
+
+``spawn`` and ``forkserver`` are not used: their child imports the readers again (~0.25 s
+of CPU) and first runs the caller's main script again, which a script without a
 ``__main__`` guard does not survive.
 
 The child ignores SIGINT (Ctrl-C is the parent's to handle) and ends quietly when the pipe
@@ -126,7 +127,7 @@ def _send_blocks(reader: BagReader, topics: list[str], size: int, conn: Connecti
         try:
             data = pickle.dumps((columns, why), pickle.HIGHEST_PROTOCOL)
         except Exception:  # an exception that does not pickle: its text
-            data = pickle.dumps((columns, f"{type(why).__name__}: {why}"), 5)
+            data = pickle.dumps((columns, f"{type(why).__name__}: {why}"), pickle.HIGHEST_PROTOCOL)
         conn.send_bytes(data)
         if why is not None:
             return
@@ -141,7 +142,7 @@ def _child(path: str, topics: list[str], size: int, conn: Connection, other: Con
             with BagReader(path) as reader:
                 _send_blocks(reader, topics, size, conn)
         except BagError as err:  # the bag does not open here
-            conn.send_bytes(pickle.dumps((((), (), (), ()), str(err)), 5))
+            conn.send_bytes(pickle.dumps((((), (), (), ()), str(err)), pickle.HIGHEST_PROTOCOL))
     except (BrokenPipeError, ConnectionError, EOFError, OSError):
         pass  # the parent went away: nothing to say
     finally:
