@@ -607,7 +607,9 @@ Each a {duration:g} s bag (seed {SEED}), written by `bench/_replay_shapes.py`:
 
 The CLI (`genbacklash replay` with the shape's topics and joint) and the floor, each as a
 process, round-robin, best of {ROUNDS}; CPU time is the child's user + system time (less
-disturbed by other processes on a shared machine than wall time).{before_note}
+disturbed by other processes on a shared machine than wall time), the CLI's own reading
+process included (it reads the bag one block ahead on a second core and is waited for, so
+its time is the CLI's children's).{before_note}
 
 {shapes_table(rows, before is not None)}
 

@@ -150,6 +150,10 @@ class RawMessage(NamedTuple):
     raw: bytes
 
 
+RawRecord = tuple[str, int, str, bytes]
+"""A :class:`RawMessage`'s fields as a plain tuple (what a block read elsewhere gives back:
+:mod:`genbacklash_ros.bags.prefetch`); a :class:`RawMessage` is one too."""
+
 _new = tuple.__new__
 
 
@@ -1018,9 +1022,10 @@ class BagWriter:
         (:meth:`add_topic`): :meth:`write_raw` for each, in one call."""
         self._write_records(records, 2)
 
-    def write_messages(self, messages: Sequence[RawMessage]) -> None:
-        """Write messages as :meth:`BagReader.raw_messages` gives them (the type is the
-        topic's), in order, on topics already added: :meth:`write_raw` for each."""
+    def write_messages(self, messages: Sequence[RawRecord]) -> None:
+        """Write messages as :meth:`BagReader.raw_messages` gives them (or their fields as
+        :data:`RawRecord` tuples; the type is the topic's), in order, on topics already
+        added: :meth:`write_raw` for each."""
         self._write_records(messages, 3)
 
     def _write_records(self, records: Sequence[Sequence[Any]], raw_at: int) -> None:

@@ -22,6 +22,7 @@ properly (it stays readable) and returns the reason in :attr:`ReplayResult.error
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import time
 from collections.abc import Callable
@@ -39,9 +40,11 @@ from genbacklash_ros.bags.bagio import (
     BagReader,
     BagWriter,
     RawMessage,
+    RawRecord,
     check_motor,
     check_selection,
 )
+from genbacklash_ros.bags.prefetch import PrefetchedMessages, can_prefetch
 from genbacklash_ros.bags.raw_values import RawValueReader, UndecodableMessage
 from genbacklash_ros.blas_threads import one_blas_thread
 from genbacklash_ros.gc_pauses import few_collections
@@ -265,8 +268,9 @@ class _Feed:
         self.motor_topic = motor[0] if motor is not None else ""
         self.read_motor: RawValueReader | None = motor[1] if motor is not None else None
 
-    def block(self, items: list[RawMessage]) -> None:
-        """Feed ``items`` (in log-time order) and write the output they make."""
+    def block(self, items: list[RawRecord]) -> None:
+        """Feed ``items`` (in log-time order; :class:`RawMessage`\\ s or their fields as
+        tuples) and write the output they make."""
         n = len(items)
         topics, times, _types, raws = zip(*items, strict=True)  # the fields, each in order
         names = np.array(topics, dtype=object)
@@ -312,12 +316,12 @@ class _Feed:
             if odd == n:
                 break
             if is_mot is not None and is_mot[odd]:
-                more = self._motor(items[odd])
+                more = self._motor(RawMessage(*items[odd]))
                 if more:
                     outputs[odd] = more
                 start = odd + 1
                 continue
-            outs = self._one(items[odd], bool(is_cmd[odd]), heads, values, ok, odd)
+            outs = self._one(RawMessage(*items[odd]), bool(is_cmd[odd]), heads, values, ok, odd)
             if outs is not None:
                 taken, more = outs
                 if taken is not None:
@@ -352,17 +356,17 @@ class _Feed:
         if outputs:
             events = sorted({*events, *outputs})
         accepted_list = accepted.tolist()
-        records: list[RawMessage] = []
+        records: list[RawRecord] = []
         done = 0
         for k in events:
             records += items[done : k + 1]
             done = k + 1
-            item = items[k]
+            log_time = times[k]
             if accepted_list[k]:
-                records.append(RawMessage(comp_topic, item.log_time_ns, comp_type, compensated[k]))
+                records.append(RawMessage(comp_topic, log_time, comp_type, compensated[k]))
             due = outputs.get(k)
             if due:
-                records += self.publish(due, item.log_time_ns)
+                records += self.publish(due, log_time)
         records += items[done:]
         writer.write_messages(records)
 
@@ -445,6 +449,7 @@ def replay(
     batched: bool = True,
     motor_topic: str | None = None,
     motor_joint: str | None = None,
+    prefetch: bool = True,
 ) -> ReplayResult:
     """Replay ``bag`` through one :class:`BacklashPipeline` and write ``output``.
 
@@ -475,6 +480,13 @@ def replay(
     motor_joint : str, optional
         The motor encoder JointState's joint (None: the parameter ``motor_joint``, else
         ``joint``).
+    prefetch : bool
+        Read the bag one block ahead in a child process, on a second core
+        (:mod:`genbacklash_ros.bags.prefetch`), where one can be forked safely and pays:
+        from a process of one thread, not daemonic, on more than one CPU, with a CPU free
+        (the load average below the CPUs), without ``GENBACKLASH_PREFETCH=0``
+        (:func:`~genbacklash_ros.bags.prefetch.can_prefetch`); else, and with False or
+        ``batched`` False, read in this process. The outputs are the same.
 
     Returns
     -------
@@ -492,7 +504,12 @@ def replay(
     if command_topic == encoder_topic:
         raise BagError(f"the command and encoder topics must differ, both are {command_topic!r}")
     started = time.perf_counter()
-    with few_collections(), one_blas_thread(), BagReader(bag) as reader:
+    with (
+        few_collections(),
+        one_blas_thread(),
+        BagReader(bag) as reader,
+        contextlib.ExitStack() as stop,
+    ):
         cmd_info = reader.topic(command_topic, COMMAND_MSGTYPES)
         enc_info = reader.topic(encoder_topic, ENCODER_MSGTYPES)
         custom_data = reader.custom_data
@@ -538,6 +555,11 @@ def replay(
                 "the parameters say gear_input motor_encoder: name the motor encoder's topic "
                 "with --motor-encoder TOPIC"
             )
+        # the reading child is forked now, before this replay starts threads (a progress
+        # bar's, the writer's): a fork copies only the calling thread (can_prefetch)
+        source: PrefetchedMessages | None = None
+        if prefetch and batched and can_prefetch():  # closed (the child waited for) on exit
+            source = stop.enter_context(PrefetchedMessages(reader.path, topics, _BLOCK))
         pipeline = BacklashPipeline(run_params)
         history = ReplayHistory(names=run_params.structure().names())
         index, joint_name = run_params.command_index, run_params.joint
@@ -600,8 +622,8 @@ def replay(
                 batched,
                 motor,
             )
-            block: list[RawMessage] = []
-            stream = reader.raw_messages(topics)
+            block: list[RawRecord] = []
+            stream = iter(source) if source is not None else reader.raw_messages(topics)
             size = _BLOCK if batched else 1
             try:
                 while True:
@@ -613,7 +635,7 @@ def replay(
                     taken, block = block, []
                     feed.block(taken)
                     count += len(taken)
-                    last_log = taken[-1].log_time_ns
+                    last_log = taken[-1][1]
                     bar.step(len(taken))
             except BagError as err:
                 error = str(err)
@@ -621,7 +643,7 @@ def replay(
                 if block:  # what was read before the damage (or the last block)
                     feed.block(block)
                     count += len(block)
-                    last_log = block[-1].log_time_ns
+                    last_log = block[-1][1]
                     bar.step(len(block))
                 bar.close()
             error = error or corrupt.summary(Path(bag))
