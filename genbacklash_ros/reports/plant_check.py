@@ -79,11 +79,12 @@ class PlantCheck:
         """One sentence: the plant's miss against the command's, and what the guard makes
         of that ratio."""
         what = "the true drivetrain's play" if self.plant == "truth" else "the final estimate"
-        verdict = (
-            "the node's guard turns compensation off at this ratio"
-            if self.ratio >= self.rho_off
-            else "the node's guard fades compensation at this ratio"
-        )
+        if self.ratio >= self.rho_off:
+            verdict = "the node's guard turns compensation off at this ratio"
+        elif self.ratio >= self.rho_full:
+            verdict = "the node's guard fades compensation at this ratio"
+        else:
+            verdict = "the node's guard compensates in full at this ratio"
         return (
             f"Run free on the recorded commands, {what} misses the readings by "
             f"{self.model_rms:.3g} rad RMS where the command itself misses them by "

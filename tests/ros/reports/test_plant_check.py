@@ -45,6 +45,7 @@ def test_the_ratio_is_the_plants_miss_over_the_commands_miss() -> None:
     y = simulate_backlash(model, u, 0.0) + np.random.default_rng(3).normal(0.0, 1e-3, u.size)
     good = check_plant(model, u, y, GuardSettings(), "truth")
     assert good.describes and good.ratio < 0.1
+    assert "compensates in full" in good.sentence()
     assert good.no_model_rms == pytest.approx(float(np.sqrt(np.mean((y - u) ** 2))))
     wide = GeneralBacklash.ideal(1.0, 0.2, 0.2)  # four times the play
     bad = check_plant(wide, u, y, GuardSettings(), "estimate")
@@ -56,8 +57,9 @@ def test_the_ratio_is_the_plants_miss_over_the_commands_miss() -> None:
     middling = GeneralBacklash.ideal(1.0, 0.07, 0.07)
     ratio = check_plant(middling, u, y, GuardSettings(), "estimate").ratio
     assert 0.0 < ratio < 0.75
-    strict = GuardSettings(rho_full=ratio / 2, rho_off=ratio * 0.9)
-    assert not check_plant(middling, u, y, strict, "estimate").describes
+    strict = GuardSettings(rho_full=ratio / 2, rho_off=ratio * 1.5)
+    faded = check_plant(middling, u, y, strict, "estimate")
+    assert not faded.describes and "fades compensation" in faded.sentence()
 
 
 def test_readings_equal_to_the_commands_leave_nothing_to_judge() -> None:
