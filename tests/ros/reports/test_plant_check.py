@@ -8,6 +8,7 @@ recorded commands and judged by the node's guard thresholds.
 
 from __future__ import annotations
 
+import dataclasses
 import html
 import math
 import re
@@ -100,3 +101,7 @@ def test_a_compliant_coupling_is_not_reported_as_a_93_percent_cut(tmp_path: Path
     assert summary.startswith("Tracking error Not a prediction for this drivetrain")
     assert "Measured while recording" in text
     assert f"ratio {errors.check.ratio:.2f}" in text
+    # the issue's own case: no truth in the bag, the final estimate as the plant
+    bare = tracking_errors(dataclasses.replace(result, custom_data=None))
+    assert bare is not None and bare.plant == "estimate" and bare.check is not None
+    assert not bare.trusted, bare.check
