@@ -23,18 +23,20 @@ from genbacklash_core.diagnose import (
     diagnose,
     effect_names,
 )
-from genbacklash_ros.cli.joints import per_joint
-from genbacklash_ros.cli.replay import (
-    BATCH_PARAMETERS,
-    CommandParameters,
+from genbacklash_ros.cli.bag_input import (
     add_bag_input_options,
-    add_node_parameter_options,
-    batch_parameters,
     is_bag,
     load_series,
-    node_parameters,
     servo_dict,
     servo_line,
+)
+from genbacklash_ros.cli.joints import per_joint
+from genbacklash_ros.cli.node_options import (
+    BATCH_PARAMETERS,
+    CommandParameters,
+    add_node_parameter_options,
+    batch_parameters,
+    node_parameters,
 )
 from genbacklash_ros.node.parameters import NodeParameters
 

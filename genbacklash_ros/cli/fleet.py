@@ -13,7 +13,7 @@ import sys
 from typing import Any
 
 from genbacklash_core import GenBacklashError
-from genbacklash_ros.cli.replay import (
+from genbacklash_ros.cli.node_options import (
     BATCH_PARAMETERS,
     add_node_parameter_options,
     node_parameters,

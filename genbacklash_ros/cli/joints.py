@@ -164,7 +164,7 @@ def _check(
                 "(replaced by each joint's name)"
             )
     source = str(getattr(args, data))
-    from genbacklash_ros.cli.replay import is_bag
+    from genbacklash_ros.cli.bag_input import is_bag
 
     if not is_bag(source):
         raise GenBacklashError(f"several --joint need a bag, not {source}")

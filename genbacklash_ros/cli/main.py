@@ -32,7 +32,10 @@ from genbacklash_core.data import NonFinitePolicy
 from genbacklash_core.uncertainty import batch_uncertainty, play_std
 from genbacklash_ros.bags.csvio import Series, write_series_csv
 from genbacklash_ros.blas_threads import one_blas_thread
+from genbacklash_ros.cli import bag_input as bag_input_cli
+from genbacklash_ros.cli import node_options as node_options_cli
 from genbacklash_ros.cli import replay as replay_cli
+from genbacklash_ros.cli import simulate as simulate_cli
 from genbacklash_ros.cli.joints import per_joint
 from genbacklash_ros.cli.paths import check_paths
 from genbacklash_ros.cli.start import add_checkpoint_option
@@ -225,10 +228,12 @@ def _summary(result: IdentificationResult) -> str:
 
 
 def _cmd_identify(args: argparse.Namespace) -> int:
-    params = replay_cli.node_parameters(args, replay_cli.batch_parameters(args.data)).params
+    params = node_options_cli.node_parameters(
+        args, node_options_cli.batch_parameters(args.data)
+    ).params
     model = params.model if args.model is None else args.model
     # a backlash alone is rate independent: lost readings along monotone commands hide nothing
-    series = replay_cli.load_series(args, params, bridge=model == "backlash")
+    series = bag_input_cli.load_series(args, params, bridge=model == "backlash")
     result = _identify(
         series,
         model=model,
@@ -246,13 +251,13 @@ def _cmd_identify(args: argparse.Namespace) -> int:
         out = result.to_dict()
         out.update(spread.to_dict(result.model.parameter_names))
         if series.servo is not None:  # the servo the rows model (genbacklash_core.servo)
-            out["servo"] = replay_cli.servo_dict(series)
+            out["servo"] = bag_input_cli.servo_dict(series)
         print(json.dumps(out))
     else:
         print(_parameter_table(result, std=spread.std))
         print("\n".join(spread.lines()))
         if series.servo is not None:
-            print(replay_cli.servo_line(series))
+            print(bag_input_cli.servo_line(series))
         print(_summary(result))
     if args.checkpoint:
         from genbacklash_ros.cli.start import identify_estimate, write_start
@@ -264,7 +269,7 @@ def _cmd_identify(args: argparse.Namespace) -> int:
     if args.plot:
         from genbacklash_ros.reports.plots import save_identification_plots
 
-        unit = "rad" if replay_cli.is_bag(args.data) else ""  # a CSV says no unit
+        unit = "rad" if bag_input_cli.is_bag(args.data) else ""  # a CSV says no unit
         for path in save_identification_plots(result, args.plot, series.u, series.y, unit=unit):
             print(f"wrote {path}", file=sys.stderr)
     return EXIT_OK if result.converged else EXIT_NOT_CONVERGED
@@ -274,7 +279,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     if not args.physics and (args.bandwidth is not None or args.motor_encoder):
         raise GenBacklashError("--bandwidth and --motor-encoder apply to --physics VARIANT")
     if args.bag or args.scenario or args.physics:
-        return replay_cli.simulate_bag(args)
+        return simulate_cli.simulate_bag(args)
     if args.example is None or not args.output:
         raise GenBacklashError("give --example N and -o FILE.csv (or --bag DIR for a bag)")
     example = paper_example(args.example)
@@ -400,7 +405,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
         help="CSV file with columns u,y[,t], or a rosbag2 directory / .mcap file (then give "
         "--command and --encoder: one sample per encoder message, the command held)",
     )
-    replay_cli.add_bag_input_options(ident, required=False)
+    bag_input_cli.add_bag_input_options(ident, required=False)
     ident.add_argument(
         "--model",
         choices=("backlash", "cascade"),
@@ -455,7 +460,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     ident.add_argument(
         "--plot", metavar="DIR", help="also write characteristic.png and history.png into DIR"
     )
-    replay_cli.add_node_parameter_options(ident, used=_BATCH_USES.format(command="identify"))
+    node_options_cli.add_node_parameter_options(ident, used=_BATCH_USES.format(command="identify"))
     ident.set_defaults(
         func=per_joint(_cmd_identify, data="data", dirs=("plot",), files=("checkpoint",))
     )
@@ -490,7 +495,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
         help="signal-to-noise ratio (default: the paper's)",
     )
     sim.add_argument("-o", "--output", metavar="FILE.csv", help="output CSV")
-    replay_cli.add_simulate_bag_options(sim)
+    simulate_cli.add_simulate_bag_options(sim)
     sim.set_defaults(func=_cmd_simulate)
 
     demo = sub.add_parser(

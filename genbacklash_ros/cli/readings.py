@@ -24,13 +24,9 @@ import numpy as np
 from genbacklash_core import GenBacklashError
 from genbacklash_ros.bags.bagio import AlignedSeries, read_aligned
 from genbacklash_ros.bags.csvio import Series, read_series_csv, write_readings_csv
+from genbacklash_ros.cli.bag_input import add_bag_input_options, motor_selection
 from genbacklash_ros.cli.joints import per_joint
-from genbacklash_ros.cli.replay import (
-    add_bag_input_options,
-    add_node_parameter_options,
-    motor_selection,
-    node_parameters,
-)
+from genbacklash_ros.cli.node_options import add_node_parameter_options, node_parameters
 
 __all__ = ["add_parser", "cmd_readings", "rows_differ"]
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import signal
 from pathlib import Path
 from typing import Any
 
@@ -87,7 +88,15 @@ def test_the_ros2_executable_and_genbacklash_node_start_the_rclpy_node(
         pytest.skip(reason)
     argv = ["backlash_identifier", "--ros-args", "-p", "degree:=12"]
     monkeypatch.setattr("sys.argv", argv)
-    assert node_cli.ros2_main() == 2
+    # the entry point leaves SIGINT and SIGTERM ignored for its process's exit (stop_signals):
+    # here that process is pytest's, whose later subprocesses would inherit the ignoring
+    previous = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        assert node_cli.ros2_main() == 2
+        assert signal.getsignal(signal.SIGINT) == signal.SIG_IGN  # as a process's own exit
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
     line = "parameter 'degree' must lie in [1, 9], got 12"
     assert capfd.readouterr().err.strip() == f"backlash_identifier: error: {line}"
     bad = tmp_path / "p.yaml"
