@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from genbacklash_core.samples import MAX_BRIDGED
-from genbacklash_ros.bags import bagio
 from genbacklash_ros.bags.bagio import BagError, BagReader, BagWriter, align, read_aligned
+from genbacklash_ros.bags.bagio import reader as bag_reader
+from genbacklash_ros.bags.bagio.in_order import chunks_in_order
 from genbacklash_ros.bags.rosbags_types import jazzy_typestore
 from genbacklash_ros.node.messages import (
     DiagnosticArray,
@@ -273,10 +274,10 @@ def test_chunks_in_order_read_as_rosbags_merges_them(
     for source in (bag, mcap):
         with BagReader(source) as reader:
             topics = list(reader.topics)
-            assert bagio._chunks_in_order(reader._reader, set(topics)) is not None
+            assert chunks_in_order(reader._reader, set(topics)) is not None
             chunked = list(reader.raw_messages(topics))
         with monkeypatch.context() as patch:
-            patch.setattr(bagio, "_chunks_in_order", lambda *args: None)
+            patch.setattr(bag_reader, "chunks_in_order", lambda *args: None)
             with BagReader(source) as reader:
                 assert list(reader.raw_messages(topics)) == chunked
         with BagReader(source) as reader:
@@ -295,7 +296,7 @@ def test_chunks_out_of_order_go_through_rosbags_merge(tmp_path: Path) -> None:
         writer.add_topic("/x", "std_msgs/msg/Float64")
         writer.write_raw_many([("/x", t, raw) for t in times])
     with BagReader(tmp_path / "bag") as reader:
-        assert bagio._chunks_in_order(reader._reader, {"/x"}) is None
+        assert chunks_in_order(reader._reader, {"/x"}) is None
         got = [m.log_time_ns for m in reader.raw_messages(["/x"])]
     assert got == sorted(times)
 
