@@ -94,28 +94,25 @@ class PlantCheck:
 
 
 def check_plant(
-    model: GeneralBacklash,
+    model: GeneralBacklash | Callable[[np.ndarray, float], np.ndarray],
     u: np.ndarray,
     y: np.ndarray,
     settings: GuardSettings,
     plant: str,
-    simulate: Callable[[np.ndarray, float], np.ndarray] | None = None,
 ) -> PlantCheck:
     """Judge ``model`` as a plant of the aligned samples ``(u, y)`` (see the module notes).
 
     Parameters
     ----------
-    model : GeneralBacklash
-        The plant's backlash (used when ``simulate`` is None).
+    model : GeneralBacklash or callable
+        The plant: a backlash, run by its own simulation (eq. 8), or its free run
+        ``model(u, x0) -> x`` from the first reading (e.g. a worn truth).
     u, y : ndarray
         Aligned samples: the command held at each reading, and the reading.
     settings : GuardSettings
         The node's guard settings (their ``rho_full`` and ``rho_off`` judge the ratio).
     plant : str
         ``"truth"`` or ``"estimate"``, for the sentence.
-    simulate : callable, optional
-        ``simulate(u, x0) -> x``: the plant's free run from the first reading (e.g. a worn
-        truth); default the backlash's own simulation (eq. 8).
 
     Returns
     -------
@@ -129,7 +126,10 @@ def check_plant(
         return PlantCheck(plant, nan, nan, nan, settings.rho_full, settings.rho_off)
     none = float(np.sqrt(np.mean((y - u) ** 2)))
     try:
-        x = simulate(u, x0) if simulate is not None else simulate_backlash(model, u, x0)
+        if isinstance(model, GeneralBacklash):
+            x = simulate_backlash(model, u, x0)  # eq. 8
+        else:
+            x = model(u, x0)
     except GenBacklashError:
         return PlantCheck(plant, nan, none, nan, settings.rho_full, settings.rho_off)
     miss = float(np.sqrt(np.mean((y - x) ** 2)))

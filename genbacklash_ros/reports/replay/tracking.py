@@ -141,15 +141,8 @@ def compute_tracking_errors(d: ReportData) -> TrackingErrors | None:
         return None
     check = None
     if d.u.size:
-        checked = backlash_of(d.truth.model) if d.truth is not None else d.model
-        assert checked is not None
         check = check_plant(
-            checked,
-            d.u,
-            d.y,
-            d.guard,
-            plant,
-            lambda u, x0: _plant(d.truth, d.model, d.t, u, x0),
+            lambda u, x0: _plant(d.truth, d.model, d.t, u, x0), d.u, d.y, d.guard, plant
         )
     return TrackingErrors(plant, t, weight, none, node, final, d.t, d.y - d.u, check)
 
