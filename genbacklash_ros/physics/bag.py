@@ -26,8 +26,8 @@ from genbacklash_ros.bags.simbags import (
     TRUTH_STEP_S,
     BagTruth,
     SimulatedBag,
-    _settings_dict,
     phases_label,
+    settings_dict,
     write_record_bag,
 )
 from genbacklash_ros.physics.engine import DEFAULT_RATE
@@ -66,7 +66,7 @@ def write_physics_bag(
         "rate": float(rate),
         "motor_encoder": bool(motor_encoder),
     }
-    recorded = _settings_dict(dataclasses.replace(cfg, model=model))
+    recorded = settings_dict(dataclasses.replace(cfg, model=model))
     recorded["physics"] = physics
     description = (
         f"{label}: {total:g} s of the physics drivetrain '{params.name}' ({params.description}); "
