@@ -129,12 +129,16 @@ class ThreadCost:
     involuntary: float
 
 
-def _thread_counts(pid: int) -> dict[tuple[str, int, int], tuple[str, float, int, int]]:
-    """Per thread of ``pid`` and of its children: (name, CPU seconds, voluntary and
-    involuntary context switches) from ``/proc/<pid>/task`` (Linux)."""
+def _thread_counts(
+    pid: int, *, with_children: bool = True
+) -> dict[tuple[str, int, int], tuple[str, float, int, int]]:
+    """Per thread of ``pid`` (and of its children): (name, CPU seconds, voluntary and
+    involuntary context switches) from ``/proc/<pid>/task`` (Linux), keyed by (role, process
+    id, thread id)."""
     tick = os.sysconf("SC_CLK_TCK")
     out: dict[tuple[str, int, int], tuple[str, float, int, int]] = {}
-    for role, each in (("node", pid), *(("node's child", c) for c in children(pid))):
+    kids = children(pid) if with_children else ()
+    for role, each in (("node", pid), *(("node's child", c) for c in kids)):
         for task in Path(f"/proc/{each}/task").glob("[0-9]*"):
             try:
                 stat = (task / "stat").read_text()
@@ -397,15 +401,12 @@ def pipeline_cost(u: np.ndarray, y: np.ndarray) -> float:
 
 def _thread_cpu() -> dict[str, float]:
     """CPU seconds (``utime + stime``) of each thread of this process (Linux ``/proc``)."""
-    tick = os.sysconf("SC_CLK_TCK")
-    out: dict[str, float] = {}
-    for tid in os.listdir("/proc/self/task"):
-        try:
-            fields = Path(f"/proc/self/task/{tid}/stat").read_text().rsplit(")", 1)[1].split()
-        except OSError:  # the thread ended
-            continue
-        out[tid] = (int(fields[11]) + int(fields[12])) / tick
-    return out
+    own = os.getpid()
+    return {
+        str(tid): counts[1]
+        for (_, pid, tid), counts in _thread_counts(own, with_children=False).items()
+        if pid == own
+    }
 
 
 def paced_threads(u: np.ndarray, y: np.ndarray, one_thread: bool) -> tuple[float, float, float]:
