@@ -25,8 +25,10 @@ differs from the command in the second half (compensated), latency (the time the
 taken less the publish time of the message it answers, the command's or the ping's, on the
 player's monotonic clock) of the compensated command and of the pong in the same run, the
 node's CPU fraction (``utime + stime`` from ``/proc/<pid>/stat`` from the first command to
-the last reply, divided by that wall time; the echo's and the player's over the same time)
-and each joint's largest |parameter error| of its last estimate against its truth.
+the last reply, divided by that wall time; the echo's and the player's over the same time),
+the same split per thread of the node and of its child (``/proc/<pid>/task``: CPU and
+context switches a second, :func:`thread_costs`) and each joint's largest |parameter error|
+of its last estimate against its truth.
 ``--thread-priority P`` (1-99) runs the node with ``thread_priority: P`` (its message thread
 under ``SCHED_FIFO``, identification in a child process, whose CPU is counted with the
 node's) and the echo's one thread under ``SCHED_FIFO`` at the same priority, so that the
@@ -107,10 +109,76 @@ class Played:
     status_names: set[str]
     faults: set[str]  # fault names any joint's diagnostics reported
     late: int
+    threads: list[ThreadCost]  # the node's and its children's threads over the play
     cpu_s: float  # the node's
     wall_s: float
     player_cpu_s: float  # this process's, over the same wall time
     echo_cpu_s: float
+
+
+@dataclass(frozen=True)
+class ThreadCost:
+    """One thread's share of a core and its context switches a second over the play."""
+
+    process: str  # "node" or "node's child"
+    tid: int
+    main: bool  # the process's main thread (the node's takes the messages)
+    name: str  # /proc comm (Python threads of the node are all "python")
+    cpu: float
+    voluntary: float
+    involuntary: float
+
+
+def _thread_counts(
+    pid: int, *, with_children: bool = True
+) -> dict[tuple[str, int, int], tuple[str, float, int, int]]:
+    """Per thread of ``pid`` (and of its children): (name, CPU seconds, voluntary and
+    involuntary context switches) from ``/proc/<pid>/task`` (Linux), keyed by (role, process
+    id, thread id)."""
+    tick = os.sysconf("SC_CLK_TCK")
+    out: dict[tuple[str, int, int], tuple[str, float, int, int]] = {}
+    kids = children(pid) if with_children else ()
+    for role, each in (("node", pid), *(("node's child", c) for c in kids)):
+        for task in Path(f"/proc/{each}/task").glob("[0-9]*"):
+            try:
+                stat = (task / "stat").read_text()
+                status = (task / "status").read_text()
+            except OSError:  # the thread ended meanwhile
+                continue
+            fields = stat.rsplit(")", 1)[1].split()
+            name = stat[stat.index("(") + 1 : stat.rindex(")")]
+            switches = dict(line.split(":\t") for line in status.splitlines() if ":\t" in line)
+            out[(role, each, int(task.name))] = (
+                name,
+                (int(fields[11]) + int(fields[12])) / tick,
+                int(switches["voluntary_ctxt_switches"]),
+                int(switches["nonvoluntary_ctxt_switches"]),
+            )
+    return out
+
+
+def thread_costs(
+    before: dict[tuple[str, int, int], tuple[str, float, int, int]],
+    after: dict[tuple[str, int, int], tuple[str, float, int, int]],
+    wall_s: float,
+) -> list[ThreadCost]:
+    """What each thread used between two :func:`_thread_counts`, most CPU first (threads
+    that used nothing and hardly switched are left out)."""
+    costs = []
+    for key, (name, cpu, vol, invol) in after.items():
+        _, cpu0, vol0, invol0 = before.get(key, (name, 0.0, 0, 0))
+        cost = ThreadCost(
+            key[0],
+            key[2],
+            key[1] == key[2],
+            name,
+            (cpu - cpu0) / wall_s,
+            (vol - vol0) / wall_s,
+            (invol - invol0) / wall_s,
+        )
+        if cost.cpu > 0.0 or cost.voluntary + cost.involuntary >= 10.0:
+            costs.append(cost)
+    return sorted(costs, key=lambda c: -c.cpu)
 
 
 def cpu_seconds(pid: int) -> float:
@@ -249,6 +317,7 @@ def play(u: np.ndarray, y: np.ndarray, node_pid: int, echo_pid: int) -> Played:
         rows = commands.tolist()
         readings = y.T.tolist()
         joints = list(JOINTS)
+        threads0 = _thread_counts(node_pid)
         cpu0, echo0, start = cpu_seconds(node_pid), cpu_seconds(echo_pid), time.monotonic_ns()
         own0 = time.process_time()
         late = 0
@@ -275,6 +344,7 @@ def play(u: np.ndarray, y: np.ndarray, node_pid: int, echo_pid: int) -> Played:
         cpu = cpu_seconds(node_pid) - cpu0
         echo_cpu = cpu_seconds(echo_pid) - echo0
         own = time.process_time() - own0
+        threads1 = _thread_counts(node_pid)
         end = max(int(back.max()), int(sent[-1]))
         wall = (end - start) / 1e9
         replies.until(time.monotonic_ns() + 1_500_000_000)  # the last estimates, diagnostics
@@ -292,6 +362,7 @@ def play(u: np.ndarray, y: np.ndarray, node_pid: int, echo_pid: int) -> Played:
         names,
         faults,
         late,
+        thread_costs(threads0, threads1, wall),
         cpu,
         wall,
         own,
@@ -330,15 +401,12 @@ def pipeline_cost(u: np.ndarray, y: np.ndarray) -> float:
 
 def _thread_cpu() -> dict[str, float]:
     """CPU seconds (``utime + stime``) of each thread of this process (Linux ``/proc``)."""
-    tick = os.sysconf("SC_CLK_TCK")
-    out: dict[str, float] = {}
-    for tid in os.listdir("/proc/self/task"):
-        try:
-            fields = Path(f"/proc/self/task/{tid}/stat").read_text().rsplit(")", 1)[1].split()
-        except OSError:  # the thread ended
-            continue
-        out[tid] = (int(fields[11]) + int(fields[12])) / tick
-    return out
+    own = os.getpid()
+    return {
+        str(tid): counts[1]
+        for (_, pid, tid), counts in _thread_counts(own, with_children=False).items()
+        if pid == own
+    }
 
 
 def paced_threads(u: np.ndarray, y: np.ndarray, one_thread: bool) -> tuple[float, float, float]:
@@ -544,6 +612,27 @@ def report(
         joint_rows,
     )
     statuses = sorted(s for s in p.status_names if s.startswith("backlash_identifier"))
+    threads_table = md_table(
+        [
+            "process",
+            "thread",
+            "name",
+            "CPU (of a core)",
+            "voluntary switches / s",
+            "involuntary / s",
+        ],
+        [
+            [
+                t.process,
+                "main" if t.main else str(t.tid),
+                t.name,
+                f"{t.cpu:.3f}",
+                f"{t.voluntary:.0f}",
+                f"{t.involuntary:.0f}",
+            ]
+            for t in p.threads
+        ],
+    )
 
     def mark(ok: bool) -> str:
         return "met" if ok else "NOT met"
@@ -577,6 +666,14 @@ BLAS thread as in the node):
 array: {passed}. Faults the joints' diagnostics reported (their elements pass through
 while one is active): {", ".join(sorted(p.faults)) or "none"}. Diagnostics statuses seen:
 {", ".join(f"`{s}`" for s in statuses)}.
+
+Where the node's CPU went, per thread over the same time (`/proc/<pid>/task`, the node's
+and its child's, the identify process with `thread_priority`; the node's main thread takes
+the messages and answers the commands, `dds.*` are Fast DDS's; counted from a moment before
+the first command to a moment after the last reply, so the sum may differ a little from the
+node's figure above):
+
+{threads_table}
 
 Targets:
 - every joint's estimate within 0.05 of its truth: {mark(est_ok)} (largest
