@@ -30,6 +30,7 @@ from genbacklash_ros.cli.bag_input import (
     servo_dict,
     servo_line,
 )
+from genbacklash_ros.cli.exit_codes import EXIT_OK
 from genbacklash_ros.cli.joints import per_joint
 from genbacklash_ros.cli.node_options import (
     BATCH_PARAMETERS,
@@ -42,7 +43,6 @@ from genbacklash_ros.node.parameters import NodeParameters
 
 __all__ = ["add_parser", "cmd_diagnose", "parse_start"]
 
-EXIT_OK = 0
 
 _DESCRIPTION = """\
 Find where a backlash model and the measurements disagree, name the missing effect, add it,

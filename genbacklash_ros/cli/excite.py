@@ -33,12 +33,11 @@ from genbacklash_core.excite import (
 from genbacklash_core.scenarios import OPERATION_BACKLASH, OperationSettings
 from genbacklash_ros.bags.bagio import BagError, BagWriter
 from genbacklash_ros.bags.simbags import COMMAND_TOPIC, START_NS, command_message
+from genbacklash_ros.cli.exit_codes import EXIT_NOT_CONVERGED, EXIT_OK
 from genbacklash_ros.node.messages import Float64MultiArray
 
 __all__ = ["add_parser", "cmd_excite", "write_trajectory_bag", "write_trajectory_csv"]
 
-EXIT_OK = 0
-EXIT_NOT_CONVERGED = 3
 
 _USAGE = """\
 genbacklash excite --range LO HI --v-max V --a-max A -o FILE.csv [--rate HZ] [--gap G]

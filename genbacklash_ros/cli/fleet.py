@@ -13,6 +13,7 @@ import sys
 from typing import Any
 
 from genbacklash_core import GenBacklashError
+from genbacklash_ros.cli.exit_codes import EXIT_LOST, EXIT_OK
 from genbacklash_ros.cli.node_options import (
     BATCH_PARAMETERS,
     add_node_parameter_options,
@@ -22,8 +23,6 @@ from genbacklash_ros.node.parameters import PARAMETER_SPECS
 
 __all__ = ["add_parsers", "cmd_fleet", "cmd_fleet_report", "parse_joint"]
 
-EXIT_OK = 0
-EXIT_LOST = 1
 
 _FLEET_DESCRIPTION = """\
 Analyse every bag of an archive on a Dask cluster and store one row per bag and joint in a

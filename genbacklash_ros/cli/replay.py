@@ -16,6 +16,7 @@ from genbacklash_core.measured import OfflineBaseline
 from genbacklash_ros.bags.bagio import node_outputs
 from genbacklash_ros.bags.replay import OUTPUT_TOPICS, ReplayResult, replay
 from genbacklash_ros.cli.bag_input import add_bag_input_options, motor_selection
+from genbacklash_ros.cli.exit_codes import EXIT_BAD_INPUT, EXIT_OK
 from genbacklash_ros.cli.joints import per_joint
 from genbacklash_ros.cli.node_options import (
     SET_BY_REPLAY,
@@ -36,8 +37,6 @@ __all__ = [
     "replay_baseline",
 ]
 
-EXIT_OK = 0
-EXIT_BAD_INPUT = 2
 
 _DESCRIPTION = f"""\
 Replay a recorded bag through the backlash_identifier node's pipeline, offline.

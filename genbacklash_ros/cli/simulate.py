@@ -12,6 +12,7 @@ import sys
 from genbacklash_core import GenBacklashError
 from genbacklash_core.scenarios import PHASE_KINDS
 from genbacklash_ros.bags.simbags import COMMAND_TOPIC, ENCODER_TOPIC, MOTOR_TOPIC, SimulatedBag
+from genbacklash_ros.cli.exit_codes import EXIT_OK
 from genbacklash_ros.physics.variants import DEFAULT_BANDWIDTH, VARIANTS
 
 __all__ = [
@@ -21,8 +22,6 @@ __all__ = [
     "parse_phases",
     "simulate_bag",
 ]
-
-EXIT_OK = 0
 
 
 OPERATION_SCENARIOS = PHASE_KINDS
