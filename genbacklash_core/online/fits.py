@@ -8,8 +8,10 @@ window did not excite the parameters enough (:func:`block_conditioning`,
 :func:`poorly_excited`). :func:`cold_fit` runs the batch iteration from the paper's start
 (:func:`~genbacklash_core.identify.identify_backlash`,
 :func:`~genbacklash_core.identify.identify_cascade`); the recursive identifier uses it too,
-for its batch (re-)initialisations. :func:`refine_window` adds a few output-error steps;
-:func:`outlier_rows` says which remembered rows an accepted fit cannot have produced.
+for its batch (re-)initialisations, on data that engaged both branches
+(:func:`~genbacklash_core.online.engaged.unengaged_branch`). :func:`refine_window` adds a
+few output-error steps; :func:`outlier_rows` says which remembered rows an accepted fit
+cannot have produced.
 
 Examples
 --------
