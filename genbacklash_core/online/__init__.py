@@ -24,6 +24,8 @@ The modules below them hold one concept each, and what the two share stands once
 ``advice``                branch coverage and excitation advice
 ``seed``                  a saved estimate as prior information (``seed``) and how each
                           identifier lets it fade
+``engaged``               whether the data engaged each branch at all (before a batch
+                          start fits)
 ``fits``                  the windowed fits and the batch (re-)initialisation both use
 ``covariance``            the delta method of eq. (34): natural parameters and covariance
 ``state``                 converged / converging / no_excitation and the confidence

@@ -8,8 +8,10 @@ window did not excite the parameters enough (:func:`block_conditioning`,
 :func:`poorly_excited`). :func:`cold_fit` runs the batch iteration from the paper's start
 (:func:`~genbacklash_core.identify.identify_backlash`,
 :func:`~genbacklash_core.identify.identify_cascade`); the recursive identifier uses it too,
-for its batch (re-)initialisations. :func:`refine_window` adds a few output-error steps;
-:func:`outlier_rows` says which remembered rows an accepted fit cannot have produced.
+for its batch (re-)initialisations, on data that engaged both branches
+(:func:`~genbacklash_core.online.engaged.unengaged_branch`). :func:`refine_window` adds a
+few output-error steps; :func:`outlier_rows` says which remembered rows an accepted fit
+cannot have produced.
 
 Examples
 --------
@@ -36,6 +38,7 @@ from genbacklash_core.simulate import play_bounds
 from genbacklash_core.structure import Structure
 
 from .covariance import natural_covariance
+from .engaged import unengaged_branch
 from .rows import WindowRows, settling_samples, window_rows
 from .seed import SeedPrior
 
@@ -296,8 +299,13 @@ def cold_fit(
 ) -> tuple[Structure, FloatArray] | str:
     """The batch iteration (with its restarts) from the paper's start; or why it failed.
 
-    Detects the branch sense when it is not known yet. ``breaks``: the sample rule.
+    Detects the branch sense when it is not known yet. ``breaks``: the sample rule. Data
+    that never engaged a branch of a backlash alone
+    (:func:`~genbacklash_core.online.engaged.unengaged_branch`) are not fitted: no start or
+    refinement can determine that branch.
     """
+    if (unengaged := unengaged_branch(structure, u, y, breaks)) is not None:
+        return unengaged
     sign = structure.sign if sign_known else None
     try:
         for refine in (False, True):
