@@ -221,6 +221,52 @@ def _shuffled(
     return out
 
 
+def _multi_and_singles() -> tuple[MultiJointPipeline, list[BacklashPipeline]]:
+    """The arm's joints in one pipeline, and each in a single-joint pipeline of its own."""
+    js = JointSet.from_mapping({"joints": list(NAMES), "command_indices": list(INDICES)})
+    singles = [
+        BacklashPipeline(params, status_name=joint_status_name(params.joint))
+        for params in js.per_joint
+    ]
+    return MultiJointPipeline(js), singles
+
+
+def _side_by_side(
+    multi: MultiJointPipeline,
+    singles: list[BacklashPipeline],
+    topic: str,
+    msg: Float64MultiArray | JointState,
+    receive_ns: int,
+    *,
+    answer_only: bool = False,
+) -> tuple[list[Output], list[list[Output]]]:
+    """One message to the multi-joint pipeline and to each joint's single-joint pipeline
+    (``answer_only``: a command's ``answer`` alone, its periodic step left to the next
+    message); asserts each joint's outputs but the compensated command are the single
+    one's, in joint order. Returns both."""
+    alone: list[list[Output]]
+    if topic == COMMAND_TOPIC and answer_only:
+        answer = multi.answer(msg, receive_ns)
+        got = [] if answer is None else [answer]
+        alone = [[] for _ in singles]
+        for single in singles:
+            single.answer(msg, receive_ns)
+    elif topic == COMMAND_TOPIC:
+        got = multi.on_command(msg, receive_ns)
+        alone = [single.on_command(msg, receive_ns) for single in singles]
+    else:
+        got = multi.on_encoder(msg, receive_ns)
+        alone = [single.on_encoder(msg, receive_ns) for single in singles]
+    expected = [
+        (o.topic, name, o.message, o.stamp_ns)
+        for name, outputs in zip(NAMES, alone, strict=True)
+        for o in outputs
+        if o.topic != "compensated_command"
+    ]
+    assert [(o.topic, o.joint, o.message, o.stamp_ns) for o in got if o.joint] == expected
+    return got, alone
+
+
 def test_every_joint_gives_what_its_single_joint_pipeline_gives(
     arm: list[tuple[int, str, Float64MultiArray | JointState]],
 ) -> None:
@@ -228,28 +274,11 @@ def test_every_joint_gives_what_its_single_joint_pipeline_gives(
     a single-joint pipeline's on the same stream, to the bit, the readings' names reordered,
     missing, repeated or not finite now and then (one look-up per name tuple)."""
     messages = _shuffled(arm[: len(arm) // 2])
-    js = JointSet.from_mapping({"joints": list(NAMES), "command_indices": list(INDICES)})
-    multi = MultiJointPipeline(js)
-    singles = [
-        BacklashPipeline(params, status_name=joint_status_name(params.joint))
-        for params in js.per_joint
-    ]
+    multi, singles = _multi_and_singles()
     compared = 0
     for receive_ns, topic, msg in messages:
-        if topic == COMMAND_TOPIC:
-            got = multi.on_command(msg, receive_ns)  # type: ignore[arg-type]
-            alone = [single.on_command(msg, receive_ns) for single in singles]  # type: ignore[arg-type]
-        else:
-            got = multi.on_encoder(msg, receive_ns)
-            alone = [single.on_encoder(msg, receive_ns) for single in singles]
-        expected = [
-            (o.topic, name, o.message, o.stamp_ns)
-            for name, outputs in zip(NAMES, alone, strict=True)
-            for o in outputs
-            if o.topic != "compensated_command"
-        ]
-        assert [(o.topic, o.joint, o.message, o.stamp_ns) for o in got if o.joint] == expected
-        compared += len(expected)
+        got, alone = _side_by_side(multi, singles, topic, msg, receive_ns)
+        compared += sum(o.topic != "compensated_command" for outputs in alone for o in outputs)
         for index, outputs in zip(INDICES, alone, strict=True):
             answers = [o.message for o in outputs if o.topic == "compensated_command"]
             if answers:
@@ -259,6 +288,55 @@ def test_every_joint_gives_what_its_single_joint_pipeline_gives(
         assert multi.pipelines[name].stats == single.stats
     assert multi.pipelines[NAMES[0]].stats.dropped["encoder_invalid"] > 0  # missing
     assert multi.pipelines[NAMES[-1]].stats.dropped["encoder_invalid"] > 0  # not finite
+
+
+def _one_joint_silent(
+    messages: list[tuple[int, str, Float64MultiArray | JointState]],
+) -> list[tuple[int, str, Float64MultiArray | JointState]]:
+    """The wrist's command element cut off from 2 to 5 s (the array too short for index 3)
+    and the elbow's reading left out from 6 to 9 s: each joint silent on one stream for 3 s
+    while the others read every message."""
+    start = messages[0][0]
+    out: list[tuple[int, str, Float64MultiArray | JointState]] = []
+    for receive_ns, topic, msg in messages:
+        at = (receive_ns - start) / 1e9
+        if isinstance(msg, Float64MultiArray) and 2.0 <= at < 5.0:
+            msg = Float64MultiArray(msg.layout, msg.data[:3])
+        elif isinstance(msg, JointState) and 6.0 <= at < 9.0:
+            keep = [k for k, name in enumerate(msg.name) if name != "elbow"]
+            names = tuple(msg.name[k] for k in keep)
+            msg = JointState(msg.header, names, tuple(msg.position[k] for k in keep))
+        out.append((receive_ns, topic, msg))
+    return out
+
+
+@pytest.mark.parametrize("answer_only", [False, True])
+def test_a_joint_that_cannot_read_a_stream_reports_its_own_silence(
+    arm: list[tuple[int, str, Float64MultiArray | JointState]], answer_only: bool
+) -> None:
+    """A joint that cannot read a stream's messages (its command element cut off, its reading
+    left out) reports its own silence and the others none: every joint's outputs a
+    single-joint pipeline's, message by message, also when a command's periodic step waits
+    for the next message (``answer`` alone). (Written for branch joint4-1, which shared one
+    silence watch between the joints; the watch stayed per joint, the test guards it.)"""
+    messages = _one_joint_silent(arm[: len(arm) // 3])
+    multi, singles = _multi_and_singles()
+    silent: dict[str, set[str]] = {name: set() for name in NAMES}
+    for receive_ns, topic, msg in messages:
+        got, _ = _side_by_side(multi, singles, topic, msg, receive_ns, answer_only=answer_only)
+        for o in got:
+            if o.topic == "diagnostics":
+                assert isinstance(o.message, DiagnosticArray)
+                for key in o.message.status[0].values:
+                    if key.key.endswith("_silent_s"):
+                        silent[o.joint].add(key.key)
+    assert silent == {
+        "shoulder": set(),
+        "elbow": {"encoder_silent_s"},
+        "wrist": {"command_silent_s"},
+    }
+    for name, single in zip(NAMES, singles, strict=True):
+        assert multi.pipelines[name].stats == single.stats
 
 
 def test_the_answer_comes_before_any_joint_builds_its_periodic_outputs(
