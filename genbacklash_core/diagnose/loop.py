@@ -218,9 +218,7 @@ def _pooled(
     if folds is None or report.model is None or candidate.model is None:
         return None
     val = report.split.validation
-    return folds.errors(
-        (report.model, candidate.model), (report.y_sim[val], candidate.y_sim[val])
-    )
+    return folds.errors((report.model, candidate.model), (report.y_sim[val], candidate.y_sim[val]))
 
 
 def _judge(

@@ -94,7 +94,11 @@ class DiagnoseSettings:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise GenBacklashError(f"{name} must be a whole number >= 1, got {value!r}")
-        if isinstance(self.folds, bool) or self.folds not in (1, 2):
+        if (
+            not isinstance(self.folds, int)
+            or isinstance(self.folds, bool)
+            or self.folds not in (1, 2)
+        ):
             raise GenBacklashError(f"folds must be 1 or 2, got {self.folds!r}")
 
     def as_dict(self) -> dict[str, float]:
