@@ -130,12 +130,15 @@ class GapReport:
         The segments.
     groups : tuple of GapGroup
         The breakdown, grouped by aspect (branch, direction, reversal, travel, time).
+    model : AugmentedModel or None
+        The model simulated (None: not recorded).
     """
 
     gap: float
     y_sim: FloatArray
     split: Split
     groups: tuple[GapGroup, ...]
+    model: AugmentedModel | None = None
 
     def aspect(self, name: str) -> tuple[GapGroup, ...]:
         """The groups of one aspect."""
@@ -246,4 +249,4 @@ def measure_gap(model: AugmentedModel, u: FloatArray, y: FloatArray, split: Spli
         error2,
         spread,
     )
-    return GapReport(gap, out.y, split, tuple(groups))
+    return GapReport(gap, out.y, split, tuple(groups), model)

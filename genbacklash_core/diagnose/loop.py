@@ -35,7 +35,10 @@
    validation gap significantly (a one-sided Newey-West test on the squared errors, plus a
    minimum relative drop, and with a measured floor a drop of more than ``floor_margin - 1``
    times it, except for a nominee that re-divides what the model carries and adds no
-   parameter: :func:`_redivides`); otherwise the next nominee is checked.
+   parameter: :func:`_redivides`); otherwise the next nominee is checked. With two folds
+   (``DiagnoseSettings.folds``, :mod:`.folds`) the drop and its test are judged on the
+   squared errors of both held-out blocks pooled: the validation segment at the record's end
+   and a block as long at its start, the models refitted on the rest.
 6. When none passes alone, the best two nominees are tried with the best follow-up each, as a
    pair against the current model: two effects can hide each other (an offset pins a dead-zone
    constant and the lag then fits badly; the offset alone extrapolates poorly). If no pair
@@ -89,6 +92,7 @@ from .effects import CATALOG, Detection, Effect
 from .effects.input_lag import adds_dead_time, vanished
 from .fit import ModelFit, fit_model
 from .floor import noise_floor
+from .folds import FoldErrors, Folds
 from .gap import GapReport, Split, measure_gap, split_record
 from .model import AugmentedModel, without_effect
 from .prediction import restarted_gap
@@ -97,7 +101,7 @@ from .settings import DiagnoseSettings
 from .spec import anchors_of
 from .stats import long_run_variance
 
-__all__ = ["StartStructure", "diagnose", "gap_drop_test"]
+__all__ = ["StartStructure", "diagnose", "gap_drop_test", "loss_drop_test"]
 
 _LOOK_AHEAD = 2  # nominees (and follow-ups of each) tried as pairs when none passes alone
 _TIE = 0.9  # a rival whose BIC change is at least this share of the best's is a near tie
@@ -191,14 +195,30 @@ def gap_drop_test(y: FloatArray, before: FloatArray, after: FloatArray) -> tuple
     >>> p < 0.01
     True
     """
+    return loss_drop_test((y - before) ** 2 - (y - after) ** 2)
+
+
+def loss_drop_test(d: FloatArray) -> tuple[float, float]:
+    """One-sided test that the loss differences ``d`` (the squared errors before, less
+    those after) have a positive mean, with a Newey-West variance; ``(t, p)``."""
     from scipy import stats  # here: a slow import most runs never need
 
-    d = (y - before) ** 2 - (y - after) ** 2
     lrv = long_run_variance(d)
     if lrv <= 0.0:
         return (math.inf, 0.0) if np.mean(d) > 0 else (0.0, 1.0)
     t = float(np.mean(d)) / math.sqrt(lrv / d.size)
     return t, float(stats.norm.sf(t))
+
+
+def _pooled(
+    report: GapReport, candidate: GapReport, folds: Folds | None
+) -> tuple[FoldErrors, FoldErrors] | None:
+    """Both held-out blocks' errors of the two reports' models (:mod:`.folds`), or None:
+    one fold (``folds`` None), or a model not recorded or not refitted on the first block."""
+    if folds is None or report.model is None or candidate.model is None:
+        return None
+    val = report.split.validation
+    return folds.errors((report.model, candidate.model), (report.y_sim[val], candidate.y_sim[val]))
 
 
 def _judge(
@@ -209,13 +229,25 @@ def _judge(
     settings: DiagnoseSettings,
     floor: float | None = None,
     slack: bool = True,
+    folds: Folds | None = None,
 ) -> tuple[bool, str]:
     val = report.split.validation
-    t, p = gap_drop_test(y_val, report.y_sim[val], candidate.y_sim[val])
-    drop, least, excess = _drop(report.gap, candidate.gap, settings, floor)
+    before, after = report.gap, candidate.gap
+    pooled = _pooled(report, candidate, folds)
+    if pooled is None:
+        t, p = gap_drop_test(y_val, report.y_sim[val], candidate.y_sim[val])
+        what = "validation misfit"
+    else:
+        # blocked cross-validation (folds.py): both held-out blocks' errors, one series
+        fold_before, fold_after = pooled
+        t, p = loss_drop_test(fold_before.squared_errors - fold_after.squared_errors)
+        before, after = fold_before.pooled_gap(), fold_after.pooled_gap()
+        floor = None if floor is None or folds is None else folds.floor_gap(floor)
+        what = "validation misfit over both held-out blocks"
+    drop, least, excess = _drop(before, after, settings, floor)
     numbers = (
-        f"BIC {bic_change:+.1f} on the estimation data, validation misfit {report.gap:.4f} -> "
-        f"{candidate.gap:.4f} ({-100 * drop:+.1f}%{excess}, one-sided test t = {t:.1f}, "
+        f"BIC {bic_change:+.1f} on the estimation data, {what} {before:.4f} -> "
+        f"{after:.4f} ({-100 * drop:+.1f}%{excess}, one-sided test t = {t:.1f}, "
         f"p = {p:.2g})"
     )
     if bic_change > -settings.bic_margin:
@@ -225,7 +257,7 @@ def _judge(
             f"rejected: the validation misfit drops less than {100 * least:g}%{excess} ({numbers})"
         )
     margin = settings.floor_margin - 1.0
-    if slack and floor is not None and report.gap - candidate.gap < margin * floor:
+    if slack and floor is not None and before - after < margin * floor:
         # a misfit within floor_margin times the floor is left unexplained (nothing to
         # name), so a drop under that slack is within what quantisation and noise allow:
         # near the floor a small drop is a large share of a small excess (a periodic error
@@ -353,6 +385,7 @@ class _Run:
     breaks: BoolArray | None = None  # of the estimation segment
     floor: float | None = None  # the floor's gap, when the dwells measured the noise
     record_breaks: BoolArray | None = None  # of the whole record
+    folds: Folds | None = None  # the second held-out block, with two folds
 
     def nominate(
         self, context: Context
@@ -428,6 +461,7 @@ class _Run:
             self.settings,
             self.floor,
             slack,
+            self.folds,
         )
 
     @property
@@ -989,7 +1023,10 @@ def diagnose(
     check_excitation(u_est, y_est, 4)
     stage("measuring the noise floor")
     floor = noise_floor(uu, yy, split.validation, bb)
-    run = _Run(uu, yy, split, effects, settings, b_est, floor.gap if floor.known else None, bb)
+    folds = Folds(uu, yy, split, bb) if settings.folds == 2 else None
+    run = _Run(
+        uu, yy, split, effects, settings, b_est, floor.gap if floor.known else None, bb, folds
+    )
 
     stage("fitting the starting model")
     current = _start_fit(start, u_est, y_est, b_est)

@@ -43,6 +43,10 @@ class DiagnoseSettings:
         allow (:mod:`~genbacklash_core.diagnose.floor`; only when the record's dwells measured
         the noise). An effect must also lower the gap by at least ``floor_margin - 1`` times
         that floor: a smaller drop is within what the floor allows.
+    folds : int
+        Held-out blocks the acceptance verdict pools (:mod:`~genbacklash_core.diagnose.folds`):
+        1, the validation segment at the record's end alone; 2, also a block as long at its
+        start, with the models refitted on the rest (about twice the fits per verdict).
 
     Examples
     --------
@@ -66,6 +70,7 @@ class DiagnoseSettings:
     max_degree: int = 5
     floor_margin: float = 1.3
     min_excess_drop: float = 0.1
+    folds: int = 2
 
     def __post_init__(self) -> None:
         for name in ("validation", "alpha", "screen_alpha", "min_share", "gap_alpha"):
@@ -89,6 +94,12 @@ class DiagnoseSettings:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise GenBacklashError(f"{name} must be a whole number >= 1, got {value!r}")
+        if (
+            not isinstance(self.folds, int)
+            or isinstance(self.folds, bool)
+            or self.folds not in (1, 2)
+        ):
+            raise GenBacklashError(f"folds must be 1 or 2, got {self.folds!r}")
 
     def as_dict(self) -> dict[str, float]:
         """The settings as a plain mapping (for reports)."""
