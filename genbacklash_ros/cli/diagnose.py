@@ -69,8 +69,10 @@ model-error model) and each effect of the catalog looks for its signature:
   {effects}
 
 Nominated effects are added to the model and refitted; the one that lowers the BIC most is
-accepted only if it also lowers the validation misfit significantly. The loop stops when no
-signature is found or nothing helps; nothing is named when nothing is missing.
+accepted only if it also lowers the validation misfit significantly, judged over two held-out
+blocks pooled: the held-out end, and a block as long at the record's start with the models
+refitted on the rest. The loop stops when no signature is found or nothing helps; nothing is
+named when nothing is missing.
 """
 
 _EPILOG = """\
