@@ -13,7 +13,7 @@ from .data import as_float_array, as_order
 from .errors import GenBacklashError
 from .linear import LinearBlock
 
-__all__ = ["Cascade", "model_from_dict", "model_to_dict"]
+__all__ = ["Cascade", "backlash_of", "model_from_dict", "model_to_dict"]
 
 
 @dataclass(frozen=True)
@@ -70,6 +70,21 @@ class Cascade:
         from .simulate import simulate_cascade
 
         return simulate_cascade(self, u, x0).y
+
+
+def backlash_of(model: object) -> GeneralBacklash:
+    """The backlash of ``model``: a :class:`GeneralBacklash` itself, a cascade's first stage
+    (its linear block is what follows the play).
+
+    >>> b = GeneralBacklash.ideal(1.0, 0.1, 0.1)
+    >>> backlash_of(b) is b
+    True
+    """
+    if isinstance(model, Cascade):
+        return model.backlash
+    if isinstance(model, GeneralBacklash):
+        return model
+    raise GenBacklashError(f"model must be a GeneralBacklash or a Cascade, got {model!r}")
 
 
 def model_to_dict(model: GeneralBacklash | Cascade) -> dict[str, Any]:

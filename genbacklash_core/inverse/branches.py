@@ -15,10 +15,10 @@ import numpy as np
 
 from genbacklash_core._typing import ArrayLike, FloatArray
 from genbacklash_core.backlash import GeneralBacklash
-from genbacklash_core.cascade import Cascade
+from genbacklash_core.cascade import Cascade, backlash_of
 from genbacklash_core.errors import GenBacklashError
 
-from .options import DEFAULT_OPTIONS, CompensatorOptions, as_options, backlash_of, real_number
+from .options import DEFAULT_OPTIONS, CompensatorOptions, as_options, real_number
 
 EPS = sys.float_info.epsilon
 MAX = sys.float_info.max

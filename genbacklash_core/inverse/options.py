@@ -10,8 +10,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from genbacklash_core.backlash import GeneralBacklash
-from genbacklash_core.cascade import Cascade
 from genbacklash_core.errors import GenBacklashError
 from genbacklash_core.structure import as_order
 
@@ -145,11 +143,3 @@ def as_options(options: object) -> CompensatorOptions:
     if not isinstance(options, CompensatorOptions):
         raise GenBacklashError(f"options must be CompensatorOptions, got {options!r}")
     return options
-
-
-def backlash_of(model: object) -> GeneralBacklash:
-    if isinstance(model, Cascade):
-        return model.backlash  # the linear block is the user's controller's business
-    if isinstance(model, GeneralBacklash):
-        return model
-    raise GenBacklashError(f"model must be a GeneralBacklash or a Cascade, got {model!r}")

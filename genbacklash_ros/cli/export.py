@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from genbacklash_core import Cascade, GenBacklashError, GeneralBacklash
-from genbacklash_core.cascade import model_from_dict
+from genbacklash_core.cascade import backlash_of, model_from_dict
 from genbacklash_core.inverse import CompensatorOptions, branch_inverse, invertible_range
 from genbacklash_ros.node.checkpoint import CheckpointError, checkpoint_from_dict, write_atomic
 
@@ -120,10 +120,6 @@ def read_model(path: str | Path) -> tuple[Model, str]:
 # --------------------------------------------------------------------------- valid range
 
 
-def _backlash(model: Model) -> GeneralBacklash:
-    return model.backlash if isinstance(model, Cascade) else model
-
-
 def _pushing(backlash: GeneralBacklash) -> tuple[str, str]:
     """Names of the branches that push the output up and down (R, L when increasing)."""
     return ("right", "left") if backlash.sign > 0 else ("left", "right")
@@ -168,7 +164,7 @@ def valid_range(model: Model) -> ValidRange:
     branches on either side (:meth:`~genbacklash_core.GeneralBacklash.crossings`; where a
     monotone part is unbounded, crossings are sought within 1000 plays of the dead zone).
     """
-    backlash = _backlash(model)
+    backlash = backlash_of(model)
     low, high = invertible_range(backlash)
     anchor = 0.5 * (backlash.c_right - backlash.c_left)
     if not low < anchor < high:
@@ -270,7 +266,7 @@ def inverse_table(
     options = valid.options()
     up = branch_inverse(model, x, +1, options)
     down = branch_inverse(model, x, -1, options)
-    backlash = _backlash(model)
+    backlash = backlash_of(model)
     span = (float(min(up.min(), down.min())), float(max(up.max(), down.max())))
     if span[0] < span[1]:
         inside = [c for c in backlash.crossings(*span) if span[0] < c < span[1]]
@@ -301,7 +297,7 @@ def csv_text(table: InverseTable) -> str:
 
 
 def _model_comment(model: Model) -> list[str]:
-    backlash = _backlash(model)
+    backlash = backlash_of(model)
     lines = [
         f"m_left = {list(backlash.m_left)!r}, c_left = {backlash.c_left!r}",
         f"m_right = {list(backlash.m_right)!r}, c_right = {backlash.c_right!r}",

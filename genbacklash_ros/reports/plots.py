@@ -18,6 +18,7 @@ from genbacklash_core import (
     IdentificationResult,
     IterationHistory,
 )
+from genbacklash_core.cascade import backlash_of
 
 __all__ = [
     "parameter_unit",
@@ -54,10 +55,6 @@ def _with_unit(label: str, unit: str) -> str:
     return f"{label} [{unit}]" if unit else f"{label} (in the data's units)"
 
 
-def _backlash_of(model: GeneralBacklash | Cascade) -> GeneralBacklash:
-    return model.backlash if isinstance(model, Cascade) else model
-
-
 def plot_characteristic(
     estimate: GeneralBacklash | Cascade,
     u_range: tuple[float, float],
@@ -74,11 +71,11 @@ def plot_characteristic(
     fig, ax = plt.subplots(figsize=(6.4, 5.2), layout="constrained")
     if data is not None:
         ax.plot(data[0], data[1], ".", color="0.75", markersize=2, label="measured", zorder=1)
-    est = _backlash_of(estimate)
+    est = backlash_of(estimate)
     ax.plot(u, est.left(u), color="C0", label="estimate: left branch L(u)")
     ax.plot(u, est.right(u), color="C1", label="estimate: right branch R(u)")
     if truth is not None:
-        tru = _backlash_of(truth)
+        tru = backlash_of(truth)
         ax.plot(u, tru.left(u), "--", color="k", linewidth=1, label="truth")
         ax.plot(u, tru.right(u), "--", color="k", linewidth=1)
     ax.set_xlabel(_with_unit("input u", unit))

@@ -15,7 +15,7 @@ from genbacklash_core import (
     Cascade,
     GeneralBacklash,
 )
-from genbacklash_core.cascade import model_from_dict, model_to_dict
+from genbacklash_core.cascade import backlash_of, model_from_dict, model_to_dict
 from genbacklash_core.scenarios import (
     OperationSettings,
 )
@@ -24,11 +24,6 @@ TRUTH_KEY = "genbacklash.truth"
 """``custom_data`` key of the truth JSON (:class:`BagTruth`)."""
 TRUTH_FORMAT = 1
 TRUTH_STEP_S = 0.25  # resolution of the stored dead zones over time
-
-
-def backlash_of(model: GeneralBacklash | Cascade) -> GeneralBacklash:
-    """The backlash of ``model`` (a cascade's first stage)."""
-    return model.backlash if isinstance(model, Cascade) else model
 
 
 @dataclass(frozen=True, eq=False)

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from genbacklash_core import Cascade, GeneralBacklash
+from genbacklash_core.cascade import backlash_of as core_backlash_of
 from genbacklash_core.guard import GuardSettings
 from genbacklash_ros.bags.bagio import align
 from genbacklash_ros.bags.replay import ReplayResult
@@ -43,7 +44,8 @@ _DEFAULT_GUARD = GuardSettings()  # a ReportData built by hand: the node's defau
 
 
 def backlash_of(model: GeneralBacklash | Cascade | None) -> GeneralBacklash | None:
-    return model.backlash if isinstance(model, Cascade) else model
+    """:func:`genbacklash_core.cascade.backlash_of`, None for no model."""
+    return None if model is None else core_backlash_of(model)
 
 
 # --------------------------------------------------------------------------- data
